@@ -1,0 +1,236 @@
+//! Primitive behaviours (paper §4.2): sensor-based actions `s = <pre(s), per(s)>` and
+//! actuator-based actions `a = <pre(a), add(a), del(a)>`.
+
+use core::fmt;
+
+use embassy_time::Duration;
+
+use crate::facts::FactSet;
+
+/// Most sensor-based actions a domain can hold: the width of a [`SensorSet`].
+pub const MAX_SENSORS: usize = 32;
+
+/// Index of a sensor-based action in its domain, `0..MAX_SENSORS`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorId(u8);
+
+impl SensorId {
+    /// The sensor with index `index`, or `None` when `index >= MAX_SENSORS`.
+    pub const fn new(index: usize) -> Option<Self> {
+        if index < MAX_SENSORS {
+            Some(Self(index as u8))
+        } else {
+            None
+        }
+    }
+
+    /// The index of this sensor in its domain.
+    pub const fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// Index of an actuator-based action in its domain, `0..=255`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ActionId(u8);
+
+impl ActionId {
+    /// The action with index `index`, or `None` when `index > 255`.
+    pub const fn new(index: usize) -> Option<Self> {
+        if index <= u8::MAX as usize {
+            Some(Self(index as u8))
+        } else {
+            None
+        }
+    }
+
+    /// The index of this action in its domain.
+    pub const fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// A set of sensors: the sensors running beside one action state (Algorithm 2).
+#[derive(Clone, Copy, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorSet(u32);
+
+impl SensorSet {
+    /// No sensor.
+    pub const EMPTY: Self = Self(0);
+
+    /// The set whose members are the set bits of `bits`.
+    pub const fn from_bits(bits: u32) -> Self {
+        Self(bits)
+    }
+
+    /// The raw bits (bit `i` is sensor `i`).
+    pub const fn bits(self) -> u32 {
+        self.0
+    }
+
+    /// Whether no sensor is in the set.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// Number of sensors in the set.
+    pub const fn len(self) -> usize {
+        self.0.count_ones() as usize
+    }
+
+    /// Whether `sensor` is in the set.
+    pub const fn contains(self, sensor: SensorId) -> bool {
+        self.0 & (1u32 << sensor.0) != 0
+    }
+
+    /// The set with `sensor` added.
+    #[must_use]
+    pub const fn with(self, sensor: SensorId) -> Self {
+        Self(self.0 | (1u32 << sensor.0))
+    }
+
+    /// The set with `sensor` removed.
+    #[must_use]
+    pub const fn without(self, sensor: SensorId) -> Self {
+        Self(self.0 & !(1u32 << sensor.0))
+    }
+
+    /// The sensors in increasing id order.
+    pub fn iter(self) -> impl ExactSizeIterator<Item = SensorId> + Clone {
+        SensorIter(self.0)
+    }
+}
+
+impl fmt::Debug for SensorSet {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_set()
+            .entries(self.iter().map(SensorId::index))
+            .finish()
+    }
+}
+
+impl FromIterator<SensorId> for SensorSet {
+    fn from_iter<I: IntoIterator<Item = SensorId>>(iter: I) -> Self {
+        iter.into_iter().fold(Self::EMPTY, Self::with)
+    }
+}
+
+#[derive(Clone)]
+struct SensorIter(u32);
+
+impl Iterator for SensorIter {
+    type Item = SensorId;
+
+    fn next(&mut self) -> Option<SensorId> {
+        if self.0 == 0 {
+            return None;
+        }
+        let index = self.0.trailing_zeros();
+        self.0 &= self.0.wrapping_sub(1);
+        Some(SensorId(index as u8))
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let n = self.0.count_ones() as usize;
+        (n, Some(n))
+    }
+}
+
+impl ExactSizeIterator for SensorIter {}
+
+/// How a sensor runs while it is switched on (paper §4.1, "multi-mode").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SensorMode {
+    /// Sampled every `period` (a sonar, a bumper).
+    Cyclic {
+        /// Time between two samples.
+        period: Duration,
+    },
+    /// Sampled once when switched on (a camera taking one image).
+    OneShot,
+    /// Sampled only when the running behaviour asks for it
+    /// ([`ActionIo::request`](crate::exec::ActionIo::request)).
+    OnDemand,
+}
+
+/// A sensor-based action `s = <pre(s), per(s)>`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorAction<'a> {
+    /// Name, as missions and traces call it.
+    pub name: &'a str,
+    /// `pre(s)`: facts that must hold for the sensor to be switched on.
+    pub pre: FactSet,
+    /// `per(s)`: the facts this sensor's samples decide.
+    pub per: FactSet,
+    /// Cyclic, one-shot or on demand.
+    pub mode: SensorMode,
+    /// A sample that takes longer than this is a [`SensorFault::Timeout`](crate::platform::SensorFault).
+    pub timeout: Duration,
+}
+
+impl<'a> SensorAction<'a> {
+    /// Default time a sample may take before the sensor counts as not answering.
+    pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(500);
+
+    /// A sensor with no precondition and the default timeout.
+    pub const fn new(name: &'a str, per: FactSet, mode: SensorMode) -> Self {
+        Self {
+            name,
+            pre: FactSet::EMPTY,
+            per,
+            mode,
+            timeout: Self::DEFAULT_TIMEOUT,
+        }
+    }
+
+    /// The same sensor with precondition `pre(s)`.
+    #[must_use]
+    pub const fn with_pre(mut self, pre: FactSet) -> Self {
+        self.pre = pre;
+        self
+    }
+
+    /// The same sensor with another sample timeout.
+    #[must_use]
+    pub const fn with_timeout(mut self, timeout: Duration) -> Self {
+        self.timeout = timeout;
+        self
+    }
+
+    /// Algorithm 2 line 11: this sensor runs beside an action whose precondition is `pre`
+    /// when it perceives something and `per(s) ⊆ pre(a)`.
+    pub const fn serves(&self, pre: FactSet) -> bool {
+        !self.per.is_empty() && self.per.is_subset(pre)
+    }
+}
+
+/// An actuator-based action `a = <pre(a), add(a), del(a)>`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ActuatorAction<'a> {
+    /// Name, as missions and traces call it.
+    pub name: &'a str,
+    /// `pre(a)`: facts that must hold while the action runs.
+    pub pre: FactSet,
+    /// `add(a)`: facts the action makes true.
+    pub add: FactSet,
+    /// `del(a)`: facts the action makes false.
+    pub del: FactSet,
+}
+
+impl<'a> ActuatorAction<'a> {
+    /// An action from its STRIPS sets.
+    pub const fn new(name: &'a str, pre: FactSet, add: FactSet, del: FactSet) -> Self {
+        Self {
+            name,
+            pre,
+            add,
+            del,
+        }
+    }
+}

@@ -1,0 +1,319 @@
+//! The planning domain `Δ`: the names of facts and events, the sensor-based actions `S` and
+//! the actuator-based actions `A` (paper §4.2).
+//!
+//! Names are resolved to small integer ids once, when the domain is built; everything that
+//! runs afterwards works on ids. Lookups by name are linear in the table size and meant for
+//! load time only.
+
+use heapless::Vec;
+
+use crate::action::{ActionId, ActuatorAction, MAX_SENSORS, SensorAction, SensorId, SensorSet};
+use crate::facts::{FactId, FactSet, MAX_FACTS};
+
+/// Most trigger events a domain can name.
+pub const MAX_EVENTS: usize = 16;
+
+/// Index of a trigger event (the invocation `t(p)` of a plan).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EventId(u8);
+
+impl EventId {
+    /// The event with index `index`, or `None` when `index >= MAX_EVENTS`.
+    pub const fn new(index: usize) -> Option<Self> {
+        if index < MAX_EVENTS {
+            Some(Self(index as u8))
+        } else {
+            None
+        }
+    }
+
+    /// The index of this event in its domain.
+    pub const fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// Which table of a domain an error is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Table {
+    /// Facts.
+    Fact,
+    /// Trigger events.
+    Event,
+    /// Sensor-based actions.
+    Sensor,
+    /// Actuator-based actions.
+    Action,
+}
+
+/// Why a domain could not be built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum DomainError {
+    /// The table already holds `capacity` entries.
+    Full {
+        /// The table that is full.
+        table: Table,
+        /// Its capacity.
+        capacity: usize,
+    },
+    /// The name is already in the table.
+    Duplicate(Table),
+    /// No entry of that name in the table.
+    Unknown(Table),
+    /// A name is empty.
+    EmptyName(Table),
+}
+
+/// The planning domain `Δ` with room for `NS` sensor-based and `NA` actuator-based actions.
+#[derive(Clone, Debug)]
+pub struct Domain<'a, const NS: usize, const NA: usize> {
+    facts: Vec<&'a str, MAX_FACTS>,
+    events: Vec<&'a str, MAX_EVENTS>,
+    sensors: Vec<SensorAction<'a>, NS>,
+    actions: Vec<ActuatorAction<'a>, NA>,
+}
+
+impl<const NS: usize, const NA: usize> Default for Domain<'_, NS, NA> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+fn push_name<'a, const N: usize>(
+    table: &mut Vec<&'a str, N>,
+    which: Table,
+    name: &'a str,
+) -> Result<usize, DomainError> {
+    if name.is_empty() {
+        return Err(DomainError::EmptyName(which));
+    }
+    if table.contains(&name) {
+        return Err(DomainError::Duplicate(which));
+    }
+    let index = table.len();
+    table.push(name).map_err(|_| DomainError::Full {
+        table: which,
+        capacity: N,
+    })?;
+    Ok(index)
+}
+
+impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
+    /// An empty domain.
+    pub const fn new() -> Self {
+        Self {
+            facts: Vec::new(),
+            events: Vec::new(),
+            sensors: Vec::new(),
+            actions: Vec::new(),
+        }
+    }
+
+    /// Adds a fact and returns its id.
+    pub fn add_fact(&mut self, name: &'a str) -> Result<FactId, DomainError> {
+        let index = push_name(&mut self.facts, Table::Fact, name)?;
+        FactId::new(index).ok_or(DomainError::Full {
+            table: Table::Fact,
+            capacity: MAX_FACTS,
+        })
+    }
+
+    /// Adds a trigger event and returns its id.
+    pub fn add_event(&mut self, name: &'a str) -> Result<EventId, DomainError> {
+        let index = push_name(&mut self.events, Table::Event, name)?;
+        EventId::new(index).ok_or(DomainError::Full {
+            table: Table::Event,
+            capacity: MAX_EVENTS,
+        })
+    }
+
+    /// Adds a sensor-based action and returns its id.
+    pub fn add_sensor(&mut self, sensor: SensorAction<'a>) -> Result<SensorId, DomainError> {
+        let full = DomainError::Full {
+            table: Table::Sensor,
+            capacity: if NS < MAX_SENSORS { NS } else { MAX_SENSORS },
+        };
+        if sensor.name.is_empty() {
+            return Err(DomainError::EmptyName(Table::Sensor));
+        }
+        if self.sensor_id(sensor.name).is_some() {
+            return Err(DomainError::Duplicate(Table::Sensor));
+        }
+        let id = SensorId::new(self.sensors.len()).ok_or(full)?;
+        self.sensors.push(sensor).map_err(|_| full)?;
+        Ok(id)
+    }
+
+    /// Adds an actuator-based action and returns its id.
+    pub fn add_action(&mut self, action: ActuatorAction<'a>) -> Result<ActionId, DomainError> {
+        let full = DomainError::Full {
+            table: Table::Action,
+            capacity: NA,
+        };
+        if action.name.is_empty() {
+            return Err(DomainError::EmptyName(Table::Action));
+        }
+        if self.action_id(action.name).is_some() {
+            return Err(DomainError::Duplicate(Table::Action));
+        }
+        let id = ActionId::new(self.actions.len()).ok_or(full)?;
+        self.actions.push(action).map_err(|_| full)?;
+        Ok(id)
+    }
+
+    /// The id of the fact called `name`.
+    pub fn fact_id(&self, name: &str) -> Option<FactId> {
+        self.facts
+            .iter()
+            .position(|n| *n == name)
+            .and_then(FactId::new)
+    }
+
+    /// The set of the facts called `names`.
+    pub fn facts(&self, names: &[&str]) -> Result<FactSet, DomainError> {
+        names.iter().try_fold(FactSet::EMPTY, |set, name| {
+            self.fact_id(name)
+                .map(|id| set.with(id))
+                .ok_or(DomainError::Unknown(Table::Fact))
+        })
+    }
+
+    /// The id of the event called `name`.
+    pub fn event_id(&self, name: &str) -> Option<EventId> {
+        self.events
+            .iter()
+            .position(|n| *n == name)
+            .and_then(EventId::new)
+    }
+
+    /// The id of the sensor-based action called `name`.
+    pub fn sensor_id(&self, name: &str) -> Option<SensorId> {
+        self.sensors
+            .iter()
+            .position(|s| s.name == name)
+            .and_then(SensorId::new)
+    }
+
+    /// The id of the actuator-based action called `name`.
+    pub fn action_id(&self, name: &str) -> Option<ActionId> {
+        self.actions
+            .iter()
+            .position(|a| a.name == name)
+            .and_then(ActionId::new)
+    }
+
+    /// The name of a fact.
+    pub fn fact_name(&self, fact: FactId) -> Option<&'a str> {
+        self.facts.get(fact.index()).copied()
+    }
+
+    /// The name of an event.
+    pub fn event_name(&self, event: EventId) -> Option<&'a str> {
+        self.events.get(event.index()).copied()
+    }
+
+    /// A sensor-based action.
+    pub fn sensor(&self, id: SensorId) -> Option<&SensorAction<'a>> {
+        self.sensors.get(id.index())
+    }
+
+    /// An actuator-based action.
+    pub fn action(&self, id: ActionId) -> Option<&ActuatorAction<'a>> {
+        self.actions.get(id.index())
+    }
+
+    /// All fact names, in id order.
+    pub fn fact_names(&self) -> &[&'a str] {
+        &self.facts
+    }
+
+    /// All event names, in id order.
+    pub fn event_names(&self) -> &[&'a str] {
+        &self.events
+    }
+
+    /// All sensor-based actions, in id order.
+    pub fn sensors(&self) -> &[SensorAction<'a>] {
+        &self.sensors
+    }
+
+    /// All actuator-based actions, in id order.
+    pub fn actions(&self) -> &[ActuatorAction<'a>] {
+        &self.actions
+    }
+
+    /// Algorithm 2 line 11: the sensors `s` with `per(s) ⊆ pre` (and `per(s) ≠ ∅`).
+    ///
+    /// O(NS).
+    pub fn sensors_serving(&self, pre: FactSet) -> SensorSet {
+        self.sensors
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.serves(pre))
+            .filter_map(|(i, _)| SensorId::new(i))
+            .collect()
+    }
+
+    /// `∪ per(s)` over a set of sensors: the facts they decide while running.
+    ///
+    /// O(NS).
+    pub fn perception_of(&self, sensors: SensorSet) -> FactSet {
+        sensors
+            .iter()
+            .filter_map(|s| self.sensor(s))
+            .fold(FactSet::EMPTY, |acc, s| acc.union(s.per))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::action::SensorMode;
+
+    #[test]
+    fn names_are_unique_nonempty_and_bounded() {
+        let mut d: Domain<'_, 1, 1> = Domain::new();
+        let a = d.add_fact("a").unwrap();
+        assert_eq!(d.add_fact("a"), Err(DomainError::Duplicate(Table::Fact)));
+        assert_eq!(d.add_fact(""), Err(DomainError::EmptyName(Table::Fact)));
+        assert_eq!(d.fact_id("a"), Some(a));
+        assert_eq!(d.facts(&["a", "b"]), Err(DomainError::Unknown(Table::Fact)));
+        let per = FactSet::single(a);
+        d.add_sensor(SensorAction::new("s", per, SensorMode::OneShot))
+            .unwrap();
+        assert_eq!(
+            d.add_sensor(SensorAction::new("t", per, SensorMode::OneShot)),
+            Err(DomainError::Full {
+                table: Table::Sensor,
+                capacity: 1
+            })
+        );
+        d.add_action(ActuatorAction::new("x", per, per, FactSet::EMPTY))
+            .unwrap();
+        assert_eq!(
+            d.add_action(ActuatorAction::new("x", per, per, FactSet::EMPTY)),
+            Err(DomainError::Duplicate(Table::Action))
+        );
+    }
+
+    #[test]
+    fn fact_table_holds_exactly_max_facts() {
+        let names: std::vec::Vec<std::string::String> =
+            (0..=MAX_FACTS).map(|i| std::format!("f{i}")).collect();
+        let mut d: Domain<'_, 1, 1> = Domain::new();
+        for name in &names[..MAX_FACTS] {
+            d.add_fact(name).unwrap();
+        }
+        assert_eq!(
+            d.add_fact(&names[MAX_FACTS]),
+            Err(DomainError::Full {
+                table: Table::Fact,
+                capacity: MAX_FACTS
+            })
+        );
+    }
+}

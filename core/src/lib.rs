@@ -1,0 +1,70 @@
+//! # psmpa-core: the P-SMPA robot control architecture, `no_std` and heap-free
+//!
+//! Classic robot software runs sense, model, plan, act in sequence, so a plan executes blind to
+//! changes. P-SMPA (Yang et al., "Towards a Robust Software Architecture for Autonomous Robot
+//! Software") runs the sensor-based actions a plan step needs *in parallel* with the
+//! actuator-based action, and lets them talk through a mutual data store.
+//!
+//! | paper | here |
+//! |---|---|
+//! | facts, `τ' = add(a) ∪ (τ \ del(a))` | [`facts`] |
+//! | `s = <pre, per>`, `a = <pre, add, del>` | [`action`] |
+//! | planning domain `Δ` | [`domain`] |
+//! | `p = <t(p), c(p), bd(p)>`, library `P`, BDI selection | [`plan`] |
+//! | world model `M = <ω, φ, Π>`, task `Π = <Δ, τ0, τG>` | [`model`], [`mission`] |
+//! | Algorithm 2: plan → FSM `f(Λ, T)` with parallel states | [`fsm`], run by [`exec`] |
+//! | Algorithm 3: data stores `D`, mutual store | [`store`] |
+//! | Algorithm 1: the control loop | [`control`] |
+//! | the SMPA baseline | [`exec::Policy::Smpa`] |
+//!
+//! The platform (a robot, or a simulator) implements [`platform::Sensor`] and
+//! [`platform::Actuator`]. The core only exposes futures: it never spawns a task and never
+//! reads a clock other than `embassy-time`, so the same code runs on a microcontroller under
+//! the embassy executor and on a host in virtual time. Capacities are const generics; a full
+//! store or table is an `Err`; nothing allocates, nothing panics.
+#![no_std]
+#![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented,
+        clippy::arithmetic_side_effects
+    )
+)]
+
+#[cfg(test)]
+extern crate std;
+
+pub(crate) mod fmt;
+
+pub mod action;
+pub mod control;
+pub mod domain;
+pub mod exec;
+pub mod facts;
+pub mod fsm;
+pub mod mission;
+pub mod model;
+pub mod plan;
+pub mod platform;
+pub mod store;
+pub mod trace;
+
+pub use action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, SensorSet};
+pub use control::{ControlError, Report};
+pub use domain::{Domain, DomainError, EventId};
+pub use exec::{ActionIo, Config, Failure, Policy, Runtime, Violation};
+pub use facts::{FactId, FactSet};
+pub use fsm::{BehaviourState, Fsm, FsmError, Target};
+pub use mission::Mission;
+pub use model::{Task, WorldModel};
+pub use plan::{Plan, PlanError, PlanId, PlanLibrary};
+pub use platform::{Actuator, Outcome, Reading, Sensor, SensorFault};
+pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
+pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};

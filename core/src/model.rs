@@ -1,0 +1,41 @@
+//! The world model `M = <ω, φ, Π>` (paper §4.2) and the task `Π = <Δ, τ0, τG>`.
+
+use crate::action::SensorId;
+use crate::domain::EventId;
+use crate::facts::FactSet;
+use crate::store::Entry;
+
+/// A task `Π = <Δ, τ0, τG>`; the domain `Δ` is the mission's [`Domain`](crate::domain::Domain).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Task {
+    /// The event posted to the plan library until the goal holds (for example "fetch tea").
+    pub event: EventId,
+    /// `τ0`: the initial state.
+    pub init: FactSet,
+    /// `τG`: the goal; reached when `τG ⊆ τ`.
+    pub goal: FactSet,
+}
+
+/// A snapshot of the world model `M = <ω, φ, Π>` of a runtime with `NS` sensors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WorldModel<const NS: usize> {
+    /// `ω`: the latest sample of every sensor, with its timestamp.
+    pub percepts: [Option<Entry>; NS],
+    /// `φ`: the beliefs, the current state `τ`.
+    pub beliefs: FactSet,
+    /// `Π`: the task.
+    pub task: Task,
+}
+
+impl<const NS: usize> WorldModel<NS> {
+    /// Whether the goal holds: `τG ⊆ φ`.
+    pub fn goal_holds(&self) -> bool {
+        self.task.goal.is_subset(self.beliefs)
+    }
+
+    /// The latest sample of `sensor`.
+    pub fn percept(&self, sensor: SensorId) -> Option<Entry> {
+        self.percepts.get(sensor.index()).copied().flatten()
+    }
+}

@@ -1,0 +1,9 @@
+//! # psmpa-sim: the host side of psmpa
+//!
+//! * [`backend`] (feature `std`): runs `psmpa-core` futures to completion in virtual time, on a
+//!   real `embassy_executor::raw::Executor`, deterministically and on any number of threads.
+#![cfg_attr(not(feature = "std"), no_std)]
+#![deny(missing_docs)]
+
+#[cfg(feature = "std")]
+pub mod backend;

@@ -1,0 +1,492 @@
+//! End-to-end behaviour of the core runtime on the tiny world, in virtual time.
+
+use embassy_time::{Duration, Instant};
+use psmpa_core::{
+    ControlError, DataStore, Failure, Policy, Runtime, SensorSet, StoreAccess, TraceEvent, Value,
+};
+use psmpa_sim::backend::simulate;
+use psmpa_tests::Recorder;
+use psmpa_tests::tiny::{self, Ids, Note, SMPA, TinyWorld};
+
+const LIMIT: Duration = Duration::from_secs(600);
+
+struct Run {
+    result: Result<psmpa_core::Report, ControlError>,
+    trace: Vec<(Instant, TraceEvent)>,
+    hash: u64,
+    notes: Vec<Note>,
+    elapsed: Duration,
+}
+
+fn run_with(
+    policy: Policy,
+    windows: &[(u64, u64)],
+    failing_plan: bool,
+    tweak: impl FnOnce(&mut TinyWorld),
+) -> Run {
+    let (mission, ids) = tiny::mission(failing_plan);
+    let mut world = TinyWorld::new(ids, windows);
+    tweak(&mut world);
+    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
+        &mission,
+        &world,
+        &world,
+        Recorder::default(),
+        tiny::config(policy),
+    );
+    let done = simulate(rt.run(), LIMIT).expect("simulation completes");
+    let hash = rt.trace_hash().value();
+    Run {
+        result: done.output,
+        trace: rt.into_sink().0,
+        hash,
+        notes: world.notes(),
+        elapsed: done.elapsed,
+    }
+}
+
+fn run(policy: Policy, windows: &[(u64, u64)]) -> Run {
+    run_with(policy, windows, false, |_| {})
+}
+
+fn ids() -> Ids {
+    tiny::mission(false).1
+}
+
+#[test]
+fn mission_reaches_the_goal_in_the_expected_virtual_time() {
+    let r = run(Policy::PSmpa, &[]);
+    let report = r.result.unwrap();
+    assert_eq!(report.plans_started, 1);
+    assert_eq!(report.plans_failed, 0);
+    // 2 m at 0.2 m/s, then 0.5 s to open the door.
+    assert_eq!(r.elapsed, Duration::from_millis(10_500));
+    assert!(matches!(
+        r.trace.last(),
+        Some((_, TraceEvent::GoalReached { .. }))
+    ));
+}
+
+/// Least commitment: a sensor is on only inside a state whose action needs it (`per(s) ⊆
+/// pre(a)`), apart from the one sample of each sensor that establishes the initial model.
+#[test]
+fn sensors_are_on_only_during_the_actions_that_need_them() {
+    let ids = ids();
+    for policy in [Policy::PSmpa, SMPA] {
+        let r = run(policy, &[(3_000, 4_000)]);
+        r.result.unwrap();
+        let mut established = false;
+        let mut state_sensors: Option<SensorSet> = None;
+        let mut on = SensorSet::EMPTY;
+        let mut on_per_action = [SensorSet::EMPTY; 4];
+        let mut current_action = None;
+        for (_, e) in &r.trace {
+            match *e {
+                TraceEvent::ModelEstablished { .. } => {
+                    assert!(on.is_empty());
+                    established = true;
+                }
+                TraceEvent::StateEntered {
+                    action, sensors, ..
+                } => {
+                    state_sensors = Some(sensors);
+                    current_action = Some(action);
+                }
+                TraceEvent::StateLeft { .. } => {
+                    assert!(
+                        on.is_empty(),
+                        "{policy:?}: sensors still on when the action ended"
+                    );
+                    state_sensors = None;
+                }
+                TraceEvent::SensorOn { sensor } => {
+                    if established {
+                        let allowed = state_sensors.expect("sensor on outside a state");
+                        assert!(
+                            allowed.contains(sensor),
+                            "{policy:?}: sensor {sensor:?} on for a state that does not need it"
+                        );
+                        let a = current_action.unwrap().index();
+                        on_per_action[a] = on_per_action[a].with(sensor);
+                    }
+                    on = on.with(sensor);
+                }
+                TraceEvent::SensorOff { sensor } => on = on.without(sensor),
+                _ => {}
+            }
+        }
+        assert_eq!(
+            on_per_action[ids.walk.index()],
+            SensorSet::EMPTY.with(ids.range)
+        );
+        assert_eq!(
+            on_per_action[ids.open.index()],
+            SensorSet::EMPTY.with(ids.camera)
+        );
+    }
+}
+
+/// Algorithm 3: every value the walking behaviour read from its mutual store is the latest
+/// sample its range sensor wrote before that instant.
+#[test]
+fn the_actuator_reads_what_its_sensor_wrote_through_the_mutual_store() {
+    let ids = ids();
+    let r = run(Policy::PSmpa, &[(2_050, 2_730), (6_000, 6_400)]);
+    r.result.unwrap();
+    let samples: Vec<(Instant, Value)> = r
+        .trace
+        .iter()
+        .filter_map(|(t, e)| match *e {
+            TraceEvent::Sample { sensor, value, .. } if sensor == ids.range => Some((*t, value)),
+            _ => None,
+        })
+        .collect();
+    let reads: Vec<(Instant, Option<Value>)> = r
+        .notes
+        .iter()
+        .filter_map(|n| match *n {
+            Note::ReadRange(t, v) => Some((t, v)),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        reads.len() > 20,
+        "the behaviour woke on samples: {} reads",
+        reads.len()
+    );
+    let mut saw_obstacle = false;
+    for (t, v) in reads {
+        let latest = samples
+            .iter()
+            .rev()
+            .find(|(st, _)| *st <= t)
+            .map(|(_, v)| *v);
+        assert_eq!(v, latest, "read at {t:?}");
+        saw_obstacle |= v == Some(Value::Mm(300));
+    }
+    assert!(saw_obstacle);
+}
+
+/// The behaviour learns of a violated precondition within one sensor period.
+#[test]
+fn a_precondition_violation_reaches_the_behaviour_within_one_sensor_period() {
+    for appear in [1_234u64, 3_000, 5_001, 7_099] {
+        let r = run(Policy::PSmpa, &[(appear, appear + 1_000)]);
+        r.result.unwrap();
+        let stopped: Vec<Instant> = r
+            .notes
+            .iter()
+            .filter_map(|n| match *n {
+                Note::Stopped(t) => Some(t),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(stopped.len(), 1, "obstacle at {appear} ms");
+        let latency = stopped[0] - Instant::from_millis(appear);
+        assert!(
+            latency <= tiny::RANGE_PERIOD,
+            "obstacle at {appear} ms seen after {} ms",
+            latency.as_millis()
+        );
+        let violated_at = r
+            .trace
+            .iter()
+            .find(|(_, e)| matches!(e, TraceEvent::PreconditionViolated { .. }))
+            .map(|(t, _)| *t)
+            .unwrap();
+        assert_eq!(violated_at, stopped[0], "told at the instant of the sample");
+    }
+}
+
+/// An obstacle that comes and goes inside an SMPA act phase (1-4 s, sensors off) is never
+/// seen by SMPA; P-SMPA, sensing while walking, sees it and stops.
+#[test]
+fn a_transient_event_during_an_act_phase_is_missed_by_smpa_and_caught_by_psmpa() {
+    let window = [(1_500, 2_500)];
+    let violations = |r: &Run| {
+        r.trace
+            .iter()
+            .filter(|(_, e)| matches!(e, TraceEvent::PreconditionViolated { .. }))
+            .count()
+    };
+    let p = run(Policy::PSmpa, &window);
+    let s = run(SMPA, &window);
+    p.result.unwrap();
+    s.result.unwrap();
+    assert_eq!(violations(&p), 1);
+    assert!(p.notes.iter().any(|n| matches!(n, Note::Stopped(_))));
+    assert_eq!(violations(&s), 0);
+    assert!(!s.notes.iter().any(|n| matches!(n, Note::Stopped(_))));
+    // SMPA stands still a quarter of the time: it takes longer than P-SMPA even though
+    // P-SMPA stopped for the obstacle.
+    assert!(
+        s.elapsed > p.elapsed,
+        "smpa {:?} psmpa {:?}",
+        s.elapsed,
+        p.elapsed
+    );
+}
+
+/// Under SMPA the sensors are on exactly during sense phases and the robot is held then.
+#[test]
+fn smpa_alternates_sense_and_act_phases_of_the_configured_lengths() {
+    let ids = ids();
+    let s = run(SMPA, &[]);
+    s.result.unwrap();
+    let walk_phases: Vec<(Instant, psmpa_core::Phase)> = s
+        .trace
+        .iter()
+        .filter_map(|(t, e)| match *e {
+            TraceEvent::PhaseStarted { action, phase } if action == ids.walk => Some((*t, phase)),
+            _ => None,
+        })
+        .collect();
+    assert!(walk_phases.len() >= 6);
+    for pair in walk_phases.windows(2) {
+        let dt = pair[1].0 - pair[0].0;
+        match pair[0].1 {
+            psmpa_core::Phase::Sense => assert_eq!(dt, Duration::from_secs(1)),
+            psmpa_core::Phase::Act => assert_eq!(dt, Duration::from_secs(3)),
+        }
+    }
+    // 10 s of walking in 3 s act phases needs 4 sense phases: 14 s, then the door.
+    assert_eq!(s.elapsed, Duration::from_millis(14_000 + 1_000 + 500));
+}
+
+#[test]
+fn a_failed_plan_leads_to_reselection_of_another_plan() {
+    let r = run_with(Policy::PSmpa, &[], true, |_| {});
+    let report = r.result.unwrap();
+    assert_eq!((report.plans_started, report.plans_failed), (2, 1));
+    let plan_events: Vec<TraceEvent> = r
+        .trace
+        .iter()
+        .map(|(_, e)| *e)
+        .filter(|e| {
+            matches!(
+                e,
+                TraceEvent::PlanSelected { .. }
+                    | TraceEvent::PlanFailed { .. }
+                    | TraceEvent::PlanSucceeded { .. }
+            )
+        })
+        .collect();
+    let ids = ids();
+    let p0 = psmpa_core::PlanId::new(0).unwrap();
+    let p1 = psmpa_core::PlanId::new(1).unwrap();
+    let ev = psmpa_core::EventId::new(0).unwrap();
+    assert_eq!(
+        plan_events,
+        [
+            TraceEvent::PlanSelected {
+                plan: p0,
+                event: ev
+            },
+            TraceEvent::PlanFailed {
+                plan: p0,
+                reason: Failure::ActionFailed {
+                    action: ids.stumble
+                }
+            },
+            TraceEvent::PlanSelected {
+                plan: p1,
+                event: ev
+            },
+            TraceEvent::PlanSucceeded { plan: p1 },
+        ]
+    );
+}
+
+#[test]
+fn no_applicable_plan_is_a_clear_error_not_a_hang() {
+    let (mut mission, ids) = tiny::mission(false);
+    // The only plan now needs a fact that never holds.
+    let mut library = psmpa_core::PlanLibrary::new();
+    let never = mission.domain.fact_id("door_open").unwrap();
+    library
+        .add(
+            psmpa_core::Plan::new(
+                "get-in",
+                mission.task.event,
+                psmpa_core::FactSet::single(never),
+                &[ids.walk],
+            )
+            .unwrap(),
+        )
+        .unwrap();
+    mission.library = library;
+    let world = TinyWorld::new(ids, &[]);
+    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
+        &mission,
+        &world,
+        &world,
+        Recorder::default(),
+        tiny::config(Policy::PSmpa),
+    );
+    let out = simulate(rt.run(), LIMIT).unwrap().output;
+    assert!(
+        matches!(out, Err(ControlError::NoApplicablePlan { .. })),
+        "{out:?}"
+    );
+}
+
+#[test]
+fn repeated_failure_ends_with_exhausted_not_a_loop() {
+    let (mut mission, ids) = tiny::mission(true);
+    let mut library = psmpa_core::PlanLibrary::new();
+    library
+        .add(
+            psmpa_core::Plan::new(
+                "only",
+                mission.task.event,
+                psmpa_core::FactSet::EMPTY,
+                &[ids.stumble],
+            )
+            .unwrap(),
+        )
+        .unwrap();
+    mission.library = library;
+    let world = TinyWorld::new(ids, &[]);
+    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
+        &mission,
+        &world,
+        &world,
+        Recorder::default(),
+        tiny::config(Policy::PSmpa),
+    );
+    let out = simulate(rt.run(), LIMIT).unwrap().output;
+    assert!(
+        matches!(out, Err(ControlError::Exhausted { .. })),
+        "{out:?}"
+    );
+}
+
+/// A sensor that stops answering is a fault after its timeout: the state fails, the behaviour
+/// is not left running, and the control loop ends with an error instead of hanging.
+#[test]
+fn a_sensor_that_stops_answering_fails_the_action_after_its_timeout() {
+    let ids = ids();
+    let r = run_with(Policy::PSmpa, &[], false, |w| w.camera_answers = false);
+    assert!(r.result.is_err());
+    let fault_at = r
+        .trace
+        .iter()
+        .find_map(|(t, e)| match *e {
+            TraceEvent::SensorFailed { sensor, fault } if sensor == ids.camera => Some((*t, fault)),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(fault_at.1, psmpa_core::SensorFault::Timeout);
+    // The camera was switched on when "open" started (10 s) and timed out 500 ms later.
+    assert_eq!(fault_at.0, Instant::from_millis(10_500));
+    assert!(r.trace.iter().any(|(_, e)| matches!(
+        e,
+        TraceEvent::PlanFailed {
+            reason: Failure::SensorFault { .. },
+            ..
+        }
+    )));
+}
+
+/// A precondition that stays false longer than `max_violation` takes the failure edge.
+#[test]
+fn a_precondition_that_stays_violated_fails_the_state() {
+    let (mission, ids) = tiny::mission(false);
+    let world = TinyWorld::new(ids, &[(2_000, 60_000)]);
+    let mut config = tiny::config(Policy::PSmpa);
+    config.max_violation = Duration::from_secs(3);
+    config.max_failures = 0;
+    let rt: tiny::TinyRuntime<'_, 4> =
+        Runtime::new(&mission, &world, &world, Recorder::default(), config);
+    let out = simulate(rt.run(), LIMIT).unwrap();
+    assert!(matches!(
+        out.output,
+        Err(ControlError::TooManyFailures {
+            last: Failure::PreconditionViolated { .. },
+            ..
+        })
+    ));
+    // Seen at 2.0 s, given up 3 s later.
+    assert_eq!(out.elapsed, Duration::from_secs(5));
+}
+
+/// A sensor store with no room: the sample is an error that fails the state, never dropped.
+#[test]
+fn a_full_sensor_store_is_an_error_not_a_silent_drop() {
+    let (mission, ids) = tiny::mission(false);
+    let world = TinyWorld::new(ids, &[]);
+    let mut config = tiny::config(Policy::PSmpa);
+    config.max_failures = 0;
+    let rt: tiny::TinyRuntime<'_, 0> =
+        Runtime::new(&mission, &world, &world, Recorder::default(), config);
+    let out = simulate(rt.run(), LIMIT).unwrap().output;
+    // The very first sample, establishing the model, finds no room.
+    assert_eq!(
+        out,
+        Err(ControlError::InitialModel {
+            failure: Failure::StoreFull {
+                key: psmpa_core::store::SAMPLE_KEY
+            }
+        })
+    );
+    let trace = rt.into_sink().0;
+    assert!(
+        !trace
+            .iter()
+            .any(|(_, e)| matches!(e, TraceEvent::Sample { .. }))
+    );
+}
+
+#[test]
+fn the_same_run_gives_the_same_trace_hash_twice_and_on_8_parallel_threads() {
+    let window = [(1_500, 2_500), (4_200, 5_000)];
+    let reference: Vec<u64> = [Policy::PSmpa, SMPA]
+        .iter()
+        .map(|p| run(*p, &window).hash)
+        .collect();
+    assert_ne!(
+        reference[0], reference[1],
+        "the policies leave different traces"
+    );
+    let again: Vec<u64> = [Policy::PSmpa, SMPA]
+        .iter()
+        .map(|p| run(*p, &window).hash)
+        .collect();
+    assert_eq!(reference, again);
+    let threads: Vec<_> = (0..8)
+        .map(|i| {
+            std::thread::spawn(move || {
+                let policy = if i % 2 == 0 { Policy::PSmpa } else { SMPA };
+                (i % 2, run(policy, &window).hash)
+            })
+        })
+        .collect();
+    for t in threads {
+        let (which, hash) = t.join().unwrap();
+        assert_eq!(hash, reference[which]);
+    }
+}
+
+/// Stores are the runtime's: after a run the sensor's store holds its last sample.
+#[test]
+fn sensor_stores_keep_the_latest_sample_with_its_time() {
+    let (mission, ids) = tiny::mission(false);
+    let world = TinyWorld::new(ids, &[]);
+    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
+        &mission,
+        &world,
+        &world,
+        Recorder::default(),
+        tiny::config(Policy::PSmpa),
+    );
+    simulate(rt.run(), LIMIT).unwrap().output.unwrap();
+    let store: &DataStore<_, 4> = rt.sensor_store(ids.range).unwrap();
+    let last = store.get(psmpa_core::store::SAMPLE_KEY).unwrap();
+    assert_eq!(last.value, Value::Mm(2550));
+    // Sampled every 100 ms from 0 while walking. The walk ends at 10.0 s, the instant the next
+    // sample is due: the sensor ends with the action, so the last sample is from 9.9 s.
+    assert_eq!(last.at, Instant::from_millis(9_900));
+    let model = rt.model();
+    assert!(model.goal_holds());
+    assert_eq!(model.percept(ids.range), Some(last));
+}
