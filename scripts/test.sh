@@ -33,6 +33,9 @@ for target in thumbv7em-none-eabihf thumbv6m-none-eabi riscv32imac-unknown-none-
   cargo build -p psmpa-core --target "$target" --release --features defmt
 done
 
+step "the simulated world builds without std (the firmware runs it)"
+cargo build -p psmpa-sim --no-default-features --target thumbv7em-none-eabihf --release
+
 step "psmpa-core uses no allocator"
 # `extern crate std/alloc` is allowed only right under `#[cfg(test)]`.
 awk 'FNR == 1 { prev = "" }

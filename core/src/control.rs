@@ -11,7 +11,7 @@
 
 use embassy_sync::blocking_mutex::raw::RawMutex;
 
-use crate::action::{SensorId, SensorMode};
+use crate::action::{SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
 use crate::exec::{Failure, Runtime};
 use crate::facts::FactSet;
@@ -96,21 +96,28 @@ impl<
     /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor whose
     /// `pre(s)` holds is switched on, sampled once and switched off again.
     pub async fn establish_initial_model(&self) -> Result<FactSet, ControlError> {
-        self.set_beliefs(self.mission.task.init);
-        for (index, spec) in self.mission.domain.sensors().iter().enumerate() {
-            let Some(sensor) = SensorId::new(index) else {
-                break;
-            };
-            if spec.mode == SensorMode::OnDemand || !spec.pre.is_subset(self.beliefs()) {
-                continue;
-            }
-            let one = crate::action::SensorSet::EMPTY.with(sensor);
+        let init = self.mission.task.init;
+        self.set_beliefs(init);
+        let eligible: SensorSet = self
+            .mission
+            .domain
+            .sensors()
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.mode != SensorMode::OnDemand && s.pre.is_subset(init))
+            .filter_map(|(i, _)| SensorId::new(i))
+            .collect();
+        // Fused as if they ran together, although each is on only for its one sample.
+        self.set_running(eligible);
+        for sensor in eligible.iter() {
+            let one = SensorSet::EMPTY.with(sensor);
             let to_error = |failure| ControlError::InitialModel { failure };
             self.switch_on(one).await.map_err(to_error)?;
             let sampled = self.sample(sensor).await;
             self.switch_off(one).await;
             sampled.map_err(to_error)?;
         }
+        self.set_running(SensorSet::EMPTY);
         let beliefs = self.beliefs();
         self.trace(TraceEvent::ModelEstablished { beliefs });
         Ok(beliefs)

@@ -65,6 +65,8 @@ pub struct Config {
     /// Plans after which the control loop gives up even if they all succeeded (a library whose
     /// plans never reach the goal would otherwise loop forever).
     pub max_plans: u16,
+    /// Lost samples in a row after which a sensor counts as [`SensorFault::Silent`].
+    pub max_lost: u8,
 }
 
 impl Default for Config {
@@ -74,6 +76,7 @@ impl Default for Config {
             max_violation: Duration::from_secs(5),
             max_failures: 8,
             max_plans: 64,
+            max_lost: 10,
         }
     }
 }
@@ -228,6 +231,14 @@ impl ActionIo<'_> {
 struct Shared<const NS: usize> {
     beliefs: Cell<FactSet>,
     percepts: [Cell<Option<Entry>>; NS],
+    /// What each sensor's latest sample says of its `per(s)`.
+    holds: [Cell<FactSet>; NS],
+    /// The sensors switched on for the current state (or the initial model).
+    running: Cell<SensorSet>,
+    /// The running sensors that have sampled since they were switched on.
+    fresh: Cell<SensorSet>,
+    /// Samples lost in a row, per sensor.
+    lost: [Cell<u8>; NS],
     violation: Cell<Option<Violation>>,
     requests: Cell<SensorSet>,
     version: Cell<u32>,
@@ -383,6 +394,10 @@ impl<
             shared: Mutex::new(Shared {
                 beliefs: Cell::new(mission.task.init),
                 percepts: [const { Cell::new(None) }; NS],
+                holds: [const { Cell::new(FactSet::EMPTY) }; NS],
+                running: Cell::new(SensorSet::EMPTY),
+                fresh: Cell::new(SensorSet::EMPTY),
+                lost: [const { Cell::new(0) }; NS],
                 violation: Cell::new(None),
                 requests: Cell::new(SensorSet::EMPTY),
                 version: Cell::new(0),
@@ -527,6 +542,14 @@ impl<
         Failure::SensorFault { sensor, fault }
     }
 
+    /// Declares which sensors run from now on (for sensor fusion); none has sampled yet.
+    pub(crate) fn set_running(&self, sensors: SensorSet) {
+        self.shared.lock(|s| {
+            s.running.set(sensors);
+            s.fresh.set(SensorSet::EMPTY);
+        });
+    }
+
     /// Switches `sensors` on in id order; on a fault, switches back off those already on.
     pub(crate) async fn switch_on(&self, sensors: SensorSet) -> Result<(), Failure> {
         for sensor in sensors.iter() {
@@ -574,10 +597,28 @@ impl<
             .sensor(sensor)
             .ok_or(Failure::SensorUnavailable { sensor })?;
         let reading = match with_timeout(spec.timeout, self.sensors.sample(sensor)).await {
-            Ok(Ok(reading)) => reading,
+            Ok(Ok(Some(reading))) => reading,
+            Ok(Ok(None)) => {
+                self.trace(TraceEvent::SampleLost { sensor });
+                let lost = self.shared.lock(|s| {
+                    s.lost.get(sensor.index()).map_or(u8::MAX, |n| {
+                        n.set(n.get().saturating_add(1));
+                        n.get()
+                    })
+                });
+                if lost >= self.config.max_lost {
+                    return Err(self.sensor_failed(sensor, SensorFault::Silent));
+                }
+                return Ok(());
+            }
             Ok(Err(fault)) => return Err(self.sensor_failed(sensor, fault)),
             Err(_) => return Err(self.sensor_failed(sensor, SensorFault::Timeout)),
         };
+        self.shared.lock(|s| {
+            if let Some(n) = s.lost.get(sensor.index()) {
+                n.set(0);
+            }
+        });
         let now = Instant::now();
         let holds = reading.holds.intersection(spec.per);
         let entry = Entry {
@@ -589,9 +630,24 @@ impl<
             .ok_or(Failure::SensorUnavailable { sensor })?
             .put(SAMPLE_KEY, reading.value, now)
             .map_err(|e| Failure::StoreFull { key: e.key })?;
+        let domain = &self.mission.domain;
         self.shared.lock(|s| {
+            if let Some(h) = s.holds.get(sensor.index()) {
+                h.set(holds);
+            }
+            let fresh = s.fresh.get().with(sensor);
+            s.fresh.set(fresh);
+            // Sensor fusion by conjunction: a fact of per(s) holds only if no running sensor that
+            // perceives it and has sampled says otherwise (the sonar sees a box while the bumper
+            // feels nothing: the path is not clear).
+            let sampled = SensorSet::from_bits(s.running.get().bits() & fresh.bits()).with(sensor);
+            let decided = sampled.iter().fold(spec.per, |acc, t| {
+                let per_t = domain.sensor(t).map_or(FactSet::EMPTY, |t| t.per);
+                let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, Cell::get);
+                acc.difference(per_t.difference(holds_t))
+            });
             s.beliefs
-                .set(s.beliefs.get().difference(spec.per).union(holds));
+                .set(s.beliefs.get().difference(spec.per).union(decided));
             if let Some(p) = s.percepts.get(sensor.index()) {
                 p.set(Some(entry));
             }
@@ -603,6 +659,26 @@ impl<
         });
         self.notify();
         Ok(())
+    }
+
+    /// When the latest sample was taken that says one of `missing` does not hold: the newest
+    /// evidence of a violation. Samples of other sensors that only repeat the fused verdict are
+    /// not evidence.
+    fn evidence(&self, missing: FactSet) -> Option<Instant> {
+        let domain = &self.mission.domain;
+        self.shared.lock(|s| {
+            let sampled = SensorSet::from_bits(s.running.get().bits() & s.fresh.get().bits());
+            sampled
+                .iter()
+                .filter(|t| {
+                    let per_t = domain.sensor(*t).map_or(FactSet::EMPTY, |t| t.per);
+                    let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, Cell::get);
+                    per_t.difference(holds_t).intersects(missing)
+                })
+                .filter_map(|t| s.percepts.get(t.index()).and_then(Cell::get))
+                .map(|e| e.at)
+                .max()
+        })
     }
 
     /// Compares `pre(a)` with the beliefs after new samples; tells the behaviour about a change
@@ -618,20 +694,23 @@ impl<
                 self.trace(TraceEvent::PreconditionRestored { action });
             }
             (false, None) => {
+                let seen = self.evidence(missing).unwrap_or(now);
                 self.shared.lock(|s| {
                     s.violation.set(Some(Violation {
                         missing,
-                        since: now,
-                        last_seen: now,
+                        since: seen,
+                        last_seen: seen,
                     }))
                 });
                 self.trace(TraceEvent::PreconditionViolated { action, missing });
             }
             (false, Some(v)) => {
+                let last_seen = self.evidence(missing).unwrap_or(v.last_seen);
+                let changed = v.missing != missing || last_seen != v.last_seen;
                 self.shared.lock(|s| {
                     s.violation.set(Some(Violation {
                         missing,
-                        last_seen: now,
+                        last_seen,
                         ..v
                     }))
                 });
@@ -640,6 +719,9 @@ impl<
                 }
                 if now.saturating_duration_since(v.since) >= self.config.max_violation {
                     return Err(Failure::PreconditionViolated { action, missing });
+                }
+                if !changed {
+                    return Ok(());
                 }
             }
         }
@@ -704,6 +786,7 @@ impl<
         io: &ActionIo<'_>,
     ) -> Result<Outcome, Failure> {
         self.switch_on(sensors).await?;
+        self.set_running(sensors);
         let result = async {
             let start = Instant::now();
             let mut schedule = Schedule::new(&self.mission.domain, sensors, start, true);
@@ -742,6 +825,7 @@ impl<
         first: bool,
     ) -> Result<(), Failure> {
         self.switch_on(sensors).await?;
+        self.set_running(sensors);
         let result = async {
             let start = Instant::now();
             let mut schedule = Schedule::new(&self.mission.domain, sensors, start, first);
@@ -807,6 +891,7 @@ impl<
             s.violation.set(None);
             s.requests.set(SensorSet::EMPTY);
         });
+        self.set_running(SensorSet::EMPTY);
         let (outcome, result) = match result {
             Ok(outcome) => (Some(outcome), outcome_result(action, outcome)),
             Err(failure) => (None, Err(failure)),

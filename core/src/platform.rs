@@ -33,6 +33,8 @@ pub enum SensorFault {
     OutOfRange,
     /// The sensor keeps returning the same value where the world must have changed.
     Stuck,
+    /// Too many samples in a row were lost ([`Config::max_lost`](crate::exec::Config::max_lost)).
+    Silent,
     /// The device reported an error (platform-specific code).
     Device(u8),
 }
@@ -56,8 +58,11 @@ pub trait Sensor {
     async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault>;
     /// Powers the sensor down. Called when the action it serves ends.
     async fn switch_off(&self, sensor: SensorId);
-    /// Takes one sample. The runtime bounds it with the sensor's timeout.
-    async fn sample(&self, sensor: SensorId) -> Result<Reading, SensorFault>;
+    /// Takes one sample. The runtime bounds it with the sensor's timeout. `Ok(None)` means this
+    /// sample was lost (an echo that never came back); the runtime keeps the previous belief
+    /// and fails the state after [`Config::max_lost`](crate::exec::Config::max_lost) losses in
+    /// a row.
+    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault>;
 }
 
 /// The actuator behaviours of a platform (the acting side of the deliberative controller).

@@ -97,6 +97,11 @@ pub enum TraceEvent {
         /// The perception facts that hold according to it.
         holds: FactSet,
     },
+    /// A sample was lost (the sensor answered without a value).
+    SampleLost {
+        /// The sensor.
+        sensor: SensorId,
+    },
     /// A sensor failed to deliver a sample.
     SensorFailed {
         /// The sensor.
@@ -184,6 +189,12 @@ impl TraceHash {
         }
     }
 
+    /// Adds application bytes (a world's events, a device's state) to the hash. Encode values
+    /// with a fixed byte order so that every platform hashes the same bytes.
+    pub fn write(&mut self, bytes: &[u8]) {
+        self.bytes(bytes);
+    }
+
     fn u8(&mut self, v: u8) {
         self.bytes(&[v]);
     }
@@ -221,6 +232,7 @@ impl TraceHash {
             SensorFault::OutOfRange => self.u8(1),
             SensorFault::Stuck => self.u8(2),
             SensorFault::Device(code) => self.bytes(&[3, code]),
+            SensorFault::Silent => self.u8(4),
         }
     }
 
@@ -303,6 +315,7 @@ impl TraceHash {
                 self.value_of(value);
                 self.u64(holds.bits());
             }
+            E::SampleLost { sensor } => self.bytes(&[17, id(sensor.index())]),
             E::SensorFailed { sensor, fault } => {
                 self.bytes(&[10, id(sensor.index())]);
                 self.fault(fault);

@@ -7,3 +7,13 @@
 
 #[cfg(feature = "std")]
 pub mod backend;
+#[cfg(feature = "std")]
+pub mod cli;
+#[cfg(feature = "std")]
+pub mod load;
+pub mod robot;
+pub mod run;
+pub mod scenario;
+#[cfg(feature = "std")]
+pub mod sim;
+pub mod world;

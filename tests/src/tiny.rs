@@ -246,23 +246,23 @@ impl Sensor for TinyWorld {
         }
     }
 
-    async fn sample(&self, sensor: SensorId) -> Result<Reading, SensorFault> {
+    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
         self.advance();
         if sensor == self.ids.range {
             let blocked = self.blocked(Instant::now());
             let clear = FactSet::single(psmpa_core::FactId::new(0).unwrap());
-            Ok(Reading {
+            Ok(Some(Reading {
                 value: Value::Mm(if blocked { 300 } else { 2550 }),
                 holds: if blocked { FactSet::EMPTY } else { clear },
-            })
+            }))
         } else {
             if !self.camera_answers {
                 core::future::pending::<()>().await;
             }
-            Ok(Reading {
+            Ok(Some(Reading {
                 value: Value::Bool(true),
                 holds: FactSet::single(psmpa_core::FactId::new(2).unwrap()),
-            })
+            }))
         }
     }
 }

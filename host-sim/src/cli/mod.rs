@@ -1,0 +1,7 @@
+//! The pieces of the `psmpa-sim` command line: reports, Table I, sweeps and the trace, plot and
+//! timeline outputs.
+
+pub mod outputs;
+pub mod report;
+pub mod sweep;
+pub mod table1;

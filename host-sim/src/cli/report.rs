@@ -1,0 +1,172 @@
+//! The result of one run, as the contract's JSON object and as text.
+
+use std::fmt::Write as _;
+
+use serde::Serialize;
+
+use crate::robot::Arch;
+use crate::run::{Ending, Summary};
+use crate::scenario::Scenario;
+use crate::world::{Device, Fate};
+
+/// Sensor on-time, seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SensorOn {
+    /// Sonar.
+    pub sonar: f64,
+    /// Foot bumper.
+    pub bumper: f64,
+}
+
+/// The JSON object `psmpa-sim run --json` prints (`SIMULATION.md`), field for field.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunJson {
+    /// Scenario name.
+    pub scenario: String,
+    /// `psmpa` or `smpa`.
+    pub arch: &'static str,
+    /// Interferences that were put down.
+    pub interferences: u32,
+    /// Of which detected.
+    pub detected: u32,
+    /// `detected / interferences` (1.0 when there were none).
+    pub detection_rate: f64,
+    /// Collisions.
+    pub collisions: u32,
+    /// Whether the robot reached the door.
+    pub reached_door: bool,
+    /// When the run ended, s.
+    pub time_cost_s: f64,
+    /// Longest reaction latency, ms; `null` when nothing was detected.
+    pub max_reaction_ms: Option<u64>,
+    /// Sensor on-time.
+    pub sensor_on_s: SensorOn,
+    /// Trace hash, 16 lower-case hex digits.
+    pub trace_hash: String,
+}
+
+/// `detected / interferences`, 1.0 when nothing was put down (nothing was missed).
+pub fn rate(detected: u32, interferences: u32) -> f64 {
+    if interferences == 0 {
+        1.0
+    } else {
+        f64::from(detected) / f64::from(interferences)
+    }
+}
+
+fn seconds(ms: u64) -> f64 {
+    ms as f64 / 1000.0
+}
+
+impl RunJson {
+    /// The contract object of a run.
+    pub fn new(scenario: &Scenario, summary: &Summary) -> Self {
+        let t = &summary.tally;
+        Self {
+            scenario: scenario.name.as_str().to_owned(),
+            arch: summary.arch.name(),
+            interferences: t.interferences,
+            detected: t.detected,
+            detection_rate: rate(t.detected, t.interferences),
+            collisions: t.collisions,
+            reached_door: t.reached_door,
+            time_cost_s: seconds(summary.time_cost_ms),
+            max_reaction_ms: t.max_reaction_ms,
+            sensor_on_s: SensorOn {
+                sonar: seconds(t.on_ms[0]),
+                bumper: seconds(t.on_ms[1]),
+            },
+            trace_hash: format!("{:016x}", summary.trace_hash),
+        }
+    }
+}
+
+/// The architecture as the paper writes it.
+pub fn arch_title(arch: Arch) -> &'static str {
+    match arch {
+        Arch::PSmpa => "P-SMPA",
+        Arch::Smpa => "SMPA",
+    }
+}
+
+/// How the run ended, in words.
+pub fn ending(e: &Ending) -> String {
+    match e {
+        Ending::Goal(r) => format!(
+            "goal reached: in the kitchen ({} plan{} started, {} failed)",
+            r.plans_started,
+            if r.plans_started == 1 { "" } else { "s" },
+            r.plans_failed
+        ),
+        Ending::Error(e) => format!("the control loop gave up: {e:?}"),
+        Ending::TimeLimit => "stopped at max_s".to_owned(),
+    }
+}
+
+/// The human-readable report of one run.
+pub fn human(scenario: &Scenario, summary: &Summary) -> String {
+    let j = RunJson::new(scenario, summary);
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "scenario {} under {}",
+        j.scenario,
+        arch_title(summary.arch)
+    );
+    let _ = writeln!(out, "  interferences    {}", j.interferences);
+    let _ = writeln!(
+        out,
+        "  detected         {} ({:.1} %)",
+        j.detected,
+        100.0 * j.detection_rate
+    );
+    let _ = writeln!(out, "  collisions       {}", j.collisions);
+    let _ = writeln!(
+        out,
+        "  reached door     {}",
+        if j.reached_door { "yes" } else { "no" }
+    );
+    let _ = writeln!(out, "  time cost        {:.1} s", j.time_cost_s);
+    let _ = writeln!(
+        out,
+        "  max reaction     {}",
+        j.max_reaction_ms
+            .map_or("-".to_owned(), |ms| format!("{ms} ms"))
+    );
+    let _ = writeln!(
+        out,
+        "  sensor on-time   sonar {:.1} s, bumper {:.1} s, camera {:.1} s",
+        j.sensor_on_s.sonar,
+        j.sensor_on_s.bumper,
+        seconds(summary.tally.on_ms[2])
+    );
+    let _ = writeln!(out, "  outcome          {}", ending(&summary.ending));
+    let _ = writeln!(out, "  trace hash       {}", j.trace_hash);
+    for (i, (item, fate)) in scenario
+        .interferences
+        .iter()
+        .zip(summary.fates.iter())
+        .enumerate()
+    {
+        let what = match fate {
+            Fate::Unmet => "not met (taken away first, or due after the door)".to_owned(),
+            Fate::Detected(d) => format!("detected by the {}", device(*d)),
+            Fate::Collided => "collision".to_owned(),
+        };
+        let _ = writeln!(
+            out,
+            "  #{:<2} {:<4} at {:>6.1} s: {what}",
+            i + 1,
+            match item.kind {
+                crate::scenario::Kind::Box => "box",
+                crate::scenario::Kind::Ball => "ball",
+            },
+            seconds(item.at_ms),
+        );
+    }
+    out
+}
+
+fn device(d: Device) -> &'static str {
+    d.name()
+}

@@ -1,0 +1,271 @@
+//! Randomized scenarios under both architectures, with summary statistics.
+//!
+//! Scenario `i` of a sweep depends only on the seed and `i` (its own PCG stream), so a sweep
+//! gives the same numbers on any number of threads.
+
+use indicatif::{ProgressBar, ProgressStyle};
+use rand_core::Rng;
+use rand_pcg::Pcg32;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::robot::Arch;
+use crate::run::Summary;
+use crate::scenario::{Interference, Kind, Scenario, Sonar};
+use crate::sim::{RunError, run_summary};
+
+fn uniform(rng: &mut Pcg32, lo: u64, hi: u64) -> u64 {
+    lo + u64::from(rng.next_u32()) % (hi - lo + 1)
+}
+
+/// Scenario `index` of the sweep with `seed`.
+pub fn scenario(seed: u64, index: u64) -> Scenario {
+    let mut rng = Pcg32::new(seed, index);
+    let r = &mut rng;
+    let speed_um_per_ms = uniform(r, 50, 200) as i64;
+    let door_um = uniform(r, 1_000, 3_000) as i64 * 1_000;
+    let walk_ms = (door_um / speed_um_per_ms) as u64;
+    let noise_um = if uniform(r, 0, 1) == 0 {
+        0
+    } else {
+        uniform(r, 0, 30) as i64 * 1_000
+    };
+    // Probability v / 1000, at most 0.1, as a threshold on a u32 draw.
+    let dropout = if uniform(r, 0, 1) == 0 {
+        0
+    } else {
+        (uniform(r, 0, 100) << 32) / 1000
+    };
+    let n = uniform(r, 0, 8);
+    let mut interferences = heapless::Vec::new();
+    for _ in 0..n {
+        let kind = if uniform(r, 0, 1) == 0 {
+            Kind::Box
+        } else {
+            Kind::Ball
+        };
+        let ahead_um = match kind {
+            Kind::Box => uniform(r, 150, 1_000),
+            Kind::Ball => uniform(r, 0, 300),
+        } as i64
+            * 1_000;
+        let _ = interferences.push(Interference {
+            kind,
+            at_ms: uniform(r, 0, walk_ms),
+            ahead_um,
+            hold_ms: uniform(r, 500, 10_000),
+        });
+    }
+    let mut name = heapless::String::new();
+    let _ = core::fmt::write(&mut name, format_args!("sweep-{seed}-{index}"));
+    Scenario {
+        name,
+        seed: seed ^ index.rotate_left(17),
+        door_um,
+        max_ms: 600_000,
+        speed_um_per_ms,
+        avoid_ms: uniform(r, 1_000, 3_000),
+        sonar: Sonar {
+            period_ms: [50, 100, 200][uniform(r, 0, 2) as usize],
+            min_um: 250_000,
+            max_um: 2_550_000,
+            threshold_um: 500_000,
+            noise_um,
+            dropout,
+        },
+        bumper_period_ms: [10, 20, 50][uniform(r, 0, 2) as usize],
+        sense_ms: uniform(r, 5, 20) * 100,
+        act_ms: uniform(r, 10, 40) * 100,
+        interferences,
+    }
+}
+
+/// Totals of one architecture over a sweep.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct ArchStats {
+    /// Scenarios run.
+    pub scenarios: u64,
+    /// Interferences put down.
+    pub interferences: u64,
+    /// Detected.
+    pub detected: u64,
+    /// Physically detectable (certain to register in a P-SMPA sample; see `world`).
+    pub detectable: u64,
+    /// Detectable ones this architecture did not detect.
+    pub missed_detectable: u64,
+    /// Collisions.
+    pub collisions: u64,
+    /// Runs that reached the door.
+    pub reached_door: u64,
+    /// Runs that reached the goal.
+    pub goal: u64,
+    /// Sum of time costs, ms.
+    pub time_ms: u64,
+    /// Worst reaction latency, ms.
+    pub max_reaction_ms: Option<u64>,
+    /// Sum of sonar and bumper on-time, ms.
+    pub sensor_on_ms: u64,
+}
+
+impl ArchStats {
+    fn add(&mut self, s: &Summary, detectable: u32, missed: u32) {
+        let t = &s.tally;
+        self.scenarios += 1;
+        self.interferences += u64::from(t.interferences);
+        self.detected += u64::from(t.detected);
+        self.detectable += u64::from(detectable);
+        self.missed_detectable += u64::from(missed);
+        self.collisions += u64::from(t.collisions);
+        self.reached_door += u64::from(t.reached_door);
+        self.goal += u64::from(matches!(s.ending, crate::run::Ending::Goal(_)));
+        self.time_ms += s.time_cost_ms;
+        self.max_reaction_ms = self.max_reaction_ms.max(t.max_reaction_ms);
+        self.sensor_on_ms += t.on_ms[0] + t.on_ms[1];
+    }
+
+    /// Detected / interferences.
+    pub fn detection_rate(&self) -> f64 {
+        crate::cli::report::rate(self.detected as u32, self.interferences as u32)
+    }
+}
+
+/// A sweep's statistics.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct SweepStats {
+    /// Seed.
+    pub seed: u64,
+    /// Runs per architecture.
+    pub runs: u64,
+    /// P-SMPA, when run.
+    pub psmpa: Option<ArchStats>,
+    /// SMPA, when run.
+    pub smpa: Option<ArchStats>,
+    /// Median over scenarios of SMPA time / P-SMPA time (both run).
+    pub time_ratio_median: Option<f64>,
+    /// Total SMPA time / total P-SMPA time (both run).
+    pub time_ratio_total: Option<f64>,
+}
+
+/// Which architectures a sweep runs.
+pub fn arches(only: Option<Arch>) -> Vec<Arch> {
+    only.map_or_else(|| Arch::ALL.to_vec(), |a| vec![a])
+}
+
+/// Runs `runs` scenarios from `seed` under `arches` (in parallel), with a progress bar when
+/// `progress`.
+pub fn sweep(
+    seed: u64,
+    runs: u64,
+    arches: &[Arch],
+    progress: bool,
+) -> Result<SweepStats, RunError> {
+    let bar = if progress {
+        let bar = ProgressBar::new(runs);
+        if let Ok(style) = ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} scenarios ({per_sec}, eta {eta})",
+        ) {
+            bar.set_style(style);
+        }
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let results: Vec<Result<Vec<Summary>, RunError>> = (0..runs)
+        .into_par_iter()
+        .map(|i| {
+            let sc = scenario(seed, i);
+            let out = arches.iter().map(|&a| run_summary(&sc, a)).collect();
+            bar.inc(1);
+            out
+        })
+        .collect();
+    bar.finish_and_clear();
+
+    let mut stats = SweepStats {
+        seed,
+        runs,
+        ..SweepStats::default()
+    };
+    let mut ratios = Vec::new();
+    for result in results {
+        let summaries = result?;
+        // Detectability is a property of the scenario, measured on the P-SMPA run.
+        let detectable = summaries
+            .iter()
+            .find(|s| s.arch == Arch::PSmpa)
+            .map(|s| s.tally.detectable);
+        let mut times = [None, None];
+        for s in &summaries {
+            let missed = detectable.map_or(0, |d| d.saturating_sub(s.tally.detected));
+            let slot = match s.arch {
+                Arch::PSmpa => &mut stats.psmpa,
+                Arch::Smpa => &mut stats.smpa,
+            };
+            slot.get_or_insert_with(ArchStats::default)
+                .add(s, detectable.unwrap_or(0), missed);
+            times[usize::from(s.arch == Arch::Smpa)] = Some(s.time_cost_ms);
+        }
+        if let [Some(p), Some(s)] = times {
+            ratios.push(s as f64 / p.max(1) as f64);
+        }
+    }
+    if !ratios.is_empty() {
+        ratios.sort_by(f64::total_cmp);
+        stats.time_ratio_median = ratios.get(ratios.len() / 2).copied();
+    }
+    if let (Some(p), Some(s)) = (stats.psmpa, stats.smpa) {
+        stats.time_ratio_total = Some(s.time_ms as f64 / p.time_ms.max(1) as f64);
+    }
+    Ok(stats)
+}
+
+/// The statistics as text.
+pub fn render(stats: &SweepStats) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "sweep: {} random scenarios, seed {}",
+        stats.runs, stats.seed
+    );
+    let _ = writeln!(
+        out,
+        "{:<8} {:>10} {:>9} {:>8} {:>11} {:>9} {:>11} {:>10} {:>13} {:>13}",
+        "arch",
+        "interf",
+        "detected",
+        "rate %",
+        "detectable",
+        "missed",
+        "collisions",
+        "at door",
+        "max react ms",
+        "sensor on s"
+    );
+    for (name, s) in [("P-SMPA", stats.psmpa), ("SMPA", stats.smpa)] {
+        let Some(s) = s else { continue };
+        let _ = writeln!(
+            out,
+            "{:<8} {:>10} {:>9} {:>8.1} {:>11} {:>9} {:>11} {:>10} {:>13} {:>13.0}",
+            name,
+            s.interferences,
+            s.detected,
+            100.0 * s.detection_rate(),
+            s.detectable,
+            s.missed_detectable,
+            s.collisions,
+            s.reached_door,
+            s.max_reaction_ms.map_or("-".to_owned(), |m| m.to_string()),
+            s.sensor_on_ms as f64 / 1000.0,
+        );
+    }
+    if let (Some(m), Some(t)) = (stats.time_ratio_median, stats.time_ratio_total) {
+        let _ = writeln!(out, "time cost SMPA / P-SMPA: median {m:.2}, total {t:.2}");
+    }
+    let _ = writeln!(
+        out,
+        "detectable: present while a delivered P-SMPA sample was certain to register it \
+         (box within [min + noise, threshold - noise) of the sonar, or touching the bumper)"
+    );
+    out
+}

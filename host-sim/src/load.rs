@@ -1,0 +1,68 @@
+//! Loading scenario files on the host, with errors that name the file and the field or the
+//! line and column.
+//!
+//! The scenario is parsed by `serde-json-core`, the parser the firmware uses. That parser
+//! reports no position and drops serde's messages (its message-keeping feature can panic), so
+//! when it rejects a file the same file is read once more with `serde_json` and
+//! `serde_path_to_error`, only to say where and what.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use crate::scenario::{Scenario, ScenarioError, ScenarioFile};
+
+/// A scenario file that could not be used.
+#[derive(Debug)]
+pub struct LoadError {
+    /// The file.
+    pub file: PathBuf,
+    /// What is wrong, in one line.
+    pub message: String,
+}
+
+impl fmt::Display for LoadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.file.display(), self.message)
+    }
+}
+
+impl std::error::Error for LoadError {}
+
+/// Reads and validates a scenario file.
+pub fn load(path: &Path) -> Result<Scenario, LoadError> {
+    let bytes = std::fs::read(path).map_err(|e| LoadError {
+        file: path.to_path_buf(),
+        message: format!("cannot read the file: {e}"),
+    })?;
+    parse(path, &bytes)
+}
+
+/// Validates scenario bytes that came from `file`.
+pub fn parse(file: &Path, bytes: &[u8]) -> Result<Scenario, LoadError> {
+    Scenario::parse(bytes).map_err(|e| LoadError {
+        file: file.to_path_buf(),
+        message: match e {
+            ScenarioError::Json(inner) => diagnose(bytes).unwrap_or_else(|| inner.to_string()),
+            invalid @ ScenarioError::Invalid { .. } => invalid.to_string(),
+        },
+    })
+}
+
+/// Where and why a file that `serde-json-core` rejected is wrong, according to `serde_json`.
+fn diagnose(bytes: &[u8]) -> Option<String> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let result: Result<ScenarioFile<'_>, _> = serde_path_to_error::deserialize(&mut de);
+    let err = match result {
+        Ok(_) => de.end().err().map(|e| e.to_string())?,
+        Err(err) => {
+            let path = err.path().to_string();
+            let inner = err.into_inner();
+            if path == "." || inner.is_syntax() || inner.is_eof() {
+                inner.to_string()
+            } else {
+                format!("{path}: {inner}")
+            }
+        }
+    };
+    Some(err.replace('\n', " "))
+}

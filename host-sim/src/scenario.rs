@@ -1,0 +1,619 @@
+//! Scenario files (the contract of `SIMULATION.md`): parsed with `serde-json-core`, validated
+//! field by field, converted to integer units (micrometres, milliseconds).
+//!
+//! `no_std`: the firmware parses the same files at boot with the same code.
+
+use core::fmt;
+
+use heapless::{String, Vec};
+use serde::Deserialize;
+
+/// Most interferences a scenario can hold.
+pub const MAX_INTERFERENCES: usize = 32;
+/// Longest scenario name, in bytes.
+pub const MAX_NAME: usize = 48;
+
+/// What a person puts in front of the robot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// A tall box (0.8 m): the sonar sees it.
+    Box,
+    /// A small ball (0.1 m), below the sonar cone: only the foot bumper feels it.
+    Ball,
+}
+
+/// `robot` as written in the file.
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotFile {
+    /// Walking speed, m/s.
+    pub speed_mps: Option<f64>,
+    /// Time a side step around a detected obstacle takes, s.
+    pub avoid_s: Option<f64>,
+}
+
+/// `sonar` as written in the file.
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SonarFile {
+    /// Sampling period, ms.
+    pub period_ms: Option<f64>,
+    /// Shortest distance the sonar measures, m.
+    pub min_m: Option<f64>,
+    /// Longest distance; also the reading when nothing is in range, m.
+    pub max_m: Option<f64>,
+    /// An obstacle counts as seen below this distance, m.
+    pub threshold_m: Option<f64>,
+    /// Uniform noise amplitude, m.
+    pub noise_m: Option<f64>,
+    /// Probability that a sample is lost.
+    pub dropout: Option<f64>,
+}
+
+/// `bumper` as written in the file.
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BumperFile {
+    /// Sampling period, ms.
+    pub period_ms: Option<f64>,
+}
+
+/// `smpa` as written in the file.
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SmpaFile {
+    /// Sense phase length, ms.
+    pub sense_ms: Option<f64>,
+    /// Act phase length, ms.
+    pub act_ms: Option<f64>,
+}
+
+/// One interference as written in the file.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InterferenceFile {
+    /// Box or ball.
+    pub kind: Kind,
+    /// When the obstacle is put down, s.
+    pub at_s: f64,
+    /// How far in front of the robot, m (default 0.45 for a box, 0.05 for a ball).
+    pub ahead_m: Option<f64>,
+    /// After how long the person takes it away again, s (default 4.0).
+    pub hold_s: Option<f64>,
+}
+
+/// A scenario file as written, before validation.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile<'a> {
+    /// Scenario name.
+    #[serde(borrow)]
+    pub name: &'a str,
+    /// Seed of the noise and dropout generator.
+    pub seed: Option<u64>,
+    /// Distance to the door, m.
+    pub door_m: Option<f64>,
+    /// Longest run, s.
+    pub max_s: Option<f64>,
+    /// The robot.
+    pub robot: Option<RobotFile>,
+    /// The sonar.
+    pub sonar: Option<SonarFile>,
+    /// The foot bumper.
+    pub bumper: Option<BumperFile>,
+    /// The SMPA phases.
+    pub smpa: Option<SmpaFile>,
+    /// The interferences, in any order.
+    pub interferences: Vec<InterferenceFile, MAX_INTERFERENCES>,
+}
+
+/// The sonar, in integer units.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Sonar {
+    /// Sampling period, ms.
+    pub period_ms: u64,
+    /// Shortest measured distance, µm.
+    pub min_um: i64,
+    /// Longest measured distance, µm.
+    pub max_um: i64,
+    /// Detection threshold, µm.
+    pub threshold_um: i64,
+    /// Noise amplitude, µm.
+    pub noise_um: i64,
+    /// A sample is lost when a uniform `u32` draw is below this (probability × 2³²).
+    pub dropout: u64,
+}
+
+/// One interference, in integer units.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Interference {
+    /// Box or ball.
+    pub kind: Kind,
+    /// When it is put down, ms.
+    pub at_ms: u64,
+    /// How far in front of the robot, µm.
+    pub ahead_um: i64,
+    /// How long until a person takes it away, ms.
+    pub hold_ms: u64,
+}
+
+/// A validated scenario in integer units.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Scenario {
+    /// Name.
+    pub name: String<MAX_NAME>,
+    /// PRNG seed.
+    pub seed: u64,
+    /// Distance to the door, µm.
+    pub door_um: i64,
+    /// Longest run, ms.
+    pub max_ms: u64,
+    /// Walking speed, µm per ms (= mm/s).
+    pub speed_um_per_ms: i64,
+    /// Side step duration, ms.
+    pub avoid_ms: u64,
+    /// The sonar.
+    pub sonar: Sonar,
+    /// Bumper period, ms.
+    pub bumper_period_ms: u64,
+    /// SMPA sense phase, ms.
+    pub sense_ms: u64,
+    /// SMPA act phase, ms.
+    pub act_ms: u64,
+    /// The interferences, in file order.
+    pub interferences: Vec<Interference, MAX_INTERFERENCES>,
+}
+
+/// Where in a scenario file something is wrong.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Field {
+    /// Section (`robot`, `sonar`, `interferences`, ...) or `None` at the top level.
+    pub section: Option<&'static str>,
+    /// Index in `interferences`.
+    pub index: Option<usize>,
+    /// Field name.
+    pub name: &'static str,
+}
+
+impl Field {
+    const fn top(name: &'static str) -> Self {
+        Self {
+            section: None,
+            index: None,
+            name,
+        }
+    }
+
+    const fn of(section: &'static str, name: &'static str) -> Self {
+        Self {
+            section: Some(section),
+            index: None,
+            name,
+        }
+    }
+}
+
+impl fmt::Display for Field {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(section) = self.section {
+            f.write_str(section)?;
+            if let Some(i) = self.index {
+                write!(f, "[{i}]")?;
+            }
+            f.write_str(".")?;
+        }
+        f.write_str(self.name)
+    }
+}
+
+/// What is wrong with a value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Problem {
+    /// A duration or distance below zero.
+    Negative(f64),
+    /// Must be above zero.
+    NotPositive(f64),
+    /// Must be a whole number of milliseconds.
+    NotWhole(f64),
+    /// Outside `[min, max]`.
+    OutOfRange {
+        /// The value.
+        value: f64,
+        /// Smallest allowed.
+        min: f64,
+        /// Largest allowed.
+        max: f64,
+    },
+    /// The name is empty.
+    Empty,
+    /// The name is longer than [`MAX_NAME`] bytes.
+    TooLong,
+    /// `threshold_m` must lie in `(min_m, max_m]`.
+    ThresholdOutsideRange,
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Negative(v) => write!(f, "must not be negative, got {v}"),
+            Self::NotPositive(v) => write!(f, "must be greater than 0, got {v}"),
+            Self::NotWhole(v) => write!(f, "must be a whole number of milliseconds, got {v}"),
+            Self::OutOfRange { value, min, max } => {
+                write!(f, "must lie between {min} and {max}, got {value}")
+            }
+            Self::Empty => f.write_str("must not be empty"),
+            Self::TooLong => write!(f, "must be at most {MAX_NAME} bytes long"),
+            Self::ThresholdOutsideRange => {
+                f.write_str("threshold_m must lie above min_m and at most max_m")
+            }
+        }
+    }
+}
+
+/// Why a scenario is invalid.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ScenarioError {
+    /// Not valid JSON, or not the expected shape (a wrong type, an unknown field, a missing
+    /// field, an unknown `kind`). `serde-json-core` reports no position; hosts add one.
+    Json(serde_json_core::de::Error),
+    /// A value out of its range.
+    Invalid {
+        /// Which field.
+        field: Field,
+        /// What is wrong.
+        problem: Problem,
+    },
+}
+
+impl fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Json(e) => write!(f, "{e}"),
+            Self::Invalid { field, problem } => write!(f, "{field}: {problem}"),
+        }
+    }
+}
+
+fn invalid(field: Field, problem: Problem) -> ScenarioError {
+    ScenarioError::Invalid { field, problem }
+}
+
+/// Largest duration accepted anywhere (one day), ms.
+const MAX_MS: f64 = 86_400_000.0;
+/// Largest distance accepted anywhere (1 km), m.
+const MAX_M: f64 = 1_000.0;
+
+/// A non-negative number of seconds, rounded to ms.
+fn seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
+    let ms = value * 1000.0;
+    if value < 0.0 {
+        return Err(invalid(field, Problem::Negative(value)));
+    }
+    if ms > MAX_MS {
+        return Err(invalid(
+            field,
+            Problem::OutOfRange {
+                value,
+                min: 0.0,
+                max: MAX_MS / 1000.0,
+            },
+        ));
+    }
+    Ok((ms + 0.5) as u64)
+}
+
+/// A whole number of milliseconds, at least 1.
+fn millis(field: Field, value: f64) -> Result<u64, ScenarioError> {
+    if value < 0.0 {
+        return Err(invalid(field, Problem::Negative(value)));
+    }
+    if value < 1.0 {
+        return Err(invalid(field, Problem::NotPositive(value)));
+    }
+    if value > MAX_MS {
+        return Err(invalid(
+            field,
+            Problem::OutOfRange {
+                value,
+                min: 1.0,
+                max: MAX_MS,
+            },
+        ));
+    }
+    let whole = value as u64;
+    if whole as f64 != value {
+        return Err(invalid(field, Problem::NotWhole(value)));
+    }
+    Ok(whole)
+}
+
+/// A non-negative distance in metres, rounded to µm.
+fn metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
+    if value < 0.0 {
+        return Err(invalid(field, Problem::Negative(value)));
+    }
+    if value > MAX_M {
+        return Err(invalid(
+            field,
+            Problem::OutOfRange {
+                value,
+                min: 0.0,
+                max: MAX_M,
+            },
+        ));
+    }
+    Ok((value * 1_000_000.0 + 0.5) as i64)
+}
+
+fn positive_metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
+    let um = metres(field, value)?;
+    if um == 0 {
+        return Err(invalid(field, Problem::NotPositive(value)));
+    }
+    Ok(um)
+}
+
+impl Scenario {
+    /// The default values of `SIMULATION.md`: 2 m door, 0.1 m/s, 100 ms sonar with a 0.5 m
+    /// threshold, 20 ms bumper, SMPA 1 s sense / 3 s act, at most 600 s.
+    pub const DEFAULTS: ScenarioFile<'static> = ScenarioFile {
+        name: "default",
+        seed: Some(42),
+        door_m: Some(2.0),
+        max_s: Some(600.0),
+        robot: Some(RobotFile {
+            speed_mps: Some(0.1),
+            avoid_s: Some(2.0),
+        }),
+        sonar: Some(SonarFile {
+            period_ms: Some(100.0),
+            min_m: Some(0.25),
+            max_m: Some(2.55),
+            threshold_m: Some(0.5),
+            noise_m: Some(0.0),
+            dropout: Some(0.0),
+        }),
+        bumper: Some(BumperFile {
+            period_ms: Some(20.0),
+        }),
+        smpa: Some(SmpaFile {
+            sense_ms: Some(1000.0),
+            act_ms: Some(3000.0),
+        }),
+        interferences: Vec::new(),
+    };
+
+    /// Parses and validates a scenario file.
+    pub fn parse(json: &[u8]) -> Result<Self, ScenarioError> {
+        let (file, _) =
+            serde_json_core::from_slice::<ScenarioFile<'_>>(json).map_err(ScenarioError::Json)?;
+        Self::validate(&file)
+    }
+
+    /// Validates a parsed file and converts it to integer units.
+    pub fn validate(file: &ScenarioFile<'_>) -> Result<Self, ScenarioError> {
+        // Every default is `Some` in DEFAULTS; `or` keeps the file's value when present.
+        let d = Self::DEFAULTS;
+        let dr = d.robot.unwrap_or_default();
+        let ds = d.sonar.unwrap_or_default();
+        let db = d.bumper.unwrap_or_default();
+        let dp = d.smpa.unwrap_or_default();
+        let r = file.robot.unwrap_or_default();
+        let s = file.sonar.unwrap_or_default();
+        let b = file.bumper.unwrap_or_default();
+        let p = file.smpa.unwrap_or_default();
+        let pick = |v: Option<f64>, default: Option<f64>| v.or(default).unwrap_or(0.0);
+
+        if file.name.is_empty() {
+            return Err(invalid(Field::top("name"), Problem::Empty));
+        }
+        let name = String::try_from(file.name)
+            .map_err(|_| invalid(Field::top("name"), Problem::TooLong))?;
+        let door_m = pick(file.door_m, d.door_m);
+        let door_um = positive_metres(Field::top("door_m"), door_m)?;
+        let max_s = pick(file.max_s, d.max_s);
+        let max_ms = seconds(Field::top("max_s"), max_s)?;
+        if max_ms == 0 {
+            return Err(invalid(Field::top("max_s"), Problem::NotPositive(max_s)));
+        }
+        let speed = pick(r.speed_mps, dr.speed_mps);
+        let speed_field = Field::of("robot", "speed_mps");
+        if speed < 0.0 {
+            return Err(invalid(speed_field, Problem::Negative(speed)));
+        }
+        if !(0.001..=10.0).contains(&speed) {
+            return Err(invalid(
+                speed_field,
+                Problem::OutOfRange {
+                    value: speed,
+                    min: 0.001,
+                    max: 10.0,
+                },
+            ));
+        }
+        let speed_um_per_ms = (speed * 1000.0 + 0.5) as i64;
+        let avoid_ms = seconds(Field::of("robot", "avoid_s"), pick(r.avoid_s, dr.avoid_s))?;
+
+        let sonar = Sonar {
+            period_ms: millis(
+                Field::of("sonar", "period_ms"),
+                pick(s.period_ms, ds.period_ms),
+            )?,
+            min_um: metres(Field::of("sonar", "min_m"), pick(s.min_m, ds.min_m))?,
+            max_um: positive_metres(Field::of("sonar", "max_m"), pick(s.max_m, ds.max_m))?,
+            threshold_um: positive_metres(
+                Field::of("sonar", "threshold_m"),
+                pick(s.threshold_m, ds.threshold_m),
+            )?,
+            noise_um: metres(Field::of("sonar", "noise_m"), pick(s.noise_m, ds.noise_m))?,
+            dropout: {
+                let p = pick(s.dropout, ds.dropout);
+                let field = Field::of("sonar", "dropout");
+                if p < 0.0 {
+                    return Err(invalid(field, Problem::Negative(p)));
+                }
+                if p > 1.0 {
+                    return Err(invalid(
+                        field,
+                        Problem::OutOfRange {
+                            value: p,
+                            min: 0.0,
+                            max: 1.0,
+                        },
+                    ));
+                }
+                (p * 4_294_967_296.0 + 0.5) as u64
+            },
+        };
+        if sonar.max_um <= sonar.min_um {
+            return Err(invalid(
+                Field::of("sonar", "max_m"),
+                Problem::OutOfRange {
+                    value: pick(s.max_m, ds.max_m),
+                    min: pick(s.min_m, ds.min_m),
+                    max: MAX_M,
+                },
+            ));
+        }
+        if sonar.threshold_um <= sonar.min_um || sonar.threshold_um > sonar.max_um {
+            return Err(invalid(
+                Field::of("sonar", "threshold_m"),
+                Problem::ThresholdOutsideRange,
+            ));
+        }
+        let bumper_period_ms = millis(
+            Field::of("bumper", "period_ms"),
+            pick(b.period_ms, db.period_ms),
+        )?;
+        let sense_ms = millis(Field::of("smpa", "sense_ms"), pick(p.sense_ms, dp.sense_ms))?;
+        let act_ms = millis(Field::of("smpa", "act_ms"), pick(p.act_ms, dp.act_ms))?;
+
+        let mut interferences = Vec::new();
+        for (index, i) in file.interferences.iter().enumerate() {
+            let at = |name| Field {
+                section: Some("interferences"),
+                index: Some(index),
+                name,
+            };
+            let default_ahead = match i.kind {
+                Kind::Box => 0.45,
+                Kind::Ball => 0.05,
+            };
+            let item = Interference {
+                kind: i.kind,
+                at_ms: seconds(at("at_s"), i.at_s)?,
+                ahead_um: metres(at("ahead_m"), i.ahead_m.unwrap_or(default_ahead))?,
+                hold_ms: seconds(at("hold_s"), i.hold_s.unwrap_or(4.0))?,
+            };
+            // Cannot overflow: the file held at most MAX_INTERFERENCES.
+            let _ = interferences.push(item);
+        }
+        Ok(Self {
+            name,
+            seed: file.seed.or(d.seed).unwrap_or(0),
+            door_um,
+            max_ms,
+            speed_um_per_ms,
+            avoid_ms,
+            sonar,
+            bumper_period_ms,
+            sense_ms,
+            act_ms,
+            interferences,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(json: &str) -> ScenarioError {
+        Scenario::parse(json.as_bytes()).unwrap_err()
+    }
+
+    #[test]
+    fn the_contract_example_parses_to_integer_units() {
+        let json = br#"{
+          "name": "sonar-6", "seed": 42, "door_m": 2.0, "max_s": 600,
+          "robot":  { "speed_mps": 0.1, "avoid_s": 2.0 },
+          "sonar":  { "period_ms": 100, "min_m": 0.25, "max_m": 2.55, "threshold_m": 0.5,
+                      "noise_m": 0.0, "dropout": 0.0 },
+          "bumper": { "period_ms": 20 },
+          "smpa":   { "sense_ms": 1000, "act_ms": 3000 },
+          "interferences": [
+            { "kind": "box",  "at_s": 3.0,  "ahead_m": 0.45, "hold_s": 4.0 },
+            { "kind": "ball", "at_s": 11.0, "ahead_m": 0.05, "hold_s": 4.0 }
+          ]
+        }"#;
+        let s = Scenario::parse(json).unwrap();
+        assert_eq!(s.name.as_str(), "sonar-6");
+        assert_eq!(s.door_um, 2_000_000);
+        assert_eq!(s.speed_um_per_ms, 100);
+        assert_eq!(s.sonar.max_um, 2_550_000);
+        assert_eq!(s.sonar.threshold_um, 500_000);
+        assert_eq!(s.interferences[1].at_ms, 11_000);
+        assert_eq!(s.interferences[0].ahead_um, 450_000);
+        // Only the required fields: the same scenario, with the shown defaults.
+        let minimal = Scenario::parse(
+            br#"{"name":"sonar-6","interferences":[
+            {"kind":"box","at_s":3.0},{"kind":"ball","at_s":11.0}]}"#,
+        )
+        .unwrap();
+        assert_eq!(minimal, s);
+    }
+
+    #[test]
+    fn bad_values_name_their_field() {
+        let e = err(
+            r#"{"name":"x","interferences":[{"kind":"box","at_s":1},{"kind":"ball","at_s":-2}]}"#,
+        );
+        assert_eq!(
+            e.to_string(),
+            "interferences[1].at_s: must not be negative, got -2"
+        );
+        let e = err(r#"{"name":"","interferences":[]}"#);
+        assert_eq!(e.to_string(), "name: must not be empty");
+        let e = err(r#"{"name":"x","sonar":{"period_ms":0},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "sonar.period_ms: must be greater than 0, got 0"
+        );
+        let e = err(r#"{"name":"x","bumper":{"period_ms":2.5},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "bumper.period_ms: must be a whole number of milliseconds, got 2.5"
+        );
+        let e = err(r#"{"name":"x","sonar":{"threshold_m":3.0},"interferences":[]}"#);
+        assert!(e.to_string().starts_with("sonar.threshold_m:"));
+        let e = err(r#"{"name":"x","sonar":{"dropout":1.5},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "sonar.dropout: must lie between 0 and 1, got 1.5"
+        );
+        let e = err(r#"{"name":"x","robot":{"speed_mps":0},"interferences":[]}"#);
+        assert!(e.to_string().starts_with("robot.speed_mps:"));
+    }
+
+    #[test]
+    fn shape_errors_come_from_the_json_parser() {
+        assert!(matches!(err(r#"{"name":"x"}"#), ScenarioError::Json(_)));
+        assert!(matches!(
+            err(r#"{"name":"x","interferences":[],"colour":1}"#),
+            ScenarioError::Json(_)
+        ));
+        assert!(matches!(
+            err(r#"{"name":"x","interferences":[{"kind":"chair","at_s":1}]}"#),
+            ScenarioError::Json(_)
+        ));
+        assert!(matches!(
+            err(r#"{"name":"x","door_m":"far","interferences":[]}"#),
+            ScenarioError::Json(_)
+        ));
+        assert!(matches!(
+            err(r#"{"name":"x","interferences":["#),
+            ScenarioError::Json(_)
+        ));
+    }
+}

@@ -1,0 +1,92 @@
+//! Host runs of a scenario in virtual time, with everything recorded for the outputs.
+
+use embassy_time::{Duration, Instant};
+use psmpa_core::{TraceEvent, TraceSink};
+
+use crate::backend::{SimError, simulate};
+use crate::robot::{Arch, MissionError};
+use crate::run::{Summary, run};
+use crate::scenario::Scenario;
+use crate::world::{WorldEvent, WorldLog};
+
+/// Every world event with its time (ms) and the robot's position (µm).
+#[derive(Debug, Default, Clone)]
+pub struct WorldRecord(pub Vec<(u64, i64, WorldEvent)>);
+
+impl WorldLog for WorldRecord {
+    fn log(&mut self, at_ms: u64, pos_um: i64, event: WorldEvent) {
+        self.0.push((at_ms, pos_um, event));
+    }
+}
+
+/// Every runtime trace event with its time.
+#[derive(Debug, Default, Clone)]
+pub struct TraceRecord(pub Vec<(Instant, TraceEvent)>);
+
+impl TraceSink for TraceRecord {
+    fn record(&mut self, at: Instant, event: &TraceEvent) {
+        self.0.push((at, *event));
+    }
+}
+
+/// Why a host run failed (never because of the scenario's outcome).
+#[derive(Debug)]
+pub enum RunError {
+    /// The mission could not be built.
+    Mission(MissionError),
+    /// The simulation deadlocked or ran past its limit.
+    Sim(SimError),
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Mission(e) => write!(f, "the mission could not be built: {e:?}"),
+            Self::Sim(e) => write!(f, "simulation failed: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for RunError {}
+
+/// A recorded run.
+#[derive(Debug, Clone)]
+pub struct Recorded {
+    /// The summary.
+    pub summary: Summary,
+    /// The world's events.
+    pub world: WorldRecord,
+    /// The runtime's trace.
+    pub trace: TraceRecord,
+}
+
+/// Virtual time allowed beyond `max_s`: the run stops itself at `max_s`.
+const SLACK: Duration = Duration::from_secs(1);
+
+/// Runs `scenario` under `arch` with nothing recorded (fast path for sweeps and benchmarks).
+pub fn run_summary(scenario: &Scenario, arch: Arch) -> Result<Summary, RunError> {
+    let limit = Duration::from_millis(scenario.max_ms) + SLACK;
+    let done = simulate(run(scenario, arch, (), ()), limit).map_err(RunError::Sim)?;
+    done.output.map(|(s, (), ())| s).map_err(RunError::Mission)
+}
+
+/// Runs `scenario` under `arch` recording the world and the trace.
+pub fn run_recorded(scenario: &Scenario, arch: Arch) -> Result<Recorded, RunError> {
+    let limit = Duration::from_millis(scenario.max_ms) + SLACK;
+    let done = simulate(
+        run(
+            scenario,
+            arch,
+            WorldRecord::default(),
+            TraceRecord::default(),
+        ),
+        limit,
+    )
+    .map_err(RunError::Sim)?;
+    let (summary, world, trace) = done.output.map_err(RunError::Mission)?;
+    Ok(Recorded {
+        summary,
+        world,
+        trace,
+    })
+}

@@ -1,0 +1,784 @@
+//! The simulated NAO world of the paper's experiment (§6): a straight walk to the door while a
+//! person puts obstacles in front of the robot and takes them away again.
+//!
+//! Integer units throughout: positions in micrometres, time in milliseconds of `embassy-time`.
+//! The physics is event driven and exact: between two instants it knows when the next thing
+//! happens (an obstacle appears or is removed, the robot touches an obstacle or reaches the
+//! door, a side step ends, a box comes within the sonar threshold), so results do not depend
+//! on how often anything wakes up.
+//!
+//! What counts (see `SIMULATION.md`):
+//! * **detected**: an active sensor registered the obstacle while it was present and before the
+//!   robot touched it unregistered (sonar reading above 0 and below the threshold caused by a
+//!   box, or bumper 2). A bumper that is on registers a touch itself, so touching with the
+//!   bumper on is a detection, not a collision.
+//! * **collision**: the robot touched an obstacle no active sensor had registered; it cannot
+//!   walk through and is blocked until the obstacle is removed (or avoided once sensed).
+//! * **reaction latency**: from the first instant an active sensor could register the obstacle
+//!   (noise-free) to the instant the walking stops for it (at once, if the robot was standing).
+//! * **detectable**: at least one delivered sample fell in an instant where the obstacle was
+//!   present and certain to register whatever the noise (a box in
+//!   `[min + noise, threshold − noise)`, or a touch with the bumper on). Under P-SMPA, whose
+//!   sensors run for the whole walk, this is "could physically be detected".
+
+use core::cell::RefCell;
+
+use embassy_time::Instant;
+use heapless::Vec;
+use rand_core::{Rng, SeedableRng};
+use rand_pcg::Pcg32;
+
+use psmpa_core::TraceHash;
+
+use crate::scenario::{Kind, MAX_INTERFERENCES, Scenario};
+
+/// The world's devices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Device {
+    /// Ultrasonic sonar.
+    Sonar,
+    /// Foot bumper.
+    Bumper,
+    /// Camera (one-shot, sees the door handle).
+    Camera,
+}
+
+impl Device {
+    /// Lower-case name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Sonar => "sonar",
+            Self::Bumper => "bumper",
+            Self::Camera => "camera",
+        }
+    }
+
+    const fn slot(self) -> usize {
+        match self {
+            Self::Sonar => 0,
+            Self::Bumper => 1,
+            Self::Camera => 2,
+        }
+    }
+}
+
+/// Something that happened in the world.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WorldEvent {
+    /// A sensor was switched on.
+    SensorOn(Device),
+    /// A sensor was switched off.
+    SensorOff(Device),
+    /// A sample: sonar in mm, bumper 1/2, camera 0/1.
+    Sample(Device, u32),
+    /// A sample lost to dropout.
+    SampleLost(Device),
+    /// Interference `index` was put down at `at_um`.
+    Appeared {
+        /// Index in the scenario.
+        index: u8,
+        /// Box or ball.
+        kind: Kind,
+        /// Its position, µm from the start.
+        at_um: i64,
+    },
+    /// Interference `index` was taken away.
+    Removed(u8),
+    /// The robot had already reached the door: interference `index` was not put down.
+    Skipped(u8),
+    /// An active sensor registered interference `index`.
+    Detected(u8, Device),
+    /// The robot touched interference `index` unregistered.
+    Collided(u8),
+    /// The robot stopped for interference `index` this long after it became registrable.
+    Reacted(u8, u64),
+    /// The robot started walking.
+    Walk,
+    /// The robot stopped walking.
+    Stop,
+    /// A side step started (around interference `index`, if one was registered).
+    AvoidStarted(Option<u8>),
+    /// The side step ended.
+    AvoidDone(Option<u8>),
+    /// SMPA: actuators held (sense phase) or released.
+    Held(bool),
+    /// The robot reached the door.
+    AtDoor,
+    /// The door is open.
+    DoorOpened,
+    /// The robot entered the kitchen.
+    InKitchen,
+}
+
+impl WorldEvent {
+    /// Adds the event to `hash` in a fixed little-endian encoding.
+    pub fn hash_into(&self, hash: &mut TraceHash) {
+        let dev = |d: Device| d.slot() as u8;
+        let opt = |o: Option<u8>| o.map_or(0xff, |i| i);
+        match *self {
+            Self::SensorOn(d) => hash.write(&[0, dev(d)]),
+            Self::SensorOff(d) => hash.write(&[1, dev(d)]),
+            Self::Sample(d, v) => {
+                hash.write(&[2, dev(d)]);
+                hash.write(&v.to_le_bytes());
+            }
+            Self::SampleLost(d) => hash.write(&[3, dev(d)]),
+            Self::Appeared { index, kind, at_um } => {
+                hash.write(&[4, index, kind as u8]);
+                hash.write(&at_um.to_le_bytes());
+            }
+            Self::Removed(i) => hash.write(&[5, i]),
+            Self::Skipped(i) => hash.write(&[6, i]),
+            Self::Detected(i, d) => hash.write(&[7, i, dev(d)]),
+            Self::Collided(i) => hash.write(&[8, i]),
+            Self::Reacted(i, ms) => {
+                hash.write(&[9, i]);
+                hash.write(&ms.to_le_bytes());
+            }
+            Self::Walk => hash.write(&[10]),
+            Self::Stop => hash.write(&[11]),
+            Self::AvoidStarted(t) => hash.write(&[12, opt(t)]),
+            Self::AvoidDone(t) => hash.write(&[13, opt(t)]),
+            Self::Held(h) => hash.write(&[14, u8::from(h)]),
+            Self::AtDoor => hash.write(&[15]),
+            Self::DoorOpened => hash.write(&[16]),
+            Self::InKitchen => hash.write(&[17]),
+        }
+    }
+}
+
+/// Receives the world's events with their time and the robot's position.
+pub trait WorldLog {
+    /// One event.
+    fn log(&mut self, at_ms: u64, pos_um: i64, event: WorldEvent);
+}
+
+/// Discards the events.
+impl WorldLog for () {
+    fn log(&mut self, _at_ms: u64, _pos_um: i64, _event: WorldEvent) {}
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    Pending,
+    Present,
+    Removed,
+    Avoided,
+    Skipped,
+}
+
+/// How an interference ended for the robot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fate {
+    /// Never registered nor touched.
+    Unmet,
+    /// Registered by this device before a collision.
+    Detected(Device),
+    /// Touched unregistered.
+    Collided,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Obstacle {
+    kind: Kind,
+    at_ms: u64,
+    ahead_um: i64,
+    hold_ms: u64,
+    pos_um: i64,
+    phase: Phase,
+    fate: Fate,
+    first_registrable: Option<u64>,
+    reaction_ms: Option<u64>,
+    certain_samples: u32,
+    /// Some active sensor has registered it (also after a collision): a side step can aim at it.
+    sensed: bool,
+}
+
+impl Obstacle {
+    fn blocks(&self) -> bool {
+        self.phase == Phase::Present
+    }
+
+    fn removal_ms(&self) -> u64 {
+        self.at_ms.saturating_add(self.hold_ms)
+    }
+}
+
+/// What the robot's legs do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Motion {
+    /// Standing.
+    Idle,
+    /// Walking towards the door (unless held or blocked).
+    Walking,
+    /// Side-stepping around an obstacle; `left_ms` of stepping remain.
+    Avoiding {
+        /// Stepping time left.
+        left_ms: u64,
+        /// The obstacle being avoided.
+        target: Option<u8>,
+    },
+}
+
+struct State<L> {
+    now: u64,
+    pos_um: i64,
+    motion: Motion,
+    held: bool,
+    on: [bool; 3],
+    on_ms: [u64; 3],
+    obstacles: Vec<Obstacle, MAX_INTERFERENCES>,
+    rng: Pcg32,
+    at_door_ms: Option<u64>,
+    door_open: bool,
+    in_kitchen: bool,
+    hash: TraceHash,
+    log: L,
+}
+
+/// The world of one run: the scenario's robot, sensors and interferences.
+pub struct World<'s, L: WorldLog> {
+    scenario: &'s Scenario,
+    state: RefCell<State<L>>,
+}
+
+/// What a run of the world amounted to.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tally {
+    /// Interferences that were put down (those due after the robot reached the door are not).
+    pub interferences: u32,
+    /// Registered before being touched.
+    pub detected: u32,
+    /// Touched unregistered.
+    pub collisions: u32,
+    /// Certain to register in at least one delivered sample (see the module doc).
+    pub detectable: u32,
+    /// Longest reaction latency over the detected obstacles, ms.
+    pub max_reaction_ms: Option<u64>,
+    /// Whether the robot reached the door.
+    pub reached_door: bool,
+    /// On-time of sonar, bumper and camera, ms.
+    pub on_ms: [u64; 3],
+}
+
+fn div_ceil(a: i64, b: i64) -> u64 {
+    if b <= 0 || a <= 0 {
+        return 0;
+    }
+    (a as u64).div_ceil(b as u64)
+}
+
+impl<L: WorldLog> State<L> {
+    fn moving(&self) -> bool {
+        self.motion == Motion::Walking && !self.held
+    }
+
+    fn emit(&mut self, event: WorldEvent) {
+        let (now, pos) = (self.now, self.pos_um);
+        self.hash.write(&now.to_le_bytes());
+        self.hash.write(&pos.to_le_bytes());
+        event.hash_into(&mut self.hash);
+        self.log.log(now, pos, event);
+    }
+
+    /// Where a walking robot must stop: the door or the nearest obstacle in the way.
+    fn limit_um(&self, door_um: i64) -> i64 {
+        self.obstacles
+            .iter()
+            .filter(|o| o.blocks() && o.pos_um >= self.pos_um)
+            .map(|o| o.pos_um)
+            .fold(door_um, i64::min)
+    }
+
+    fn touching(&self, o: &Obstacle) -> bool {
+        o.blocks() && o.pos_um <= self.pos_um
+    }
+
+    /// Noise-free: could an active sensor register `o` now?
+    fn registrable(&self, o: &Obstacle, sc: &Scenario) -> bool {
+        if !o.blocks() {
+            return false;
+        }
+        let d = o.pos_um - self.pos_um;
+        let sonar = self.on[0]
+            && o.kind == Kind::Box
+            && d >= sc.sonar.min_um
+            && d < sc.sonar.threshold_um
+            && self.nearest_box() == Some(d);
+        let bumper = self.on[1] && self.touching(o);
+        sonar || bumper
+    }
+
+    fn nearest_box(&self) -> Option<i64> {
+        self.obstacles
+            .iter()
+            .filter(|o| o.blocks() && o.kind == Kind::Box && o.pos_um >= self.pos_um)
+            .map(|o| o.pos_um - self.pos_um)
+            .min()
+    }
+
+    /// The earliest instant after `now` at which something changes by itself.
+    fn next_event(&self, sc: &Scenario) -> Option<u64> {
+        let now = self.now;
+        let mut next: Option<u64> = None;
+        let mut consider = |t: u64| {
+            if t > now {
+                next = Some(next.map_or(t, |n| n.min(t)));
+            }
+        };
+        for o in &self.obstacles {
+            match o.phase {
+                Phase::Pending => consider(o.at_ms),
+                Phase::Present => consider(o.removal_ms()),
+                _ => {}
+            }
+        }
+        if self.moving() && sc.speed_um_per_ms > 0 {
+            let limit = self.limit_um(sc.door_um);
+            if limit > self.pos_um {
+                consider(now.saturating_add(div_ceil(limit - self.pos_um, sc.speed_um_per_ms)));
+            }
+            if self.on[0] {
+                for o in &self.obstacles {
+                    let d = o.pos_um - self.pos_um;
+                    if o.blocks()
+                        && o.kind == Kind::Box
+                        && o.first_registrable.is_none()
+                        && d >= sc.sonar.threshold_um
+                    {
+                        let dt = (d - sc.sonar.threshold_um) / sc.speed_um_per_ms + 1;
+                        consider(now.saturating_add(dt as u64));
+                    }
+                }
+            }
+        }
+        if let Motion::Avoiding { left_ms, .. } = self.motion {
+            if !self.held {
+                consider(now.saturating_add(left_ms.max(1)));
+            }
+        }
+        next
+    }
+
+    /// Moves time forward by `dt` with nothing happening in between.
+    fn integrate(&mut self, dt: u64, sc: &Scenario) {
+        for (on, ms) in self.on.iter().zip(self.on_ms.iter_mut()) {
+            if *on {
+                *ms = ms.saturating_add(dt);
+            }
+        }
+        if self.moving() {
+            let step = sc.speed_um_per_ms.saturating_mul(dt as i64);
+            let limit = self.limit_um(sc.door_um);
+            self.pos_um = self.pos_um.saturating_add(step).min(limit).max(self.pos_um);
+        }
+        if let Motion::Avoiding { left_ms, target } = self.motion {
+            if !self.held {
+                self.motion = Motion::Avoiding {
+                    left_ms: left_ms.saturating_sub(dt),
+                    target,
+                };
+            }
+        }
+        self.now = self.now.saturating_add(dt);
+    }
+
+    /// Applies everything due at `now`.
+    fn settle(&mut self, sc: &Scenario) {
+        let now = self.now;
+        if let Motion::Avoiding { left_ms: 0, target } = self.motion {
+            if let Some(o) = target.and_then(|i| self.obstacles.get_mut(usize::from(i))) {
+                if o.phase == Phase::Present {
+                    o.phase = Phase::Avoided;
+                }
+            }
+            self.motion = Motion::Idle;
+            self.emit(WorldEvent::AvoidDone(target));
+        }
+        for i in 0..self.obstacles.len() {
+            let Some(o) = self.obstacles.get(i).copied() else {
+                continue;
+            };
+            let index = i as u8;
+            if o.phase == Phase::Present && o.removal_ms() <= now {
+                self.set_phase(i, Phase::Removed);
+                self.emit(WorldEvent::Removed(index));
+            } else if o.phase == Phase::Pending && o.at_ms <= now {
+                if self.at_door_ms.is_some() {
+                    self.set_phase(i, Phase::Skipped);
+                    self.emit(WorldEvent::Skipped(index));
+                } else {
+                    let at_um = self.pos_um.saturating_add(o.ahead_um);
+                    if let Some(o) = self.obstacles.get_mut(i) {
+                        o.pos_um = at_um;
+                        o.phase = Phase::Present;
+                    }
+                    self.emit(WorldEvent::Appeared {
+                        index,
+                        kind: o.kind,
+                        at_um,
+                    });
+                }
+            }
+        }
+        for i in 0..self.obstacles.len() {
+            let Some(o) = self.obstacles.get(i).copied() else {
+                continue;
+            };
+            // A touch with the bumper off and nothing registered is a collision; with the
+            // bumper on, the next bumper sample registers it.
+            if self.touching(&o) && o.fate == Fate::Unmet && !self.on[1] {
+                if let Some(o) = self.obstacles.get_mut(i) {
+                    o.fate = Fate::Collided;
+                }
+                self.emit(WorldEvent::Collided(i as u8));
+            }
+            if o.first_registrable.is_none() && o.fate == Fate::Unmet && self.registrable(&o, sc) {
+                if let Some(o) = self.obstacles.get_mut(i) {
+                    o.first_registrable = Some(now);
+                }
+            }
+        }
+    }
+
+    fn set_phase(&mut self, i: usize, phase: Phase) {
+        if let Some(o) = self.obstacles.get_mut(i) {
+            o.phase = phase;
+        }
+    }
+
+    fn advance_to(&mut self, t: u64, sc: &Scenario) {
+        self.settle(sc);
+        while self.now < t {
+            let next = self.next_event(sc).map_or(t, |n| n.min(t));
+            self.integrate(next - self.now, sc);
+            self.settle(sc);
+        }
+    }
+
+    /// An active sensor registered obstacle `i` now.
+    fn register(&mut self, i: usize, by: Device) {
+        let now = self.now;
+        let moving = self.moving();
+        let Some(o) = self.obstacles.get_mut(i) else {
+            return;
+        };
+        o.sensed = true;
+        if o.fate != Fate::Unmet {
+            return;
+        }
+        o.fate = Fate::Detected(by);
+        // With noise a reading can register a box a little before the noise-free instant.
+        let first = o.first_registrable.map_or(now, |f| f.min(now));
+        o.first_registrable = Some(first);
+        let reacted = (!moving && o.reaction_ms.is_none()).then(|| now - first);
+        if let Some(r) = reacted {
+            o.reaction_ms = Some(r);
+        }
+        self.emit(WorldEvent::Detected(i as u8, by));
+        if let Some(r) = reacted {
+            self.emit(WorldEvent::Reacted(i as u8, r));
+        }
+    }
+
+    /// The robot stops walking: every registered obstacle still waiting for a reaction got one.
+    fn react(&mut self) {
+        let now = self.now;
+        for i in 0..self.obstacles.len() {
+            let Some(o) = self.obstacles.get_mut(i) else {
+                continue;
+            };
+            if let (Fate::Detected(_), None, Some(first)) =
+                (o.fate, o.reaction_ms, o.first_registrable)
+            {
+                let r = now - first;
+                o.reaction_ms = Some(r);
+                self.emit(WorldEvent::Reacted(i as u8, r));
+            }
+        }
+    }
+}
+
+impl<'s, L: WorldLog> World<'s, L> {
+    /// The world at time 0 of `scenario`, logging into `log`.
+    pub fn new(scenario: &'s Scenario, log: L) -> Self {
+        let obstacles = scenario
+            .interferences
+            .iter()
+            .map(|i| Obstacle {
+                kind: i.kind,
+                at_ms: i.at_ms,
+                ahead_um: i.ahead_um,
+                hold_ms: i.hold_ms,
+                pos_um: 0,
+                phase: Phase::Pending,
+                fate: Fate::Unmet,
+                first_registrable: None,
+                reaction_ms: None,
+                certain_samples: 0,
+                sensed: false,
+            })
+            .collect();
+        Self {
+            scenario,
+            state: RefCell::new(State {
+                now: 0,
+                pos_um: 0,
+                motion: Motion::Idle,
+                held: false,
+                on: [false; 3],
+                on_ms: [0; 3],
+                obstacles,
+                rng: Pcg32::seed_from_u64(scenario.seed),
+                at_door_ms: None,
+                door_open: false,
+                in_kitchen: false,
+                hash: TraceHash::new(),
+                log,
+            }),
+        }
+    }
+
+    /// The scenario.
+    pub fn scenario(&self) -> &'s Scenario {
+        self.scenario
+    }
+
+    /// Brings the world to the current `embassy-time` instant and runs `f` on it.
+    fn with<R>(&self, f: impl FnOnce(&mut State<L>, &Scenario) -> R) -> R {
+        let now = Instant::now().as_millis();
+        let mut s = self.state.borrow_mut();
+        s.advance_to(now, self.scenario);
+        f(&mut s, self.scenario)
+    }
+
+    /// The robot's position, µm.
+    pub fn position_um(&self) -> i64 {
+        self.with(|s, _| s.pos_um)
+    }
+
+    /// What the legs do.
+    pub fn motion(&self) -> Motion {
+        self.with(|s, _| s.motion)
+    }
+
+    /// Whether the robot stands at the door.
+    pub fn at_door(&self) -> bool {
+        self.with(|s, sc| s.pos_um >= sc.door_um)
+    }
+
+    /// When the world next changes by itself.
+    pub fn next_event(&self) -> Option<Instant> {
+        self.with(|s, sc| s.next_event(sc))
+            .map(Instant::from_millis)
+    }
+
+    /// Starts walking to the door.
+    pub fn walk(&self) {
+        self.with(|s, _| {
+            s.motion = Motion::Walking;
+            s.emit(WorldEvent::Walk);
+        });
+    }
+
+    /// Stops walking; this is the reaction to every registered obstacle not yet reacted to.
+    pub fn stop(&self) {
+        self.with(|s, _| {
+            s.react();
+            if s.motion == Motion::Walking {
+                s.motion = Motion::Idle;
+                s.emit(WorldEvent::Stop);
+            }
+        });
+    }
+
+    /// Starts a side step around the nearest registered obstacle ahead.
+    pub fn begin_avoid(&self) {
+        self.with(|s, sc| {
+            let target = s
+                .obstacles
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| o.blocks() && o.pos_um >= s.pos_um && o.sensed)
+                .min_by_key(|(_, o)| o.pos_um)
+                .map(|(i, _)| i as u8);
+            s.motion = Motion::Avoiding {
+                left_ms: sc.avoid_ms,
+                target,
+            };
+            s.emit(WorldEvent::AvoidStarted(target));
+        });
+    }
+
+    /// Notes that the walk to the door is over.
+    pub fn arrived(&self) {
+        self.with(|s, _| {
+            if s.at_door_ms.is_none() {
+                s.at_door_ms = Some(s.now);
+                s.emit(WorldEvent::AtDoor);
+            }
+        });
+    }
+
+    /// Opens the door.
+    pub fn open_door(&self) {
+        self.with(|s, _| {
+            s.door_open = true;
+            s.emit(WorldEvent::DoorOpened);
+        });
+    }
+
+    /// Enters the kitchen.
+    pub fn enter_kitchen(&self) {
+        self.with(|s, _| {
+            s.in_kitchen = true;
+            s.emit(WorldEvent::InKitchen);
+        });
+    }
+
+    /// Holds (SMPA sense phase) or releases the actuators.
+    pub fn hold(&self, held: bool) {
+        self.with(|s, _| {
+            if s.held != held {
+                s.held = held;
+                s.emit(WorldEvent::Held(held));
+            }
+        });
+    }
+
+    /// Stops everything at once (the runtime cancelled the behaviour).
+    pub fn halt(&self) {
+        self.with(|s, _| {
+            s.react();
+            s.motion = Motion::Idle;
+            s.emit(WorldEvent::Stop);
+        });
+    }
+
+    /// Switches a sensor on or off.
+    pub fn power(&self, device: Device, on: bool) {
+        self.with(|s, sc| {
+            if let Some(slot) = s.on.get_mut(device.slot()) {
+                *slot = on;
+            }
+            s.emit(if on {
+                WorldEvent::SensorOn(device)
+            } else {
+                WorldEvent::SensorOff(device)
+            });
+            // Switching a sensor on can make an obstacle registrable at once.
+            s.settle(sc);
+        });
+    }
+
+    /// One sonar sample in mm, or `None` when it is lost to dropout. Registers the box it sees
+    /// below the threshold.
+    pub fn sonar(&self) -> Option<u32> {
+        self.with(|s, sc| {
+            let sonar = sc.sonar;
+            if sonar.dropout > 0 && u64::from(s.rng.next_u32()) < sonar.dropout {
+                s.emit(WorldEvent::SampleLost(Device::Sonar));
+                return None;
+            }
+            let nearest = s
+                .obstacles
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| o.blocks() && o.kind == Kind::Box && o.pos_um >= s.pos_um)
+                .min_by_key(|(_, o)| o.pos_um)
+                .map(|(i, o)| (i, o.pos_um - s.pos_um));
+            let seen = nearest.filter(|(_, d)| (sonar.min_um..=sonar.max_um).contains(d));
+            let reading_um = match seen {
+                Some((_, d)) => {
+                    let noise = if sonar.noise_um > 0 {
+                        let span = 2 * sonar.noise_um as u64 + 1;
+                        (u64::from(s.rng.next_u32()) % span) as i64 - sonar.noise_um
+                    } else {
+                        0
+                    };
+                    (d + noise).clamp(sonar.min_um, sonar.max_um)
+                }
+                None => sonar.max_um,
+            };
+            if let Some((i, d)) = seen {
+                if d >= sonar.min_um + sonar.noise_um && d < sonar.threshold_um - sonar.noise_um {
+                    if let Some(o) = s.obstacles.get_mut(i) {
+                        o.certain_samples = o.certain_samples.saturating_add(1);
+                    }
+                }
+                if reading_um < sonar.threshold_um {
+                    s.register(i, Device::Sonar);
+                }
+            }
+            let mm = ((reading_um + 500) / 1000) as u32;
+            s.emit(WorldEvent::Sample(Device::Sonar, mm));
+            Some(mm)
+        })
+    }
+
+    /// One bumper sample: 2 on contact (registering everything it touches), else 1.
+    pub fn bumper(&self) -> u8 {
+        self.with(|s, _| {
+            let mut level = 1;
+            for i in 0..s.obstacles.len() {
+                if s.obstacles.get(i).is_some_and(|o| s.touching(o)) {
+                    if let Some(o) = s.obstacles.get_mut(i) {
+                        o.certain_samples = o.certain_samples.saturating_add(1);
+                    }
+                    s.register(i, Device::Bumper);
+                    level = 2;
+                }
+            }
+            s.emit(WorldEvent::Sample(Device::Bumper, u32::from(level)));
+            level
+        })
+    }
+
+    /// One camera image: whether the door handle is in view (the robot is at the door).
+    pub fn camera(&self) -> bool {
+        self.with(|s, sc| {
+            let seen = s.pos_um >= sc.door_um;
+            s.emit(WorldEvent::Sample(Device::Camera, u32::from(seen)));
+            seen
+        })
+    }
+
+    /// The outcome so far.
+    pub fn tally(&self) -> Tally {
+        self.with(|s, _| {
+            let placed = || {
+                s.obstacles
+                    .iter()
+                    .filter(|o| matches!(o.phase, Phase::Present | Phase::Removed | Phase::Avoided))
+            };
+            let count = |f: &dyn Fn(&Obstacle) -> bool| placed().filter(|o| f(o)).count() as u32;
+            Tally {
+                interferences: count(&|_| true),
+                detected: count(&|o| matches!(o.fate, Fate::Detected(_))),
+                collisions: count(&|o| o.fate == Fate::Collided),
+                detectable: count(&|o| o.certain_samples > 0),
+                max_reaction_ms: placed()
+                    .filter(|o| matches!(o.fate, Fate::Detected(_)))
+                    .filter_map(|o| o.reaction_ms)
+                    .max(),
+                reached_door: s.at_door_ms.is_some(),
+                on_ms: s.on_ms,
+            }
+        })
+    }
+
+    /// How each interference ended, in scenario order.
+    pub fn fates(&self) -> Vec<Fate, MAX_INTERFERENCES> {
+        self.with(|s, _| s.obstacles.iter().map(|o| o.fate).collect())
+    }
+
+    /// Hash of every world event so far.
+    pub fn hash(&self) -> TraceHash {
+        self.state.borrow().hash
+    }
+
+    /// Gives the world up and returns its log.
+    pub fn into_log(self) -> L {
+        self.state.into_inner().log
+    }
+}
