@@ -105,7 +105,36 @@ pub struct ScenarioFile<'a> {
     /// The SMPA phases.
     pub smpa: Option<SmpaFile>,
     /// The interferences, in any order.
-    pub interferences: Vec<InterferenceFile, MAX_INTERFERENCES>,
+    pub interferences: Interferences,
+}
+
+/// The `interferences` list: at most [`MAX_INTERFERENCES`], with an error that says so.
+#[derive(Clone, Debug, Default)]
+pub struct Interferences(pub Vec<InterferenceFile, MAX_INTERFERENCES>);
+
+impl<'de> Deserialize<'de> for Interferences {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Items;
+        impl<'de> serde::de::Visitor<'de> for Items {
+            type Value = Interferences;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                write!(f, "at most {MAX_INTERFERENCES} interferences")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<Self::Value, A::Error> {
+                let mut items = Vec::new();
+                while let Some(item) = seq.next_element()? {
+                    items.push(item).map_err(|_| {
+                        serde::de::Error::invalid_length(MAX_INTERFERENCES + 1, &self)
+                    })?;
+                }
+                Ok(Interferences(items))
+            }
+        }
+        deserializer.deserialize_seq(Items)
+    }
 }
 
 /// The sonar, in integer units.
@@ -381,7 +410,7 @@ impl Scenario {
             sense_ms: Some(1000.0),
             act_ms: Some(3000.0),
         }),
-        interferences: Vec::new(),
+        interferences: Interferences(Vec::new()),
     };
 
     /// Parses and validates a scenario file.
@@ -490,7 +519,7 @@ impl Scenario {
         let act_ms = millis(Field::of("smpa", "act_ms"), pick(p.act_ms, dp.act_ms))?;
 
         let mut interferences = Vec::new();
-        for (index, i) in file.interferences.iter().enumerate() {
+        for (index, i) in file.interferences.0.iter().enumerate() {
             let at = |name| Field {
                 section: Some("interferences"),
                 index: Some(index),

@@ -16,6 +16,11 @@
 //!   walk through and is blocked until the obstacle is removed (or avoided once sensed).
 //! * **reaction latency**: from the first instant an active sensor could register the obstacle
 //!   (noise-free) to the instant the walking stops for it (at once, if the robot was standing).
+//!   The instant is the start of the registrable interval in which the detection happened: if
+//!   the obstacle stops being registrable before any sample catches it (it enters the sonar's
+//!   blind zone, a nearer box hides it, the sensor is switched off), the clock starts again
+//!   when it becomes registrable again. A window shorter than a sampling period says nothing
+//!   about how fast the robot reacts.
 //! * **detectable**: at least one delivered sample fell in an instant where the obstacle was
 //!   present and certain to register whatever the noise (a box in
 //!   `[min + noise, threshold − noise)`, or a touch with the bumper on). Under P-SMPA, whose
@@ -187,7 +192,8 @@ struct Obstacle {
     pos_um: i64,
     phase: Phase,
     fate: Fate,
-    first_registrable: Option<u64>,
+    /// Start of the current interval in which an active sensor could register it.
+    registrable_since: Option<u64>,
     reaction_ms: Option<u64>,
     certain_samples: u32,
     /// Some active sensor has registered it (also after a collision): a side step can aim at it.
@@ -339,15 +345,16 @@ impl<L: WorldLog> State<L> {
                 consider(now.saturating_add(div_ceil(limit - self.pos_um, sc.speed_um_per_ms)));
             }
             if self.on[0] {
+                // A box ahead enters the sonar threshold, then the blind zone below min_m.
                 for o in &self.obstacles {
                     let d = o.pos_um - self.pos_um;
-                    if o.blocks()
-                        && o.kind == Kind::Box
-                        && o.first_registrable.is_none()
-                        && d >= sc.sonar.threshold_um
-                    {
-                        let dt = (d - sc.sonar.threshold_um) / sc.speed_um_per_ms + 1;
-                        consider(now.saturating_add(dt as u64));
+                    if o.blocks() && o.kind == Kind::Box && o.fate == Fate::Unmet {
+                        for edge in [sc.sonar.threshold_um, sc.sonar.min_um] {
+                            if d >= edge {
+                                let dt = (d - edge) / sc.speed_um_per_ms + 1;
+                                consider(now.saturating_add(dt as u64));
+                            }
+                        }
                     }
                 }
             }
@@ -433,9 +440,14 @@ impl<L: WorldLog> State<L> {
                 }
                 self.emit(WorldEvent::Collided(i as u8));
             }
-            if o.first_registrable.is_none() && o.fate == Fate::Unmet && self.registrable(&o, sc) {
+            if o.fate == Fate::Unmet {
+                let registrable = self.registrable(&o, sc);
                 if let Some(o) = self.obstacles.get_mut(i) {
-                    o.first_registrable = Some(now);
+                    o.registrable_since = if registrable {
+                        o.registrable_since.or(Some(now))
+                    } else {
+                        None
+                    };
                 }
             }
         }
@@ -469,8 +481,8 @@ impl<L: WorldLog> State<L> {
         }
         o.fate = Fate::Detected(by);
         // With noise a reading can register a box a little before the noise-free instant.
-        let first = o.first_registrable.map_or(now, |f| f.min(now));
-        o.first_registrable = Some(first);
+        let first = o.registrable_since.map_or(now, |f| f.min(now));
+        o.registrable_since = Some(first);
         let reacted = (!moving && o.reaction_ms.is_none()).then(|| now - first);
         if let Some(r) = reacted {
             o.reaction_ms = Some(r);
@@ -489,7 +501,7 @@ impl<L: WorldLog> State<L> {
                 continue;
             };
             if let (Fate::Detected(_), None, Some(first)) =
-                (o.fate, o.reaction_ms, o.first_registrable)
+                (o.fate, o.reaction_ms, o.registrable_since)
             {
                 let r = now - first;
                 o.reaction_ms = Some(r);
@@ -513,7 +525,7 @@ impl<'s, L: WorldLog> World<'s, L> {
                 pos_um: 0,
                 phase: Phase::Pending,
                 fate: Fate::Unmet,
-                first_registrable: None,
+                registrable_since: None,
                 reaction_ms: None,
                 certain_samples: 0,
                 sensed: false,
