@@ -7,7 +7,9 @@
 
 use heapless::Vec;
 
-use crate::action::{ActionId, ActuatorAction, MAX_SENSORS, SensorAction, SensorId, SensorSet};
+use crate::action::{
+    ActionId, ActuatorAction, MAX_SENSORS, SensorAction, SensorId, SensorMode, SensorSet,
+};
 use crate::facts::{FactId, FactSet, MAX_FACTS};
 
 /// Most trigger events a domain can name.
@@ -19,6 +21,9 @@ pub const MAX_EVENTS: usize = 16;
 pub struct EventId(u8);
 
 impl EventId {
+    /// The first event of a domain.
+    pub const FIRST: Self = Self(0);
+
     /// The event with index `index`, or `None` when `index >= MAX_EVENTS`.
     pub const fn new(index: usize) -> Option<Self> {
         if index < MAX_EVENTS {
@@ -66,6 +71,9 @@ pub enum DomainError {
     Unknown(Table),
     /// A name is empty.
     EmptyName(Table),
+    /// A cyclic sensor's period is shorter than one tick: it would sample forever at one
+    /// instant.
+    ZeroPeriod,
 }
 
 /// The planning domain `Δ` with room for `NS` sensor-based and `NA` actuator-based actions.
@@ -142,6 +150,11 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
         }
         if self.sensor_id(sensor.name).is_some() {
             return Err(DomainError::Duplicate(Table::Sensor));
+        }
+        if let SensorMode::Cyclic { period } = sensor.mode {
+            if period.as_ticks() == 0 {
+                return Err(DomainError::ZeroPeriod);
+            }
         }
         let id = SensorId::new(self.sensors.len()).ok_or(full)?;
         self.sensors.push(sensor).map_err(|_| full)?;
@@ -221,6 +234,20 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
         self.sensors.get(id.index())
     }
 
+    /// A sensor-based action, to change its mode or timeout (a simulator applying a
+    /// scenario's sampling periods). A zero period is refused, as in [`add_sensor`](Self::add_sensor).
+    pub fn set_sensor_mode(&mut self, id: SensorId, mode: SensorMode) -> Result<(), DomainError> {
+        if matches!(mode, SensorMode::Cyclic { period } if period.as_ticks() == 0) {
+            return Err(DomainError::ZeroPeriod);
+        }
+        let sensor = self
+            .sensors
+            .get_mut(id.index())
+            .ok_or(DomainError::Unknown(Table::Sensor))?;
+        sensor.mode = mode;
+        Ok(())
+    }
+
     /// An actuator-based action.
     pub fn action(&self, id: ActionId) -> Option<&ActuatorAction<'a>> {
         self.actions.get(id.index())
@@ -272,7 +299,6 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::action::SensorMode;
 
     #[test]
     fn names_are_unique_nonempty_and_bounded() {

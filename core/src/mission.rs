@@ -1,19 +1,1109 @@
 //! A mission: everything the runtime needs to know about a robot's job, `<S, A, P>` and the
-//! task `Π`, held in fixed-capacity structures.
+//! task `Π`, held in fixed-capacity structures, and its JSON file format.
+//!
+//! [`load`] reads a mission file with `serde-json-core` in three streaming passes over the same
+//! bytes (facts and events; sensors and actions; plans and the task), so that names are
+//! resolved to ids as they are read, in any key order, with no intermediate copies: the only
+//! memory used is the [`Mission`] itself. Names borrow from the file's bytes. Behaviour names
+//! are bound to the platform's behaviours through a [`Registry`]: a name the platform cannot run
+//! is an error at load time, not at run time.
+//!
+//! ```json
+//! { "name": "fetch-tea",
+//!   "facts": ["path_clear", "at_door", "handle_seen", "door_open", "in_kitchen"],
+//!   "events": ["fetch_tea"],
+//!   "sensors": [
+//!     { "name": "sonar", "per": ["path_clear"], "mode": "cyclic", "period_ms": 100 },
+//!     { "name": "camera", "pre": ["at_door"], "per": ["handle_seen"], "mode": "one-shot" } ],
+//!   "actions": [
+//!     { "name": "go to door", "pre": ["path_clear"], "add": ["at_door"] },
+//!     { "name": "open door", "pre": ["at_door", "handle_seen"], "add": ["door_open"] },
+//!     { "name": "enter kitchen", "pre": ["door_open"], "add": ["in_kitchen"], "del": ["at_door"] } ],
+//!   "plans": [
+//!     { "name": "GetIn Kitchen", "trigger": "fetch_tea",
+//!       "body": ["go to door", "open door", "enter kitchen"] } ],
+//!   "task": { "event": "fetch_tea", "init": [], "goal": ["in_kitchen"] } }
+//! ```
+//!
+//! Sensor `mode` is `cyclic` (with `period_ms`), `one-shot` or `on-demand`; `timeout_ms`
+//! (default 500) bounds a sample. `pre`, `add`, `del`, `context` and `init` default to `[]`.
 
-use crate::domain::Domain;
+use core::fmt;
+
+use embassy_time::Duration;
+use heapless::Vec;
+use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor};
+
+use crate::action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode};
+use crate::domain::{Domain, DomainError, EventId, Table};
+use crate::facts::FactSet;
 use crate::model::Task;
-use crate::plan::PlanLibrary;
+use crate::plan::{Plan, PlanError, PlanLibrary};
 
 /// The domain (facts, events, sensor-based and actuator-based actions), the plan library and
 /// the task of one robot, with room for `NS` sensors, `NA` actions, `NP` plans of at most `L`
 /// actions each.
 #[derive(Clone, Debug)]
 pub struct Mission<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize> {
+    /// Name of the mission.
+    pub name: &'a str,
     /// `Δ`: facts, events, `S` and `A`.
     pub domain: Domain<'a, NS, NA>,
     /// `P`: the plan library.
     pub library: PlanLibrary<'a, NP, L>,
     /// `Π`: what to achieve from where.
     pub task: Task,
+}
+
+/// Binds the behaviour names of a mission to what the platform can run.
+pub trait Registry {
+    /// The platform's handle of a sensor behaviour.
+    type Sensor: Copy;
+    /// The platform's handle of an actuator behaviour.
+    type Action: Copy;
+    /// The sensor behaviour called `name`, if the platform has one.
+    fn sensor(&self, name: &str) -> Option<Self::Sensor>;
+    /// The actuator behaviour called `name`, if the platform has one.
+    fn action(&self, name: &str) -> Option<Self::Action>;
+}
+
+/// Accepts every name and binds nothing: for checking a mission's logic without a platform.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct AnyBehaviour;
+
+impl Registry for AnyBehaviour {
+    type Sensor = ();
+    type Action = ();
+    fn sensor(&self, _name: &str) -> Option<()> {
+        Some(())
+    }
+    fn action(&self, _name: &str) -> Option<()> {
+        Some(())
+    }
+}
+
+/// The platform behaviour bound to every sensor and action id of a loaded mission.
+#[derive(Clone, Debug)]
+pub struct Bindings<S, A, const NS: usize, const NA: usize> {
+    sensors: Vec<S, NS>,
+    actions: Vec<A, NA>,
+}
+
+impl<S: Copy, A: Copy, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
+    /// The behaviour of a sensor. O(1).
+    pub fn sensor(&self, id: SensorId) -> Option<S> {
+        self.sensors.get(id.index()).copied()
+    }
+
+    /// The behaviour of an action. O(1).
+    pub fn action(&self, id: ActionId) -> Option<A> {
+        self.actions.get(id.index()).copied()
+    }
+}
+
+/// Where in a mission file something is wrong.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Location {
+    /// Top-level key (`facts`, `sensors`, `plans`, ...), `None` at the top level.
+    pub section: Option<&'static str>,
+    /// Index in that section's list.
+    pub index: Option<u16>,
+    /// Field of that entry.
+    pub field: Option<&'static str>,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.section {
+            None => f.write_str("top level"),
+            Some(s) => {
+                f.write_str(s)?;
+                if let Some(i) = self.index {
+                    write!(f, "[{i}]")?;
+                }
+                if let Some(field) = self.field {
+                    write!(f, ".{field}")?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// What is wrong with a mission file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Problem<'a> {
+    /// Not JSON, or a value of the wrong type.
+    Json(JsonError),
+    /// A key the format does not have.
+    UnknownField(&'a str),
+    /// A required key is missing.
+    MissingField(&'static str),
+    /// A fact name that is not in `facts`.
+    UnknownFact(&'a str),
+    /// An event name that is not in `events`.
+    UnknownEvent(&'a str),
+    /// An action name that is not in `actions`.
+    UnknownAction(&'a str),
+    /// A sensor mode other than `cyclic`, `one-shot`, `on-demand`.
+    UnknownMode(&'a str),
+    /// The name is already used in its table.
+    Duplicate(&'a str),
+    /// A name is empty.
+    EmptyName,
+    /// A plan body is empty.
+    EmptyBody,
+    /// More entries than the runtime was built for.
+    Capacity {
+        /// What overflowed.
+        what: &'static str,
+        /// The limit.
+        limit: usize,
+    },
+    /// A cyclic sensor needs a `period_ms` of at least 1.
+    Period,
+    /// No sequence of actions and percepts can ever make this goal fact true.
+    UnreachableGoal(&'a str),
+    /// The platform has no behaviour of this name.
+    Unbound(&'a str),
+}
+
+/// A JSON error of `serde-json-core`, which carries no message of its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum JsonError {
+    /// The text is not well-formed JSON.
+    Syntax,
+    /// A value has the wrong type (a number where a list is expected, ...).
+    Type,
+    /// A string uses an escape sequence (names must be plain).
+    Escape,
+}
+
+/// Why a mission could not be loaded: what and where.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LoadError<'a> {
+    /// Where.
+    pub at: Location,
+    /// What.
+    pub problem: Problem<'a>,
+}
+
+impl fmt::Display for LoadError<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: ", self.at)?;
+        match self.problem {
+            Problem::Json(JsonError::Syntax) => f.write_str("malformed JSON"),
+            Problem::Json(JsonError::Type) => f.write_str("a value of the wrong type"),
+            Problem::Json(JsonError::Escape) => {
+                f.write_str("escape sequences are not allowed in names")
+            }
+            Problem::UnknownField(k) => write!(f, "unknown field `{k}`"),
+            Problem::MissingField(k) => write!(f, "missing field `{k}`"),
+            Problem::UnknownFact(n) => write!(f, "unknown fact `{n}` (not in `facts`)"),
+            Problem::UnknownEvent(n) => write!(f, "unknown event `{n}` (not in `events`)"),
+            Problem::UnknownAction(n) => write!(f, "unknown action `{n}` (not in `actions`)"),
+            Problem::UnknownMode(m) => {
+                write!(
+                    f,
+                    "unknown sensor mode `{m}`, expected `cyclic`, `one-shot` or `on-demand`"
+                )
+            }
+            Problem::Duplicate(n) => write!(f, "duplicate name `{n}`"),
+            Problem::EmptyName => f.write_str("the name is empty"),
+            Problem::EmptyBody => f.write_str("the plan body is empty"),
+            Problem::Capacity { what, limit } => {
+                write!(f, "more than {limit} {what} (the runtime's capacity)")
+            }
+            Problem::Period => f.write_str("a cyclic sensor needs `period_ms` of at least 1"),
+            Problem::UnreachableGoal(n) => {
+                write!(
+                    f,
+                    "goal fact `{n}` can never hold: no action adds it and no sensor perceives it"
+                )
+            }
+            Problem::Unbound(n) => write!(f, "the platform has no behaviour called `{n}`"),
+        }
+    }
+}
+
+/// What the streaming deserializers need from the mission under construction; object safe so
+/// they carry no capacity parameters.
+trait Build<'a> {
+    fn at(&self) -> Location;
+    fn set_at(&mut self, at: Location);
+    /// Records the first problem, at the current location.
+    fn record(&mut self, problem: Problem<'a>);
+    fn add_fact(&mut self, name: &'a str) -> Result<(), Problem<'a>>;
+    fn add_event(&mut self, name: &'a str) -> Result<(), Problem<'a>>;
+    fn fact(&self, name: &'a str) -> Result<FactSet, Problem<'a>>;
+    fn event(&self, name: &'a str) -> Result<EventId, Problem<'a>>;
+    fn add_sensor(&mut self, sensor: SensorAction<'a>) -> Result<(), Problem<'a>>;
+    fn add_action(&mut self, action: ActuatorAction<'a>) -> Result<(), Problem<'a>>;
+    fn push_body(&mut self, action: &'a str) -> Result<(), Problem<'a>>;
+    fn add_plan(
+        &mut self,
+        name: &'a str,
+        trigger: EventId,
+        context: FactSet,
+    ) -> Result<(), Problem<'a>>;
+    fn set_task(&mut self, task: Task);
+    fn set_name(&mut self, name: &'a str);
+}
+
+/// Records `problem` and returns the error that stops the parse.
+fn fail<'a, E: de::Error>(b: &mut dyn Build<'a>, problem: Problem<'a>) -> E {
+    b.record(problem);
+    E::custom("mission error")
+}
+
+fn field(b: &mut dyn Build<'_>, field: Option<&'static str>) {
+    let mut at = b.at();
+    at.field = field;
+    b.set_at(at);
+}
+
+/// The mission being built, the current location and the first problem.
+struct Builder<
+    'a,
+    'r,
+    R: Registry,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+> {
+    mission: Mission<'a, NS, NA, NP, L>,
+    bindings: Bindings<R::Sensor, R::Action, NS, NA>,
+    registry: &'r R,
+    at: Location,
+    error: Option<LoadError<'a>>,
+    body: Vec<ActionId, L>,
+}
+
+fn domain_problem(e: DomainError, name: &str) -> Problem<'_> {
+    match e {
+        DomainError::Full { table, capacity } => Problem::Capacity {
+            what: match table {
+                Table::Fact => "facts",
+                Table::Event => "events",
+                Table::Sensor => "sensors",
+                Table::Action => "actions",
+            },
+            limit: capacity,
+        },
+        DomainError::Duplicate(_) => Problem::Duplicate(name),
+        DomainError::EmptyName(_) => Problem::EmptyName,
+        DomainError::Unknown(_) => Problem::UnknownFact(name),
+        DomainError::ZeroPeriod => Problem::Period,
+    }
+}
+
+impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L: usize> Build<'a>
+    for Builder<'a, '_, R, NS, NA, NP, L>
+{
+    fn at(&self) -> Location {
+        self.at
+    }
+
+    fn set_at(&mut self, at: Location) {
+        self.at = at;
+    }
+
+    fn record(&mut self, problem: Problem<'a>) {
+        if self.error.is_none() {
+            self.error = Some(LoadError {
+                at: self.at,
+                problem,
+            });
+        }
+    }
+
+    fn add_fact(&mut self, name: &'a str) -> Result<(), Problem<'a>> {
+        self.mission
+            .domain
+            .add_fact(name)
+            .map(|_| ())
+            .map_err(|e| domain_problem(e, name))
+    }
+
+    fn add_event(&mut self, name: &'a str) -> Result<(), Problem<'a>> {
+        self.mission
+            .domain
+            .add_event(name)
+            .map(|_| ())
+            .map_err(|e| domain_problem(e, name))
+    }
+
+    fn fact(&self, name: &'a str) -> Result<FactSet, Problem<'a>> {
+        self.mission
+            .domain
+            .fact_id(name)
+            .map(FactSet::single)
+            .ok_or(Problem::UnknownFact(name))
+    }
+
+    fn event(&self, name: &'a str) -> Result<EventId, Problem<'a>> {
+        self.mission
+            .domain
+            .event_id(name)
+            .ok_or(Problem::UnknownEvent(name))
+    }
+
+    fn add_sensor(&mut self, sensor: SensorAction<'a>) -> Result<(), Problem<'a>> {
+        let behaviour = self
+            .registry
+            .sensor(sensor.name)
+            .ok_or(Problem::Unbound(sensor.name))?;
+        self.mission
+            .domain
+            .add_sensor(sensor)
+            .map_err(|e| domain_problem(e, sensor.name))?;
+        self.bindings
+            .sensors
+            .push(behaviour)
+            .map_err(|_| Problem::Capacity {
+                what: "sensors",
+                limit: NS,
+            })
+    }
+
+    fn add_action(&mut self, action: ActuatorAction<'a>) -> Result<(), Problem<'a>> {
+        let behaviour = self
+            .registry
+            .action(action.name)
+            .ok_or(Problem::Unbound(action.name))?;
+        self.mission
+            .domain
+            .add_action(action)
+            .map_err(|e| domain_problem(e, action.name))?;
+        self.bindings
+            .actions
+            .push(behaviour)
+            .map_err(|_| Problem::Capacity {
+                what: "actions",
+                limit: NA,
+            })
+    }
+
+    fn push_body(&mut self, action: &'a str) -> Result<(), Problem<'a>> {
+        let id = self
+            .mission
+            .domain
+            .action_id(action)
+            .ok_or(Problem::UnknownAction(action))?;
+        self.body.push(id).map_err(|_| Problem::Capacity {
+            what: "actions in a plan body",
+            limit: L,
+        })
+    }
+
+    fn add_plan(
+        &mut self,
+        name: &'a str,
+        trigger: EventId,
+        context: FactSet,
+    ) -> Result<(), Problem<'a>> {
+        let body = core::mem::take(&mut self.body);
+        let plan = Plan::new(name, trigger, context, &body).map_err(|e| match e {
+            PlanError::EmptyBody => Problem::EmptyBody,
+            PlanError::BodyTooLong { capacity } => Problem::Capacity {
+                what: "actions in a plan body",
+                limit: capacity,
+            },
+            _ => Problem::EmptyName,
+        })?;
+        self.mission
+            .library
+            .add(plan)
+            .map(|_| ())
+            .map_err(|e| match e {
+                PlanError::Duplicate => Problem::Duplicate(name),
+                PlanError::LibraryFull { capacity } => Problem::Capacity {
+                    what: "plans",
+                    limit: capacity,
+                },
+                _ => Problem::EmptyName,
+            })
+    }
+
+    fn set_task(&mut self, task: Task) {
+        self.mission.task = task;
+    }
+
+    fn set_name(&mut self, name: &'a str) {
+        self.mission.name = name;
+    }
+}
+
+/// Which top-level keys a pass reads; it skips the others.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Pass {
+    Names,
+    Behaviours,
+    Plans,
+}
+
+/// The top-level keys; all but `sensors` and `description` are required.
+const TOP_KEYS: [&str; 8] = [
+    "name",
+    "facts",
+    "events",
+    "sensors",
+    "actions",
+    "plans",
+    "task",
+    "description",
+];
+const OPTIONAL_TOP: u16 = 1 << 3 | 1 << 7;
+
+/// A JSON string borrowed from the file.
+struct Str;
+
+impl<'de> DeserializeSeed<'de> for Str {
+    type Value = &'de str;
+    fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<&'de str, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = &'de str;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a string")
+            }
+            fn visit_borrowed_str<E: de::Error>(self, v: &'de str) -> Result<&'de str, E> {
+                Ok(v)
+            }
+        }
+        d.deserialize_str(V)
+    }
+}
+
+/// What a [`NameList`] does with each name.
+#[derive(Clone, Copy)]
+enum ListKind {
+    /// Declare facts.
+    DeclareFacts,
+    /// Declare events.
+    DeclareEvents,
+    /// A fact set (`pre`, `add`, `goal`, ...).
+    Facts,
+    /// A plan body.
+    Body,
+}
+
+/// A list of names: declared, resolved into a fact set, or collected into a plan body.
+struct NameList<'s, 'a>(&'s mut dyn Build<'a>, ListKind);
+
+impl<'a> DeserializeSeed<'a> for NameList<'_, 'a> {
+    type Value = FactSet;
+    fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<FactSet, D::Error> {
+        d.deserialize_seq(self)
+    }
+}
+
+impl<'a> Visitor<'a> for NameList<'_, 'a> {
+    type Value = FactSet;
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a list of names")
+    }
+    fn visit_seq<S: SeqAccess<'a>>(self, mut seq: S) -> Result<FactSet, S::Error> {
+        let NameList(b, kind) = self;
+        let mut set = FactSet::EMPTY;
+        let mut index = 0usize;
+        while let Some(name) = seq.next_element_seed(Str)? {
+            if matches!(kind, ListKind::DeclareFacts | ListKind::DeclareEvents) {
+                let mut at = b.at();
+                at.index = u16::try_from(index).ok();
+                b.set_at(at);
+            }
+            let done = match kind {
+                ListKind::DeclareFacts => b.add_fact(name),
+                ListKind::DeclareEvents => b.add_event(name),
+                ListKind::Facts => b.fact(name).map(|f| set = set.union(f)),
+                ListKind::Body => b.push_body(name),
+            };
+            done.map_err(|p| fail::<S::Error>(b, p))?;
+            index = index.saturating_add(1);
+        }
+        Ok(set)
+    }
+}
+
+/// A list of objects of one section, each read by [`Entry`].
+struct Entries<'s, 'a>(&'s mut dyn Build<'a>, Section);
+
+#[derive(Clone, Copy)]
+enum Section {
+    Sensors,
+    Actions,
+    Plans,
+    Task,
+}
+
+impl<'a> DeserializeSeed<'a> for Entries<'_, 'a> {
+    type Value = ();
+    fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
+        match self.1 {
+            Section::Task => Entry(self.0, Section::Task).deserialize(d),
+            _ => d.deserialize_seq(self),
+        }
+    }
+}
+
+impl<'a> Visitor<'a> for Entries<'_, 'a> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a list of objects")
+    }
+    fn visit_seq<S: SeqAccess<'a>>(self, mut seq: S) -> Result<(), S::Error> {
+        let Entries(b, section) = self;
+        let mut index = 0usize;
+        loop {
+            let mut at = b.at();
+            at.index = u16::try_from(index).ok();
+            at.field = None;
+            b.set_at(at);
+            if seq.next_element_seed(Entry(&mut *b, section))?.is_none() {
+                return Ok(());
+            }
+            index = index.saturating_add(1);
+        }
+    }
+}
+
+/// One sensor, action, plan or the task.
+struct Entry<'s, 'a>(&'s mut dyn Build<'a>, Section);
+
+impl<'a> DeserializeSeed<'a> for Entry<'_, 'a> {
+    type Value = ();
+    fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_map(self)
+    }
+}
+
+/// The fields each kind of entry has.
+const SENSOR_KEYS: [&str; 6] = ["name", "pre", "per", "mode", "period_ms", "timeout_ms"];
+const ACTION_KEYS: [&str; 4] = ["name", "pre", "add", "del"];
+const PLAN_KEYS: [&str; 4] = ["name", "trigger", "context", "body"];
+const TASK_KEYS: [&str; 3] = ["event", "init", "goal"];
+
+/// The fields of one entry as read, before they are checked together.
+#[derive(Default)]
+struct Fields<'a> {
+    name: Option<&'a str>,
+    mode: Option<&'a str>,
+    event: Option<&'a str>,
+    number: [Option<f64>; 2],
+    sets: [Option<FactSet>; 3],
+    body: bool,
+}
+
+/// A whole number of milliseconds, at least 1.
+fn millis<'a>(v: f64) -> Result<Duration, Problem<'a>> {
+    if !(1.0..=4_294_967_295.0).contains(&v) || v != (v as u64) as f64 {
+        return Err(Problem::Period);
+    }
+    Ok(Duration::from_millis(v as u64))
+}
+
+impl<'a> Visitor<'a> for Entry<'_, 'a> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("an object")
+    }
+
+    fn visit_map<M: MapAccess<'a>>(self, mut map: M) -> Result<(), M::Error> {
+        let Entry(b, section) = self;
+        let keys: &[&'static str] = match section {
+            Section::Sensors => &SENSOR_KEYS,
+            Section::Actions => &ACTION_KEYS,
+            Section::Plans => &PLAN_KEYS,
+            Section::Task => &TASK_KEYS,
+        };
+        let mut f = Fields::default();
+        while let Some(key) = map.next_key_seed(Str)? {
+            let Some(&name) = keys.iter().find(|k| **k == key) else {
+                field(b, None);
+                return Err(fail(b, Problem::UnknownField(key)));
+            };
+            field(b, Some(name));
+            match name {
+                "name" => f.name = Some(map.next_value_seed(Str)?),
+                "mode" => f.mode = Some(map.next_value_seed(Str)?),
+                "trigger" | "event" => f.event = Some(map.next_value_seed(Str)?),
+                "period_ms" => f.number[0] = Some(map.next_value()?),
+                "timeout_ms" => f.number[1] = Some(map.next_value()?),
+                "body" => {
+                    f.body = true;
+                    map.next_value_seed(NameList(&mut *b, ListKind::Body))?;
+                }
+                _ => {
+                    // A fact set: pre/per/add/del/context/init/goal, in a fixed slot each.
+                    let slot = match name {
+                        "pre" | "context" | "init" => 0,
+                        "per" | "add" | "goal" => 1,
+                        _ => 2,
+                    };
+                    let set = map.next_value_seed(NameList(&mut *b, ListKind::Facts))?;
+                    if let Some(s) = f.sets.get_mut(slot) {
+                        *s = Some(set);
+                    }
+                }
+            }
+        }
+        field(b, None);
+        let set = |i: usize| f.sets.get(i).copied().flatten();
+        let required = |b: &mut dyn Build<'a>, v: Option<&'a str>, name: &'static str| {
+            v.ok_or_else(|| fail::<M::Error>(b, Problem::MissingField(name)))
+        };
+        let checked = |b: &mut dyn Build<'a>, r: Result<(), Problem<'a>>, at: &'static str| {
+            field(b, Some(at));
+            r.map_err(|p| fail::<M::Error>(b, p))
+        };
+        match section {
+            Section::Sensors => {
+                let name = required(b, f.name, "name")?;
+                let per =
+                    set(1).ok_or_else(|| fail::<M::Error>(b, Problem::MissingField("per")))?;
+                let mode = match required(b, f.mode, "mode")? {
+                    "cyclic" => {
+                        let p = f.number[0].ok_or_else(|| {
+                            fail::<M::Error>(b, Problem::MissingField("period_ms"))
+                        })?;
+                        field(b, Some("period_ms"));
+                        SensorMode::Cyclic {
+                            period: millis(p).map_err(|e| fail::<M::Error>(b, e))?,
+                        }
+                    }
+                    "one-shot" => SensorMode::OneShot,
+                    "on-demand" => SensorMode::OnDemand,
+                    other => {
+                        field(b, Some("mode"));
+                        return Err(fail(b, Problem::UnknownMode(other)));
+                    }
+                };
+                let mut sensor =
+                    SensorAction::new(name, per, mode).with_pre(set(0).unwrap_or_default());
+                if let Some(t) = f.number[1] {
+                    field(b, Some("timeout_ms"));
+                    sensor = sensor.with_timeout(millis(t).map_err(|e| fail::<M::Error>(b, e))?);
+                }
+                let added = b.add_sensor(sensor);
+                checked(b, added, "name")
+            }
+            Section::Actions => {
+                let name = required(b, f.name, "name")?;
+                let action = ActuatorAction::new(
+                    name,
+                    set(0).unwrap_or_default(),
+                    set(1).unwrap_or_default(),
+                    set(2).unwrap_or_default(),
+                );
+                let added = b.add_action(action);
+                checked(b, added, "name")
+            }
+            Section::Plans => {
+                let name = required(b, f.name, "name")?;
+                let trigger_name = required(b, f.event, "trigger")?;
+                if !f.body {
+                    return Err(fail(b, Problem::MissingField("body")));
+                }
+                field(b, Some("trigger"));
+                let trigger = b.event(trigger_name).map_err(|p| fail::<M::Error>(b, p))?;
+                let added = b.add_plan(name, trigger, set(0).unwrap_or_default());
+                checked(b, added, "body")
+            }
+            Section::Task => {
+                let event_name = required(b, f.event, "event")?;
+                let goal =
+                    set(1).ok_or_else(|| fail::<M::Error>(b, Problem::MissingField("goal")))?;
+                field(b, Some("event"));
+                let event = b.event(event_name).map_err(|p| fail::<M::Error>(b, p))?;
+                b.set_task(Task {
+                    event,
+                    init: set(0).unwrap_or_default(),
+                    goal,
+                });
+                Ok(())
+            }
+        }
+    }
+}
+
+/// One pass over the top-level object.
+struct Top<'s, 'a>(&'s mut dyn Build<'a>, Pass, &'s mut u16);
+
+impl<'a> DeserializeSeed<'a> for Top<'_, 'a> {
+    type Value = ();
+    fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_map(self)
+    }
+}
+
+impl<'a> Visitor<'a> for Top<'_, 'a> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a mission object")
+    }
+
+    fn visit_map<M: MapAccess<'a>>(self, mut map: M) -> Result<(), M::Error> {
+        let Top(b, pass, seen) = self;
+        loop {
+            b.set_at(Location::default());
+            let Some(key) = map.next_key_seed(Str)? else {
+                return Ok(());
+            };
+            let Some(index) = TOP_KEYS.iter().position(|k| *k == key) else {
+                return Err(fail(b, Problem::UnknownField(key)));
+            };
+            *seen |= 1 << index;
+            let section = TOP_KEYS.get(index).copied().unwrap_or_default();
+            b.set_at(Location {
+                section: Some(section),
+                index: None,
+                field: None,
+            });
+            match (pass, section) {
+                (Pass::Names, "name") => {
+                    let name = map.next_value_seed(Str)?;
+                    b.set_name(name);
+                }
+                (Pass::Names, "facts") => {
+                    map.next_value_seed(NameList(&mut *b, ListKind::DeclareFacts))?;
+                }
+                (Pass::Names, "events") => {
+                    map.next_value_seed(NameList(&mut *b, ListKind::DeclareEvents))?;
+                }
+                (Pass::Behaviours, "sensors") => {
+                    map.next_value_seed(Entries(&mut *b, Section::Sensors))?
+                }
+                (Pass::Behaviours, "actions") => {
+                    map.next_value_seed(Entries(&mut *b, Section::Actions))?
+                }
+                (Pass::Plans, "plans") => map.next_value_seed(Entries(&mut *b, Section::Plans))?,
+                (Pass::Plans, "task") => map.next_value_seed(Entries(&mut *b, Section::Task))?,
+                _ => {
+                    map.next_value::<IgnoredAny>()?;
+                }
+            }
+        }
+    }
+}
+
+/// Facts that can ever hold, ignoring deletions (relaxed reachability): `init`, everything a
+/// sensor perceives, and the `add` of every action whose `pre` can hold. O(NA²).
+pub fn reachable<const NS: usize, const NA: usize>(
+    domain: &Domain<'_, NS, NA>,
+    init: FactSet,
+) -> FactSet {
+    let mut facts = domain
+        .sensors()
+        .iter()
+        .fold(init, |acc, s| acc.union(s.per));
+    loop {
+        let next = domain
+            .actions()
+            .iter()
+            .filter(|a| a.pre.is_subset(facts))
+            .fold(facts, |acc, a| acc.union(a.add));
+        if next == facts {
+            return facts;
+        }
+        facts = next;
+    }
+}
+
+/// Loads a mission file, binding its behaviours through `registry`.
+///
+/// Errors say what and where ([`LoadError`]): JSON that does not parse, an unknown field or
+/// fact or event or action, a duplicate name, a capacity exceeded (naming the limit), an empty
+/// plan body, a goal no action can ever add, a behaviour the platform does not have.
+pub fn load<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L: usize>(
+    json: &'a [u8],
+    registry: &R,
+) -> Result<Loaded<'a, R::Sensor, R::Action, NS, NA, NP, L>, LoadError<'a>> {
+    let mut b: Builder<'a, '_, R, NS, NA, NP, L> = Builder {
+        mission: Mission {
+            name: "",
+            domain: Domain::new(),
+            library: PlanLibrary::new(),
+            task: Task {
+                event: EventId::FIRST,
+                init: FactSet::EMPTY,
+                goal: FactSet::EMPTY,
+            },
+        },
+        bindings: Bindings {
+            sensors: Vec::new(),
+            actions: Vec::new(),
+        },
+        registry,
+        at: Location::default(),
+        error: None,
+        body: Vec::new(),
+    };
+    let mut seen = 0u16;
+    for pass in [Pass::Names, Pass::Behaviours, Pass::Plans] {
+        let mut de = serde_json_core::de::Deserializer::new(json, None);
+        let parsed = Top(&mut b, pass, &mut seen)
+            .deserialize(&mut de)
+            .and_then(|()| de.end().map(|_| ()));
+        if let Err(e) = parsed {
+            return Err(b.error.unwrap_or(LoadError {
+                at: b.at,
+                problem: Problem::Json(match e {
+                    serde_json_core::de::Error::InvalidType => JsonError::Type,
+                    serde_json_core::de::Error::InvalidEscapeSequence
+                    | serde_json_core::de::Error::EscapedStringIsTooLong => JsonError::Escape,
+                    _ => JsonError::Syntax,
+                }),
+            }));
+        }
+    }
+    let missing = TOP_KEYS
+        .iter()
+        .enumerate()
+        .find(|(i, _)| seen & (1 << i) == 0 && OPTIONAL_TOP & (1 << i) == 0);
+    if let Some((_, key)) = missing {
+        return Err(LoadError {
+            at: Location::default(),
+            problem: Problem::MissingField(key),
+        });
+    }
+    let m = &b.mission;
+    let possible = reachable(&m.domain, m.task.init);
+    if let Some(fact) = m.task.goal.difference(possible).iter().next() {
+        return Err(LoadError {
+            at: Location {
+                section: Some("task"),
+                index: None,
+                field: Some("goal"),
+            },
+            problem: Problem::UnreachableGoal(m.domain.fact_name(fact).unwrap_or("?")),
+        });
+    }
+    Ok(Loaded {
+        mission: b.mission,
+        bindings: b.bindings,
+    })
+}
+
+/// A loaded mission and the platform behaviours bound to its sensors and actions.
+#[derive(Clone, Debug)]
+pub struct Loaded<'a, S, A, const NS: usize, const NA: usize, const NP: usize, const L: usize> {
+    /// The mission.
+    pub mission: Mission<'a, NS, NA, NP, L>,
+    /// The behaviour of every sensor and action id.
+    pub bindings: Bindings<S, A, NS, NA>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::string::{String, ToString};
+
+    const FETCH_TEA: &[u8] = include_bytes!("../../missions/fetch-tea.json");
+
+    /// The platform of the tests: knows every behaviour of fetch-tea.json except `teleport`.
+    struct Platform;
+    impl Registry for Platform {
+        type Sensor = u8;
+        type Action = u8;
+        fn sensor(&self, name: &str) -> Option<u8> {
+            ["sonar", "bumper", "camera", "handle"]
+                .iter()
+                .position(|n| *n == name)
+                .map(|i| i as u8 + 10)
+        }
+        fn action(&self, name: &str) -> Option<u8> {
+            (name != "teleport").then_some(name.len() as u8)
+        }
+    }
+
+    type M<'a> = Loaded<'a, u8, u8, 4, 8, 4, 4>;
+
+    fn load_str(json: &str) -> Result<M<'_>, LoadError<'_>> {
+        load(json.as_bytes(), &Platform)
+    }
+
+    fn error(json: &str) -> String {
+        load_str(json).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn fetch_tea_loads_with_names_resolved_and_behaviours_bound() {
+        let m: M<'_> = load(FETCH_TEA, &Platform).unwrap();
+        let d = &m.mission.domain;
+        assert_eq!(m.mission.name, "fetch-tea");
+        assert_eq!(d.fact_names().len(), 8);
+        let sonar = d.sensor_id("sonar").unwrap();
+        assert_eq!(
+            d.sensor(sonar).unwrap().mode,
+            SensorMode::Cyclic {
+                period: Duration::from_millis(100)
+            }
+        );
+        let handle = d.sensor_id("handle").unwrap();
+        assert_eq!(d.sensor(handle).unwrap().mode, SensorMode::OnDemand);
+        assert_eq!(m.bindings.sensor(handle), Some(13));
+        let open = d.action_id("open door").unwrap();
+        assert_eq!(
+            d.action(open).unwrap().pre,
+            d.facts(&["at_door", "handle_seen", "door_unlocked"])
+                .unwrap()
+        );
+        assert_eq!(m.bindings.action(open), Some(9));
+        let plan = &m.mission.library.plans()[0];
+        assert_eq!(plan.name, "GetIn Kitchen");
+        assert_eq!(plan.body.len(), 3);
+        assert_eq!(m.mission.task.goal, d.facts(&["in_kitchen"]).unwrap());
+        assert_eq!(m.mission.task.init, d.facts(&["door_unlocked"]).unwrap());
+    }
+
+    const SMALL: &str = r#"{"name": "m", "facts": ["a", "b"], "events": ["go"],
+        "sensors": [{"name": "sonar", "per": ["a"], "mode": "cyclic", "period_ms": 50}],
+        "actions": [{"name": "x", "pre": ["a"], "add": ["b"]}],
+        "plans": [{"name": "p", "trigger": "go", "body": ["x"]}],
+        "task": {"event": "go", "goal": ["b"]}}"#;
+
+    #[test]
+    fn key_order_does_not_matter() {
+        let reversed = r#"{"task": {"goal": ["b"], "event": "go"},
+            "plans": [{"body": ["x"], "trigger": "go", "name": "p"}],
+            "actions": [{"add": ["b"], "pre": ["a"], "name": "x"}],
+            "sensors": [{"mode": "cyclic", "period_ms": 50, "per": ["a"], "name": "sonar"}],
+            "events": ["go"], "facts": ["a", "b"], "name": "m"}"#;
+        let a = load_str(SMALL).unwrap();
+        let b = load_str(reversed).unwrap();
+        assert_eq!(a.mission.domain.actions(), b.mission.domain.actions());
+        assert_eq!(a.mission.library.plans(), b.mission.library.plans());
+        assert_eq!(a.mission.task, b.mission.task);
+    }
+
+    fn with(from: &str, to: &str) -> String {
+        assert!(SMALL.contains(from), "{from}");
+        SMALL.replacen(from, to, 1)
+    }
+
+    #[test]
+    fn errors_say_what_and_where() {
+        let cases = [
+            (
+                with(r#""pre": ["a"]"#, r#""pre": ["c"]"#),
+                "actions[0].pre: unknown fact `c` (not in `facts`)",
+            ),
+            (
+                with(r#""facts": ["a", "b"]"#, r#""facts": ["a", "a", "b"]"#),
+                "facts[1]: duplicate name `a`",
+            ),
+            (
+                with(r#""body": ["x"]"#, r#""body": ["x", "y"]"#),
+                "plans[0].body: unknown action `y` (not in `actions`)",
+            ),
+            (
+                with(r#""body": ["x"]"#, r#""body": []"#),
+                "plans[0].body: the plan body is empty",
+            ),
+            (
+                with(r#""goal": ["b"]"#, r#""goal": ["a", "c"]"#),
+                "task.goal: unknown fact `c` (not in `facts`)",
+            ),
+            (
+                with(r#""trigger": "go""#, r#""trigger": "stop""#),
+                "plans[0].trigger: unknown event `stop` (not in `events`)",
+            ),
+            (
+                with(r#""mode": "cyclic""#, r#""mode": "sometimes""#),
+                "sensors[0].mode: unknown sensor mode `sometimes`, expected `cyclic`, `one-shot` or `on-demand`",
+            ),
+            (
+                with(r#""period_ms": 50"#, r#""period_ms": 0"#),
+                "sensors[0].period_ms: a cyclic sensor needs `period_ms` of at least 1",
+            ),
+            (
+                with(r#""name": "x""#, r#""name": "teleport""#),
+                "actions[0].name: the platform has no behaviour called `teleport`",
+            ),
+            (
+                with(r#""name": "sonar""#, r#""name": "lidar""#),
+                "sensors[0].name: the platform has no behaviour called `lidar`",
+            ),
+            (
+                with(r#""add": ["b"]"#, r#""add": ["b"], "cost": 3"#),
+                "actions[0]: unknown field `cost`",
+            ),
+            (
+                with(r#""name": "m","#, r#""name": "m", "owner": "me","#),
+                "top level: unknown field `owner`",
+            ),
+            (
+                with(
+                    r#""task": {"event": "go", "goal": ["b"]}"#,
+                    r#""task": {"event": "go"}"#,
+                ),
+                "task: missing field `goal`",
+            ),
+            (
+                with(r#""name": "x","#, r#""name": "","#),
+                "actions[0].name: the name is empty",
+            ),
+            (
+                with(r#""pre": ["a"]"#, r#""pre": "a""#),
+                "actions[0].pre: a value of the wrong type",
+            ),
+            (
+                with(r#""add": ["b"]}"#, r#""add": ["b"]"#),
+                "actions: malformed JSON",
+            ),
+        ];
+        for (json, expected) in cases {
+            assert_eq!(error(&json), expected, "{json}");
+        }
+        // No action adds b and no sensor perceives it.
+        let unreachable = with(r#""add": ["b"]"#, r#""add": []"#);
+        assert_eq!(
+            error(&unreachable),
+            "task.goal: goal fact `b` can never hold: no action adds it and no sensor perceives it"
+        );
+        let no_plans = SMALL.replace(
+            r#""plans": [{"name": "p", "trigger": "go", "body": ["x"]}],"#,
+            "",
+        );
+        assert_eq!(error(&no_plans), "top level: missing field `plans`");
+    }
+
+    #[test]
+    fn capacities_are_named() {
+        let many_sensors: String = (0..5)
+            .map(|i| std::format!(r#"{{"name": "s{i}", "per": ["a"], "mode": "one-shot"}}"#))
+            .collect::<std::vec::Vec<_>>()
+            .join(",");
+        let json = with(
+            r#"{"name": "sonar", "per": ["a"], "mode": "cyclic", "period_ms": 50}"#,
+            &many_sensors,
+        );
+        let err = load(json.as_bytes(), &AnyBehaviour)
+            .map(|_: Loaded<'_, (), (), 4, 8, 4, 4>| ())
+            .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "sensors[4].name: more than 4 sensors (the runtime's capacity)"
+        );
+        let long = with(r#""body": ["x"]"#, r#""body": ["x", "x", "x", "x", "x"]"#);
+        assert_eq!(
+            error(&long),
+            "plans[0].body: more than 4 actions in a plan body (the runtime's capacity)"
+        );
+    }
+
+    #[test]
+    fn relaxed_reachability_ignores_deletes_and_counts_percepts() {
+        let m = load_str(SMALL).unwrap().mission;
+        let d = &m.domain;
+        // a is perceived by the sonar, so x's pre can hold and b is reachable.
+        assert_eq!(reachable(d, FactSet::EMPTY), d.facts(&["a", "b"]).unwrap());
+    }
 }

@@ -128,6 +128,7 @@ pub fn fetch_tea(scenario: &Scenario) -> Result<(FetchTea, Ids), MissionError> {
         &[go_to_door, open_door, enter_kitchen],
     )?)?;
     let mission = Mission {
+        name: "fetch-tea",
         domain: d,
         library,
         task: Task {

@@ -104,6 +104,7 @@ pub fn mission(with_failing_plan: bool) -> (TinyMission, Ids) {
     };
     (
         Mission {
+            name: "tiny",
             domain: d,
             library,
             task,

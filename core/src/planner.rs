@@ -1,0 +1,733 @@
+//! The embedded planner: `generatePlans: M -> P` (Algorithm 1 line 4) when no plan of the
+//! library applies. Forward state-space search over fact sets from the current beliefs to the
+//! goal, with STRIPS semantics (`τ' = add(a) ∪ (τ \ del(a))`).
+//!
+//! * [`Strategy::BreadthFirst`] finds a shortest plan.
+//! * [`Strategy::AStar`] with the admissible [`Heuristic::Max`] (h_max) also finds a shortest
+//!   plan, expanding fewer nodes; [`Strategy::Greedy`] with [`Heuristic::Add`] (h_add) finds a
+//!   plan fast in larger domains, not necessarily a shortest one.
+//!
+//! Memory is fixed: `N` search nodes (16 bytes each), a visited table of `N` slots and an open
+//! list of `N` entries, all on the stack of the call. Work is bounded: at most `budget <= N - 1`
+//! nodes are generated; running out is [`PlanningError::Budget`], never a hang, and an
+//! exhausted search space is [`PlanningError::Unsolvable`]. Each expansion costs O(NA) set
+//! operations plus, for heuristic search, O(NA · |facts|) per generated node.
+
+use heapless::Vec;
+use heapless::binary_heap::{BinaryHeap, Min};
+
+use crate::action::{ActionId, ActuatorAction};
+use crate::facts::{FactSet, MAX_FACTS};
+
+/// Estimates of the number of actions still needed (for unit action costs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Heuristic {
+    /// Goal facts that do not hold yet. Not admissible when an action adds several.
+    GoalCount,
+    /// h_max: the most expensive goal fact in the delete relaxation. Admissible.
+    Max,
+    /// h_add: the sum over goal facts in the delete relaxation. Informative, not admissible.
+    Add,
+}
+
+/// How the search space is explored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Strategy {
+    /// Breadth-first: shortest plans.
+    BreadthFirst,
+    /// A*: `f = g + h`; shortest plans with an admissible heuristic.
+    AStar(Heuristic),
+    /// Greedy best-first: `f = h`; fast, not necessarily shortest.
+    Greedy(Heuristic),
+}
+
+/// Why no plan was found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum PlanningError {
+    /// Every reachable state was explored: no plan exists.
+    Unsolvable {
+        /// Nodes expanded.
+        expanded: u32,
+    },
+    /// The node budget ran out before a plan was found.
+    Budget {
+        /// Nodes expanded.
+        expanded: u32,
+        /// The budget.
+        limit: u32,
+    },
+    /// A plan exists but is longer than a plan body can hold.
+    TooLong {
+        /// The most actions a body holds.
+        limit: u32,
+    },
+}
+
+/// A plan and what finding it cost.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Found<const L: usize> {
+    /// The actions, in order.
+    pub body: Vec<ActionId, L>,
+    /// Nodes expanded.
+    pub expanded: u32,
+    /// Nodes generated.
+    pub generated: u32,
+}
+
+const NONE: u16 = u16::MAX;
+const INFINITE: u32 = u32::MAX;
+
+#[derive(Clone, Copy)]
+struct Node {
+    state: FactSet,
+    parent: u16,
+    action: u8,
+    g: u16,
+}
+
+/// A forward planner with room for `N` search nodes (at most 65 535).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Planner<const N: usize> {
+    /// How to search.
+    pub strategy: Strategy,
+    /// Most nodes to generate; capped at `N - 1`.
+    pub budget: u32,
+}
+
+impl<const N: usize> Default for Planner<N> {
+    fn default() -> Self {
+        Self {
+            strategy: Strategy::BreadthFirst,
+            budget: u32::MAX,
+        }
+    }
+}
+
+/// Visited states: open addressing over `N` slots holding node index + 1. At most `N - 1`
+/// nodes are ever stored, so a probe always ends at a free slot.
+struct Visited<const N: usize> {
+    slots: [u16; N],
+}
+
+impl<const N: usize> Visited<N> {
+    fn start(state: FactSet) -> usize {
+        // Fibonacci hashing of the 64 fact bits.
+        let h = state.bits().wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32;
+        (h as usize).checked_rem(N).unwrap_or(0)
+    }
+
+    /// The node holding `state`, or the free slot where it would go.
+    fn find(&self, arena: &[Node], state: FactSet) -> (usize, Option<u16>) {
+        let mut slot = Self::start(state);
+        for _ in 0..N {
+            match self.slots.get(slot).copied() {
+                Some(0) | None => return (slot, None),
+                Some(i) => {
+                    let index = i.wrapping_sub(1);
+                    if arena
+                        .get(usize::from(index))
+                        .is_some_and(|n| n.state == state)
+                    {
+                        return (slot, Some(index));
+                    }
+                }
+            }
+            slot = slot.wrapping_add(1).checked_rem(N).unwrap_or(0);
+        }
+        (slot, None)
+    }
+
+    fn set(&mut self, slot: usize, node: u16) {
+        if let Some(s) = self.slots.get_mut(slot) {
+            *s = node.wrapping_add(1);
+        }
+    }
+}
+
+/// Relaxed (delete-free) cost of reaching `goal` from `state`: the max or the sum over goal
+/// facts of their h_max / h_add cost. [`INFINITE`] when some goal fact is unreachable.
+fn relaxed(actions: &[ActuatorAction<'_>], state: FactSet, goal: FactSet, sum: bool) -> u32 {
+    let mut cost = [INFINITE; MAX_FACTS];
+    for f in state.iter() {
+        if let Some(c) = cost.get_mut(f.index()) {
+            *c = 0;
+        }
+    }
+    let combine = |acc: u32, c: u32| {
+        if sum {
+            acc.saturating_add(c)
+        } else {
+            acc.max(c)
+        }
+    };
+    // Bellman-Ford style: at most one round per fact until nothing improves.
+    for _ in 0..=MAX_FACTS {
+        let mut changed = false;
+        for a in actions {
+            let pre = a
+                .pre
+                .iter()
+                .map(|f| cost.get(f.index()).copied().unwrap_or(INFINITE))
+                .fold(0, combine);
+            if pre == INFINITE {
+                continue;
+            }
+            let through = pre.saturating_add(1);
+            for f in a.add.iter() {
+                if let Some(c) = cost.get_mut(f.index()) {
+                    if through < *c {
+                        *c = through;
+                        changed = true;
+                    }
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    goal.iter()
+        .map(|f| cost.get(f.index()).copied().unwrap_or(INFINITE))
+        .fold(0, combine)
+}
+
+fn estimate(h: Heuristic, actions: &[ActuatorAction<'_>], state: FactSet, goal: FactSet) -> u32 {
+    match h {
+        Heuristic::GoalCount => goal.difference(state).len() as u32,
+        Heuristic::Max => relaxed(actions, state, goal, false),
+        Heuristic::Add => relaxed(actions, state, goal, true),
+    }
+}
+
+impl<const N: usize> Planner<N> {
+    /// A planner with `strategy` and the largest budget its capacity allows.
+    pub const fn new(strategy: Strategy) -> Self {
+        Self {
+            strategy,
+            budget: u32::MAX,
+        }
+    }
+
+    fn limit(&self) -> u32 {
+        let capacity = N.saturating_sub(1).min(usize::from(u16::MAX - 1)) as u32;
+        self.budget.min(capacity)
+    }
+
+    /// Searches a plan from `init` to a state where `goal` holds, with actions indexed by their
+    /// [`ActionId`]. The plan is at most `L` actions long.
+    pub fn plan<const L: usize>(
+        &self,
+        actions: &[ActuatorAction<'_>],
+        init: FactSet,
+        goal: FactSet,
+    ) -> Result<Found<L>, PlanningError> {
+        let limit = self.limit();
+        let mut arena: Vec<Node, N> = Vec::new();
+        let mut visited = Visited::<N> { slots: [0; N] };
+        let mut open: BinaryHeap<(u32, u32, u16), Min, N> = BinaryHeap::new();
+        let mut expanded = 0u32;
+        let budget = PlanningError::Budget { expanded: 0, limit };
+        let heuristic = match self.strategy {
+            Strategy::BreadthFirst => None,
+            Strategy::AStar(h) | Strategy::Greedy(h) => Some(h),
+        };
+        let score = |g: u16, h: u32| match self.strategy {
+            Strategy::Greedy(_) => h,
+            _ => u32::from(g).saturating_add(h),
+        };
+
+        let root = Node {
+            state: init,
+            parent: NONE,
+            action: 0,
+            g: 0,
+        };
+        if limit == 0 || arena.push(root).is_err() {
+            return Err(budget);
+        }
+        let (slot, _) = visited.find(&arena, init);
+        visited.set(slot, 0);
+        if goal.is_subset(init) {
+            return self.extract(&arena, 0, expanded);
+        }
+        if let Some(h) = heuristic {
+            let h0 = estimate(h, actions, init, goal);
+            if h0 == INFINITE {
+                return Err(PlanningError::Unsolvable { expanded });
+            }
+            let _ = open.push((score(0, h0), h0, 0));
+        }
+        let mut head = 0usize;
+        loop {
+            // Next node: FIFO order for breadth-first, lowest (f, h, index) otherwise.
+            let index = match heuristic {
+                None => {
+                    if head >= arena.len() {
+                        return Err(PlanningError::Unsolvable { expanded });
+                    }
+                    head = head.saturating_add(1);
+                    head.saturating_sub(1)
+                }
+                Some(_) => match open.pop() {
+                    Some((_, _, i)) => usize::from(i),
+                    None => return Err(PlanningError::Unsolvable { expanded }),
+                },
+            };
+            let Some(node) = arena.get(index).copied() else {
+                return Err(PlanningError::Unsolvable { expanded });
+            };
+            // A cheaper path to this state was found after it was queued: skip the stale entry.
+            if heuristic.is_some() && visited.find(&arena, node.state).1 != Some(index as u16) {
+                continue;
+            }
+            if heuristic.is_some() && goal.is_subset(node.state) {
+                return self.extract(&arena, index, expanded);
+            }
+            expanded = expanded.saturating_add(1);
+            for (a, action) in actions.iter().enumerate() {
+                if !action.pre.is_subset(node.state) {
+                    continue;
+                }
+                let state = node.state.apply(action.add, action.del);
+                let g = node.g.saturating_add(1);
+                let (slot, known) = visited.find(&arena, state);
+                if let Some(k) = known {
+                    // Seen at least as cheaply: nothing new.
+                    if arena.get(usize::from(k)).is_some_and(|n| n.g <= g) {
+                        continue;
+                    }
+                }
+                let h = match heuristic {
+                    Some(h) => {
+                        let h = estimate(h, actions, state, goal);
+                        if h == INFINITE {
+                            continue;
+                        }
+                        h
+                    }
+                    None => 0,
+                };
+                if arena.len() as u32 >= limit.saturating_add(1) {
+                    return Err(PlanningError::Budget { expanded, limit });
+                }
+                let child = arena.len() as u16;
+                let pushed = arena.push(Node {
+                    state,
+                    parent: index as u16,
+                    action: a as u8,
+                    g,
+                });
+                if pushed.is_err() {
+                    return Err(PlanningError::Budget { expanded, limit });
+                }
+                visited.set(slot, child);
+                if heuristic.is_none() && goal.is_subset(state) {
+                    // Breadth-first: the first goal generated is at the least depth.
+                    return self.extract(&arena, usize::from(child), expanded);
+                }
+                if heuristic.is_some() && open.push((score(g, h), h, child)).is_err() {
+                    return Err(PlanningError::Budget { expanded, limit });
+                }
+            }
+        }
+    }
+
+    fn extract<const L: usize>(
+        &self,
+        arena: &[Node],
+        goal: usize,
+        expanded: u32,
+    ) -> Result<Found<L>, PlanningError> {
+        let too_long = PlanningError::TooLong { limit: L as u32 };
+        let mut body: Vec<ActionId, L> = Vec::new();
+        let mut at = goal;
+        while let Some(node) = arena.get(at) {
+            if node.parent == NONE {
+                break;
+            }
+            body.push(ActionId::new(usize::from(node.action)).ok_or(too_long)?)
+                .map_err(|_| too_long)?;
+            at = usize::from(node.parent);
+        }
+        body.reverse();
+        Ok(Found {
+            body,
+            expanded,
+            generated: arena.len() as u32,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::domain::Domain;
+    use std::format;
+    use std::string::String;
+    use std::vec::Vec as StdVec;
+
+    struct Action {
+        name: String,
+        sets: [StdVec<String>; 3],
+    }
+
+    /// A STRIPS domain built from owned names.
+    struct Strips {
+        facts: StdVec<String>,
+        actions: StdVec<Action>,
+    }
+
+    impl Strips {
+        fn new() -> Self {
+            Self {
+                facts: StdVec::new(),
+                actions: StdVec::new(),
+            }
+        }
+        fn fact(&mut self, f: String) {
+            self.facts.push(f);
+        }
+        fn action(&mut self, name: String, pre: &[&str], add: &[&str], del: &[&str]) {
+            let own = |v: &[&str]| v.iter().map(|f| String::from(*f)).collect();
+            self.actions.push(Action {
+                name,
+                sets: [own(pre), own(add), own(del)],
+            });
+        }
+        fn domain(&self) -> Domain<'_, 1, 64> {
+            let mut d = Domain::new();
+            for f in &self.facts {
+                d.add_fact(f).unwrap();
+            }
+            let names = |d: &Domain<'_, 1, 64>, v: &[String]| {
+                let v: StdVec<&str> = v.iter().map(String::as_str).collect();
+                d.facts(&v).unwrap()
+            };
+            for a in &self.actions {
+                let [pre, add, del] = &a.sets;
+                let a =
+                    ActuatorAction::new(&a.name, names(&d, pre), names(&d, add), names(&d, del));
+                d.add_action(a).unwrap();
+            }
+            d
+        }
+    }
+
+    fn s(v: &str) -> String {
+        String::from(v)
+    }
+
+    fn blocks(n: usize) -> Strips {
+        let names: StdVec<String> = (0..n)
+            .map(|i| format!("{}", (b'A' + i as u8) as char))
+            .collect();
+        let mut w = Strips::new();
+        w.fact(s("handempty"));
+        for x in &names {
+            w.fact(format!("ontable {x}"));
+            w.fact(format!("clear {x}"));
+            w.fact(format!("holding {x}"));
+            for y in &names {
+                if x != y {
+                    w.fact(format!("on {x} {y}"));
+                }
+            }
+        }
+        for x in &names {
+            let (ontable, clear, holding) = (
+                format!("ontable {x}"),
+                format!("clear {x}"),
+                format!("holding {x}"),
+            );
+            w.action(
+                format!("pickup {x}"),
+                &[clear.as_str(), ontable.as_str(), "handempty"],
+                &[holding.as_str()],
+                &[ontable.as_str(), clear.as_str(), "handempty"],
+            );
+            w.action(
+                format!("putdown {x}"),
+                &[holding.as_str()],
+                &[ontable.as_str(), clear.as_str(), "handempty"],
+                &[holding.as_str()],
+            );
+            for y in &names {
+                if x == y {
+                    continue;
+                }
+                let (on, clear_y) = (format!("on {x} {y}"), format!("clear {y}"));
+                w.action(
+                    format!("stack {x} {y}"),
+                    &[holding.as_str(), clear_y.as_str()],
+                    &[on.as_str(), clear.as_str(), "handempty"],
+                    &[holding.as_str(), clear_y.as_str()],
+                );
+                w.action(
+                    format!("unstack {x} {y}"),
+                    &[on.as_str(), clear.as_str(), "handempty"],
+                    &[holding.as_str(), clear_y.as_str()],
+                    &[on.as_str(), clear.as_str(), "handempty"],
+                );
+            }
+        }
+        w
+    }
+
+    fn gripper(balls: usize) -> Strips {
+        let mut w = Strips::new();
+        let rooms = ["a", "b"];
+        let hands = ["left", "right"];
+        for r in rooms {
+            w.fact(format!("robby {r}"));
+        }
+        for h in hands {
+            w.fact(format!("free {h}"));
+        }
+        for b in 0..balls {
+            for r in rooms {
+                w.fact(format!("at {b} {r}"));
+            }
+            for h in hands {
+                w.fact(format!("carry {b} {h}"));
+            }
+        }
+        for (from, to) in [("a", "b"), ("b", "a")] {
+            w.action(
+                format!("move {from} {to}"),
+                &[format!("robby {from}").as_str()],
+                &[format!("robby {to}").as_str()],
+                &[format!("robby {from}").as_str()],
+            );
+        }
+        for b in 0..balls {
+            for r in rooms {
+                for h in hands {
+                    let (at, carry, free, robby) = (
+                        format!("at {b} {r}"),
+                        format!("carry {b} {h}"),
+                        format!("free {h}"),
+                        format!("robby {r}"),
+                    );
+                    w.action(
+                        format!("pick {b} {r} {h}"),
+                        &[at.as_str(), robby.as_str(), free.as_str()],
+                        &[carry.as_str()],
+                        &[at.as_str(), free.as_str()],
+                    );
+                    w.action(
+                        format!("drop {b} {r} {h}"),
+                        &[carry.as_str(), robby.as_str()],
+                        &[at.as_str(), free.as_str()],
+                        &[carry.as_str()],
+                    );
+                }
+            }
+        }
+        w
+    }
+
+    fn set(d: &Domain<'_, 1, 64>, names: &[&str]) -> FactSet {
+        d.facts(names).unwrap()
+    }
+
+    const STRATEGIES: [Strategy; 2] = [Strategy::BreadthFirst, Strategy::AStar(Heuristic::Max)];
+
+    /// Runs every optimal strategy and checks the plan length, and that the plan really reaches
+    /// the goal when applied step by step.
+    fn optimal(d: &Domain<'_, 1, 64>, init: FactSet, goal: FactSet, length: usize) -> [u32; 2] {
+        let mut expanded = [0; 2];
+        for (i, strategy) in STRATEGIES.into_iter().enumerate() {
+            let found = Planner::<4096>::new(strategy)
+                .plan::<32>(d.actions(), init, goal)
+                .unwrap();
+            assert_eq!(found.body.len(), length, "{strategy:?}");
+            let end = found.body.iter().fold(init, |state, a| {
+                let a = d.action(*a).unwrap();
+                assert!(
+                    a.pre.is_subset(state),
+                    "{strategy:?}: {} not applicable",
+                    a.name
+                );
+                state.apply(a.add, a.del)
+            });
+            assert!(goal.is_subset(end));
+            expanded[i] = found.expanded;
+        }
+        expanded
+    }
+
+    #[test]
+    fn sussman_anomaly_takes_six_actions() {
+        let w = blocks(3);
+        let d = w.domain();
+        let init = set(
+            &d,
+            &[
+                "on C A",
+                "ontable A",
+                "ontable B",
+                "clear C",
+                "clear B",
+                "handempty",
+            ],
+        );
+        let goal = set(&d, &["on A B", "on B C"]);
+        optimal(&d, init, goal, 6);
+    }
+
+    #[test]
+    fn reversing_a_four_block_tower_takes_eight_actions() {
+        let w = blocks(4);
+        let d = w.domain();
+        let init = set(
+            &d,
+            &[
+                "on A B",
+                "on B C",
+                "on C D",
+                "ontable D",
+                "clear A",
+                "handempty",
+            ],
+        );
+        let goal = set(&d, &["on D C", "on C B", "on B A"]);
+        let [bfs, astar] = optimal(&d, init, goal, 8);
+        assert!(
+            astar < bfs,
+            "h_max guides the search: A* {astar} vs breadth-first {bfs} expansions"
+        );
+        // Greedy h_add finds a plan too, not necessarily a shortest one.
+        let greedy = Planner::<4096>::new(Strategy::Greedy(Heuristic::Add))
+            .plan::<32>(d.actions(), init, goal)
+            .unwrap();
+        assert!(greedy.body.len() >= 8);
+    }
+
+    #[test]
+    fn gripper_with_four_balls_takes_eleven_actions() {
+        let w = gripper(4);
+        let d = w.domain();
+        let init = set(
+            &d,
+            &[
+                "robby a",
+                "free left",
+                "free right",
+                "at 0 a",
+                "at 1 a",
+                "at 2 a",
+                "at 3 a",
+            ],
+        );
+        let goal = set(&d, &["at 0 b", "at 1 b", "at 2 b", "at 3 b"]);
+        optimal(&d, init, goal, 11);
+    }
+
+    #[test]
+    fn fetch_tea_takes_three_actions_by_either_door() {
+        let json = include_bytes!("../../missions/fetch-tea.json");
+        let m: crate::mission::Loaded<'_, (), (), 4, 8, 2, 4> =
+            crate::mission::load(json, &crate::mission::AnyBehaviour).unwrap();
+        let d = &m.mission.domain;
+        let goal = d.facts(&["in_kitchen"]).unwrap();
+        let open = d
+            .facts(&["path_clear", "door_unlocked", "handle_seen"])
+            .unwrap();
+        let found = Planner::<256>::new(Strategy::BreadthFirst)
+            .plan::<4>(d.actions(), open, goal)
+            .unwrap();
+        let names: StdVec<&str> = found
+            .body
+            .iter()
+            .map(|a| d.action(*a).unwrap().name)
+            .collect();
+        assert_eq!(names, ["go to door", "open door", "enter kitchen"]);
+        let locked = d.facts(&["path_clear", "handle_seen"]).unwrap();
+        let found = Planner::<256>::new(Strategy::AStar(Heuristic::Max))
+            .plan::<4>(d.actions(), locked, goal)
+            .unwrap();
+        let names: StdVec<&str> = found
+            .body
+            .iter()
+            .map(|a| d.action(*a).unwrap().name)
+            .collect();
+        assert_eq!(
+            names,
+            ["go to back door", "open back door", "enter by back door"]
+        );
+    }
+
+    #[test]
+    fn unsolvable_and_too_large_problems_are_errors() {
+        let w = blocks(4);
+        let d = w.domain();
+        let init = set(
+            &d,
+            &[
+                "on A B",
+                "on B C",
+                "on C D",
+                "ontable D",
+                "clear A",
+                "handempty",
+            ],
+        );
+        // Holding two blocks at once is impossible.
+        let impossible = set(&d, &["holding A", "holding B"]);
+        assert!(matches!(
+            Planner::<4096>::new(Strategy::BreadthFirst).plan::<32>(d.actions(), init, impossible),
+            Err(PlanningError::Unsolvable { .. })
+        ));
+        // h_max sees at once that no action ever adds an unknown goal: nothing is expanded.
+        let w2 = blocks(2);
+        let d2 = w2.domain();
+        let none_adds = FactSet::single(crate::facts::FactId::new(60).unwrap());
+        assert_eq!(
+            Planner::<64>::new(Strategy::AStar(Heuristic::Max)).plan::<8>(
+                d2.actions(),
+                FactSet::EMPTY,
+                none_adds
+            ),
+            Err(PlanningError::Unsolvable { expanded: 0 })
+        );
+        let goal = set(&d, &["on D C", "on C B", "on B A"]);
+        let small = Planner::<4096> {
+            strategy: Strategy::BreadthFirst,
+            budget: 20,
+        };
+        match small.plan::<32>(d.actions(), init, goal) {
+            Err(PlanningError::Budget {
+                expanded,
+                limit: 20,
+            }) => assert!(expanded <= 20),
+            other => panic!("expected a budget error, got {other:?}"),
+        }
+        // Capacity is a budget too: 16 nodes cannot hold the search.
+        assert!(matches!(
+            Planner::<16>::new(Strategy::AStar(Heuristic::Max)).plan::<32>(d.actions(), init, goal),
+            Err(PlanningError::Budget { limit: 15, .. })
+        ));
+        // A plan longer than the body capacity.
+        assert_eq!(
+            Planner::<4096>::new(Strategy::BreadthFirst)
+                .plan::<4>(d.actions(), init, goal)
+                .map(|f| f.body.len()),
+            Err(PlanningError::TooLong { limit: 4 })
+        );
+    }
+
+    #[test]
+    fn an_empty_goal_needs_no_action() {
+        let w = blocks(2);
+        let d = w.domain();
+        let found = Planner::<8>::default()
+            .plan::<2>(d.actions(), FactSet::EMPTY, FactSet::EMPTY)
+            .unwrap();
+        assert!(found.body.is_empty());
+    }
+}
