@@ -11,13 +11,16 @@
 
 use embassy_sync::blocking_mutex::raw::RawMutex;
 
-use crate::action::{SensorId, SensorMode, SensorSet};
+use heapless::Vec;
+
+use crate::action::{ActionId, ActuatorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
 use crate::exec::{Failure, Runtime};
 use crate::facts::FactSet;
 use crate::fmt::{info, warning};
 use crate::fsm::{Fsm, FsmError};
-use crate::plan::{FailureMemory, PlanId, PlanSet};
+use crate::plan::{FailureMemory, Plan, PlanId, PlanSet};
+use crate::planner::{Found, Planner, PlanningError};
 use crate::platform::{Actuator, Sensor};
 use crate::trace::{TraceEvent, TraceSink};
 
@@ -74,6 +77,11 @@ pub enum ControlError {
         /// Why.
         error: FsmError,
     },
+    /// No library plan applied and the planner found none.
+    Planning {
+        /// Why.
+        error: PlanningError,
+    },
     /// The initial model could not be established (a sensor fault, a full store).
     InitialModel {
         /// What went wrong.
@@ -82,6 +90,7 @@ pub enum ControlError {
 }
 
 impl<
+    'a,
     M: RawMutex,
     S: Sensor,
     A: Actuator,
@@ -91,7 +100,7 @@ impl<
     const NP: usize,
     const L: usize,
     const K: usize,
-> Runtime<'_, '_, M, S, A, T, NS, NA, NP, L, K>
+> Runtime<'_, 'a, M, S, A, T, NS, NA, NP, L, K>
 {
     /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor whose
     /// `pre(s)` holds is switched on, sampled once and switched off again.
@@ -123,15 +132,93 @@ impl<
         Ok(beliefs)
     }
 
-    /// Algorithm 1: establishes the model, then selects and executes plans until the task's
-    /// goal holds. Ends with an error, never a hang, when no plan applies, every applicable
-    /// plan failed, or the failure or plan limit of the [`Config`](crate::exec::Config) is
-    /// reached.
+    /// Algorithm 1 with plans from the library only: establishes the model, then selects and
+    /// executes plans until the task's goal holds. Ends with an error, never a hang, when no
+    /// plan applies, every applicable plan failed, or the failure or plan limit of the
+    /// [`Config`](crate::exec::Config) is reached.
     pub async fn run(&self) -> Result<Report, ControlError> {
+        self.control(None).await
+    }
+
+    /// Algorithm 1 where `generatePlans` falls back on `planner` when no library plan applies,
+    /// and plans again from the current beliefs after a failure.
+    pub async fn run_planning<const N: usize>(
+        &self,
+        planner: &Planner<N>,
+    ) -> Result<Report, ControlError> {
+        self.control(Some(planner)).await
+    }
+
+    /// The actions with the preconditions the planner must satisfy from the beliefs: facts
+    /// that a sensor running beside the action perceives are checked by that sensor when the
+    /// action runs, so they are assumed to hold unless a sample already showed them false.
+    fn planning_actions(&self) -> Vec<ActuatorAction<'a>, NA> {
+        let domain = &self.mission.domain;
+        let known_false = self.known_false();
+        domain
+            .actions()
+            .iter()
+            .map(|a| {
+                let checked = domain.perception_of(domain.sensors_serving(a.pre));
+                ActuatorAction {
+                    pre: a.pre.difference(checked.difference(known_false)),
+                    ..*a
+                }
+            })
+            .collect()
+    }
+
+    /// `generatePlans: M -> P`: the first applicable library plan, else a generated one.
+    fn generate(
+        &self,
+        planner: Option<&dyn Generate<L>>,
+        memory: &FailureMemory,
+        generated_failed: Option<FactSet>,
+        beliefs: FactSet,
+    ) -> Result<(PlanId, Vec<ActionId, L>), ControlError> {
         let task = self.mission.task;
         let library = &self.mission.library;
+        let excluded = memory.excluded(task.event, beliefs);
+        if let Some(plan) = library.select(task.event, beliefs, excluded) {
+            let body = library
+                .get(plan)
+                .map(|p| p.body.clone())
+                .unwrap_or_default();
+            return Ok((plan, body));
+        }
+        let no_plan = if excluded.is_empty() {
+            ControlError::NoApplicablePlan {
+                event: task.event,
+                beliefs,
+            }
+        } else {
+            ControlError::Exhausted {
+                event: task.event,
+                failed: excluded,
+                beliefs,
+            }
+        };
+        // The same search from the same beliefs would give the plan that just failed.
+        let Some(planner) = planner.filter(|_| generated_failed != Some(beliefs)) else {
+            return Err(no_plan);
+        };
+        let actions = self.planning_actions();
+        let found = planner
+            .generate(&actions, beliefs, task.goal)
+            .map_err(|error| ControlError::Planning { error })?;
+        self.trace(TraceEvent::PlanGenerated {
+            length: u8::try_from(found.body.len()).unwrap_or(u8::MAX),
+            expanded: found.expanded,
+        });
+        info!("generated a plan of {} actions", found.body.len());
+        Ok((PlanId::GENERATED, found.body))
+    }
+
+    async fn control(&self, planner: Option<&dyn Generate<L>>) -> Result<Report, ControlError> {
+        let task = self.mission.task;
         self.establish_initial_model().await?;
         let mut memory = FailureMemory::new();
+        let mut generated_failed: Option<FactSet> = None;
         let mut report = Report::default();
         loop {
             let beliefs = self.beliefs();
@@ -146,27 +233,18 @@ impl<
                     plans: report.plans_started,
                 });
             }
-            // generatePlans: M -> P
-            let excluded = memory.excluded(task.event, beliefs);
-            let Some(plan) = library.select(task.event, beliefs, excluded) else {
-                return Err(if excluded.is_empty() {
-                    ControlError::NoApplicablePlan {
-                        event: task.event,
-                        beliefs,
-                    }
-                } else {
-                    ControlError::Exhausted {
-                        event: task.event,
-                        failed: excluded,
-                        beliefs,
-                    }
-                });
+            let (plan, body) = self.generate(planner, &memory, generated_failed, beliefs)?;
+            let named = Plan {
+                name: self
+                    .mission
+                    .library
+                    .get(plan)
+                    .map_or("generated", |p| p.name),
+                trigger: task.event,
+                context: FactSet::EMPTY,
+                body,
             };
-            let body = library.get(plan).ok_or(ControlError::Compile {
-                plan,
-                error: FsmError::EmptyBody,
-            })?;
-            let fsm: Fsm<L> = Fsm::compile(plan, body, &self.mission.domain)
+            let fsm: Fsm<L> = Fsm::compile(plan, &named, &self.mission.domain)
                 .map_err(|error| ControlError::Compile { plan, error })?;
             self.trace(TraceEvent::PlanSelected {
                 plan,
@@ -180,7 +258,11 @@ impl<
                     self.trace(TraceEvent::PlanFailed { plan, reason });
                     warning!("plan {} failed: {:?}", plan.index(), reason);
                     report.plans_failed = report.plans_failed.saturating_add(1);
-                    memory.record(plan, task.event, self.beliefs());
+                    if plan == PlanId::GENERATED {
+                        generated_failed = Some(self.beliefs());
+                    } else {
+                        memory.record(plan, task.event, self.beliefs());
+                    }
                     if report.plans_failed > self.config.max_failures {
                         return Err(ControlError::TooManyFailures {
                             failures: report.plans_failed,
@@ -190,5 +272,26 @@ impl<
                 }
             }
         }
+    }
+}
+
+/// Object-safe access to a [`Planner`] of any capacity, so the control loop is compiled once.
+trait Generate<const L: usize> {
+    fn generate(
+        &self,
+        actions: &[ActuatorAction<'_>],
+        init: FactSet,
+        goal: FactSet,
+    ) -> Result<Found<L>, PlanningError>;
+}
+
+impl<const N: usize, const L: usize> Generate<L> for Planner<N> {
+    fn generate(
+        &self,
+        actions: &[ActuatorAction<'_>],
+        init: FactSet,
+        goal: FactSet,
+    ) -> Result<Found<L>, PlanningError> {
+        self.plan(actions, init, goal)
     }
 }

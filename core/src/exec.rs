@@ -60,7 +60,7 @@ pub struct Config {
     /// How long a running action's precondition may stay false before the runtime stops the
     /// action and takes the failure edge. The behaviour is told at once either way.
     pub max_violation: Duration,
-    /// Plan failures after which the control loop gives up.
+    /// Plan failures tolerated: the control loop gives up at failure `max_failures + 1`.
     pub max_failures: u16,
     /// Plans after which the control loop gives up even if they all succeeded (a library whose
     /// plans never reach the goal would otherwise loop forever).
@@ -239,6 +239,8 @@ struct Shared<const NS: usize> {
     fresh: Cell<SensorSet>,
     /// Samples lost in a row, per sensor.
     lost: [Cell<u8>; NS],
+    /// Facts some sample has decided (true or false) since the start.
+    sensed: Cell<FactSet>,
     violation: Cell<Option<Violation>>,
     requests: Cell<SensorSet>,
     version: Cell<u32>,
@@ -398,6 +400,7 @@ impl<
                 running: Cell::new(SensorSet::EMPTY),
                 fresh: Cell::new(SensorSet::EMPTY),
                 lost: [const { Cell::new(0) }; NS],
+                sensed: Cell::new(FactSet::EMPTY),
                 violation: Cell::new(None),
                 requests: Cell::new(SensorSet::EMPTY),
                 version: Cell::new(0),
@@ -421,6 +424,12 @@ impl<
     /// The current beliefs `φ`.
     pub fn beliefs(&self) -> FactSet {
         self.shared.lock(|s| s.beliefs.get())
+    }
+
+    /// Percept facts a sample has shown to be false (facts never sensed are unknown, not false).
+    pub fn known_false(&self) -> FactSet {
+        self.shared
+            .lock(|s| s.sensed.get().difference(s.beliefs.get()))
     }
 
     pub(crate) fn set_beliefs(&self, beliefs: FactSet) {
@@ -648,6 +657,7 @@ impl<
             });
             s.beliefs
                 .set(s.beliefs.get().difference(spec.per).union(decided));
+            s.sensed.set(s.sensed.get().union(spec.per));
             if let Some(p) = s.percepts.get(sensor.index()) {
                 p.set(Some(entry));
             }
@@ -850,6 +860,11 @@ impl<
         sense: Duration,
         act: Duration,
     ) -> Result<Outcome, Failure> {
+        // A phase of no time would alternate forever at one instant.
+        let (sense, act) = (
+            sense.max(Duration::from_ticks(1)),
+            act.max(Duration::from_ticks(1)),
+        );
         let mut behaviour = pin!(self.actuators.run(action, io));
         let mut first = true;
         loop {

@@ -21,6 +21,9 @@ pub const MAX_PLANS: usize = 32;
 pub struct PlanId(u8);
 
 impl PlanId {
+    /// The id of a plan the planner generated (not in the library).
+    pub const GENERATED: Self = Self(u8::MAX);
+
     /// The plan with index `index`, or `None` when `index >= MAX_PLANS`.
     pub const fn new(index: usize) -> Option<Self> {
         if index < MAX_PLANS {
@@ -45,15 +48,23 @@ impl PlanSet {
     /// No plan.
     pub const EMPTY: Self = Self(0);
 
-    /// Whether `plan` is in the set.
-    pub const fn contains(self, plan: PlanId) -> bool {
-        self.0 & (1u32 << plan.0) != 0
+    const fn bit(plan: PlanId) -> u32 {
+        // Generated plans (and any id past the width) have no bit.
+        match 1u32.checked_shl(plan.0 as u32) {
+            Some(bit) => bit,
+            None => 0,
+        }
     }
 
-    /// The set with `plan` added.
+    /// Whether `plan` is in the set.
+    pub const fn contains(self, plan: PlanId) -> bool {
+        self.0 & Self::bit(plan) != 0
+    }
+
+    /// The set with `plan` added; a generated plan is never in a set.
     #[must_use]
     pub const fn with(self, plan: PlanId) -> Self {
-        Self(self.0 | (1u32 << plan.0))
+        Self(self.0 | Self::bit(plan))
     }
 
     /// Whether the set is empty.

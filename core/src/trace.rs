@@ -34,7 +34,14 @@ pub enum TraceEvent {
         /// The beliefs `φ`.
         beliefs: FactSet,
     },
-    /// A plan was selected for an event.
+    /// No library plan applied: the planner generated one.
+    PlanGenerated {
+        /// Its length.
+        length: u8,
+        /// Search nodes expanded.
+        expanded: u32,
+    },
+    /// A plan was selected for an event ([`PlanId::GENERATED`] for a generated plan).
     PlanSelected {
         /// The plan.
         plan: PlanId,
@@ -272,6 +279,10 @@ impl TraceHash {
                 self.bytes(&[1, id(plan.index()), id(event.index())]);
             }
             E::PlanSucceeded { plan } => self.bytes(&[2, id(plan.index())]),
+            E::PlanGenerated { length, expanded } => {
+                self.bytes(&[18, length]);
+                self.u32(expanded);
+            }
             E::PlanFailed { plan, reason } => {
                 self.bytes(&[3, id(plan.index())]);
                 self.failure(reason);

@@ -51,7 +51,7 @@ pub fn parse(file: &Path, bytes: &[u8]) -> Result<Scenario, LoadError> {
 /// Where and why a file that `serde-json-core` rejected is wrong, according to `serde_json`.
 fn diagnose(bytes: &[u8]) -> Option<String> {
     let mut de = serde_json::Deserializer::from_slice(bytes);
-    let result: Result<ScenarioFile<'_>, _> = serde_path_to_error::deserialize(&mut de);
+    let result: Result<ScenarioFile, _> = serde_path_to_error::deserialize(&mut de);
     let err = match result {
         Ok(_) => de.end().err().map(|e| e.to_string())?,
         Err(err) => {

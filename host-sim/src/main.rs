@@ -2,14 +2,16 @@
 //! status 0 when the simulation ran, whatever its outcome; 2 for bad input, with one line on
 //! stderr naming the file and what is wrong; never a panic.
 
+use std::fs::File;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use psmpa_sim::cli::{outputs, report, sweep, table1};
+use psmpa_sim::cli::{check, outputs, report, sweep, table1};
 use psmpa_sim::load;
 use psmpa_sim::robot::Arch;
-use psmpa_sim::sim::run_recorded;
+use psmpa_sim::sim::{run_recorded, run_summary};
 
 #[derive(Parser)]
 #[command(
@@ -61,6 +63,17 @@ enum Command {
         #[arg(long, value_name = "FILE.json")]
         timeline: Option<PathBuf>,
     },
+    /// Validates a mission file and prints each plan's FSM with its parallel sensor sets.
+    Check {
+        /// Mission file (JSON, see missions/fetch-tea.json).
+        mission: PathBuf,
+        /// Also write the FSMs as a Graphviz graph.
+        #[arg(long, value_name = "FILE.dot")]
+        dot: Option<PathBuf>,
+        /// Accept behaviour names this robot does not have (check the logic only).
+        #[arg(long)]
+        any_platform: bool,
+    },
     /// Reproduces the paper's Table I: six scenarios under both architectures.
     Table1 {
         /// Print the rows as JSON.
@@ -98,6 +111,11 @@ fn internal(message: impl ToString) -> Fail {
     Fail(1, message.to_string())
 }
 
+fn write_to(path: &Path, mut file: File, content: &[u8]) -> Result<(), Fail> {
+    file.write_all(content)
+        .map_err(|e| bad_input(format!("{}: cannot write: {e}", path.display())))
+}
+
 fn write_file(path: &Path, content: &[u8]) -> Result<(), Fail> {
     std::fs::write(path, content)
         .map_err(|e| bad_input(format!("{}: cannot write: {e}", path.display())))
@@ -115,35 +133,74 @@ fn run(cli: Cli) -> Result<(), Fail> {
         } => {
             let sc = load::load(&scenario).map_err(bad_input)?;
             let arch = Arch::from(arch);
-            let rec = run_recorded(&sc, arch).map_err(internal)?;
+            // Outputs are opened first: a bad path fails before any result is printed.
+            let open = |path: &Option<PathBuf>| -> Result<Option<(PathBuf, File)>, Fail> {
+                path.as_ref()
+                    .map(|p| {
+                        File::create(p)
+                            .map(|f| (p.clone(), f))
+                            .map_err(|e| bad_input(format!("{}: cannot write: {e}", p.display())))
+                    })
+                    .transpose()
+            };
+            let (trace, timeline) = (open(&trace)?, open(&timeline)?);
+            let plot = open(&plot)?.map(|(p, _)| p);
+            let recorded = if trace.is_some() || timeline.is_some() || plot.is_some() {
+                Some(run_recorded(&sc, arch).map_err(internal)?)
+            } else {
+                None
+            };
+            let summary = match &recorded {
+                Some(rec) => rec.summary.clone(),
+                // Nothing to write: keep no event log (a long run would fill memory).
+                None => run_summary(&sc, arch).map_err(internal)?,
+            };
             if json {
-                let j = report::RunJson::new(&sc, &rec.summary);
+                let j = report::RunJson::new(&sc, &summary);
                 println!("{}", serde_json::to_string(&j).map_err(internal)?);
             } else {
-                print!("{}", report::human(&sc, &rec.summary));
+                print!("{}", report::human(&sc, &summary));
             }
-            if let Some(path) = trace {
-                write_file(&path, outputs::trace_csv(&sc, &rec).as_bytes())?;
+            if let Some(rec) = recorded {
+                if let Some((path, file)) = trace {
+                    write_to(&path, file, outputs::trace_csv(&sc, &rec).as_bytes())?;
+                }
+                if let Some((path, file)) = timeline {
+                    let doc = serde_json::to_vec_pretty(&outputs::timeline(&sc, &rec))
+                        .map_err(internal)?;
+                    write_to(&path, file, &doc)?;
+                }
+                if let Some(path) = plot {
+                    let other = run_recorded(
+                        &sc,
+                        if arch == Arch::PSmpa {
+                            Arch::Smpa
+                        } else {
+                            Arch::PSmpa
+                        },
+                    )
+                    .map_err(internal)?;
+                    let mut both = [rec, other];
+                    both.sort_by_key(|r| r.summary.arch != Arch::PSmpa);
+                    outputs::plot(&path, &sc, &both)
+                        .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
+                }
             }
-            if let Some(path) = timeline {
-                let doc =
-                    serde_json::to_vec_pretty(&outputs::timeline(&sc, &rec)).map_err(internal)?;
-                write_file(&path, &doc)?;
-            }
-            if let Some(path) = plot {
-                let other = run_recorded(
-                    &sc,
-                    if arch == Arch::PSmpa {
-                        Arch::Smpa
-                    } else {
-                        Arch::PSmpa
-                    },
-                )
-                .map_err(internal)?;
-                let mut both = [rec, other];
-                both.sort_by_key(|r| r.summary.arch != Arch::PSmpa);
-                outputs::plot(&path, &sc, &both)
-                    .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
+        }
+        Command::Check {
+            mission,
+            dot,
+            any_platform,
+        } => {
+            let bytes = std::fs::read(&mission).map_err(|e| {
+                bad_input(format!("{}: cannot read the file: {e}", mission.display()))
+            })?;
+            // The mission borrows its names from the file for the life of the process.
+            let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+            let (report, graph) = check::check(&mission, bytes, any_platform).map_err(bad_input)?;
+            print!("{report}");
+            if let Some(path) = dot {
+                write_file(&path, graph.as_bytes())?;
             }
         }
         Command::Table1 { json, plots } => {

@@ -1,156 +1,186 @@
 //! The robot of the paper's experiment, written against `psmpa-core` the way an application
-//! would: the "Fetch Tea" task with the "GetIn Kitchen" plan (go to door, open door, enter
-//! kitchen), the sensors behind its sensor-based actions and the behaviours behind its
-//! actuator-based actions, all acting on a simulated [`World`].
+//! would: the "Fetch Tea" mission is the JSON file `missions/fetch-tea.json` (embedded at build
+//! time), whose sensor and action names are bound to this robot's behaviours through a
+//! [`Registry`]; the behaviours act on a simulated [`World`].
 //!
 //! * "go to door" needs `path_clear`, which the sonar and the foot bumper perceive (cyclic):
 //!   Algorithm 2 runs both beside the walk.
-//! * "open door" needs `handle_seen`, which the camera perceives in one shot once the robot is
-//!   at the door.
+//! * "open door" needs `handle_seen` (camera, one shot) and `door_unlocked` (the hand on the
+//!   handle, on demand): the behaviour presses the handle before pushing the door.
+//! * A locked kitchen door fails "open door"; the control loop then plans again from what the
+//!   robot now believes and takes the back door.
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
+use psmpa_core::mission::{self, Bindings, LoadError, Registry};
+use psmpa_core::planner::{Planner, Strategy};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Config, Domain, DomainError, FactId, FactSet,
-    Mission, Outcome, Plan, PlanError, PlanLibrary, Policy, Reading, Runtime, Sensor, SensorAction,
-    SensorFault, SensorId, SensorMode, Task, Value,
+    ActionId, ActionIo, Actuator, Config, DomainError, FactId, FactSet, Mission, Outcome, Policy,
+    Reading, Runtime, Sensor, SensorFault, SensorId, SensorMode, Value,
 };
 
 use crate::scenario::Scenario;
-use crate::world::{Device, Motion, World, WorldLog};
+use crate::world::{Device, Motion, Place, World, WorldLog};
 
-/// Time to open the door once the handle is seen.
+/// The Fetch Tea mission file.
+pub const FETCH_TEA: &[u8] = include_bytes!("../../missions/fetch-tea.json");
+
+/// Time to push a door open once it gives.
 pub const OPEN_DOOR: Duration = Duration::from_millis(1_000);
-/// Time to walk through the open door.
+/// Time to walk through an open door.
 pub const ENTER_KITCHEN: Duration = Duration::from_millis(1_000);
 
-/// The Fetch Tea mission: 3 sensors, 3 actions, 2 plans of up to 4 actions.
-pub type FetchTea = Mission<'static, 3, 3, 2, 4>;
+/// Capacities of the robot's missions: 4 sensors, 8 actions, 4 plans of up to 6 actions.
+pub type FetchTea<'a> = Mission<'a, 4, 8, 4, 6>;
 
-/// Ids of the Fetch Tea mission.
+/// The robot's sensor behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Ids {
-    /// `path_clear`: no obstacle right in front.
-    pub path_clear: FactId,
-    /// `at_door`.
-    pub at_door: FactId,
-    /// `handle_seen`: the camera sees the door handle.
-    pub handle_seen: FactId,
-    /// `door_open`.
-    pub door_open: FactId,
-    /// `in_kitchen`: the goal.
-    pub in_kitchen: FactId,
-    /// Sonar: cyclic, perceives `path_clear`.
-    pub sonar: SensorId,
-    /// Foot bumper: cyclic, perceives `path_clear`.
-    pub bumper: SensorId,
-    /// Camera: one-shot, needs `at_door`, perceives `handle_seen`.
-    pub camera: SensorId,
-    /// Go to door: pre `path_clear`, add `at_door`.
-    pub go_to_door: ActionId,
-    /// Open door: pre `at_door, handle_seen`, add `door_open`.
-    pub open_door: ActionId,
-    /// Enter kitchen: pre `door_open`, add `in_kitchen`, del `at_door`.
-    pub enter_kitchen: ActionId,
+pub enum NaoSensor {
+    /// Ultrasonic sonar.
+    Sonar,
+    /// Foot bumper.
+    Bumper,
+    /// Head camera.
+    Camera,
+    /// Hand on the door handle.
+    Handle,
 }
 
-/// Why the mission could not be built.
+/// The robot's actuator behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NaoAction {
+    /// Walk to the kitchen door.
+    GoToDoor,
+    /// Press the handle and push the kitchen door.
+    OpenDoor,
+    /// Walk through the kitchen door.
+    EnterKitchen,
+    /// Walk on to the back door.
+    GoToBackDoor,
+    /// Open the back door.
+    OpenBackDoor,
+    /// Walk through the back door into the kitchen.
+    EnterByBackDoor,
+}
+
+/// What this robot can run, by the names missions use.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NaoRegistry;
+
+impl Registry for NaoRegistry {
+    type Sensor = NaoSensor;
+    type Action = NaoAction;
+
+    fn sensor(&self, name: &str) -> Option<NaoSensor> {
+        Some(match name {
+            "sonar" => NaoSensor::Sonar,
+            "bumper" => NaoSensor::Bumper,
+            "camera" => NaoSensor::Camera,
+            "handle" => NaoSensor::Handle,
+            _ => return None,
+        })
+    }
+
+    fn action(&self, name: &str) -> Option<NaoAction> {
+        Some(match name {
+            "go to door" => NaoAction::GoToDoor,
+            "open door" => NaoAction::OpenDoor,
+            "enter kitchen" => NaoAction::EnterKitchen,
+            "go to back door" => NaoAction::GoToBackDoor,
+            "open back door" => NaoAction::OpenBackDoor,
+            "enter by back door" => NaoAction::EnterByBackDoor,
+            _ => return None,
+        })
+    }
+}
+
+/// Why the robot's mission could not be set up.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum MissionError {
-    /// A domain table.
+    /// The mission file is invalid.
+    Load(LoadError<'static>),
+    /// The mission lacks a fact the robot's sensors decide.
+    MissingFact(&'static str),
+    /// A scenario period could not be applied.
     Domain(DomainError),
-    /// The plan library.
-    Plan(PlanError),
 }
 
-impl From<DomainError> for MissionError {
-    fn from(e: DomainError) -> Self {
-        Self::Domain(e)
+impl core::fmt::Display for MissionError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Load(e) => write!(f, "{e}"),
+            Self::MissingFact(name) => write!(
+                f,
+                "the mission has no fact `{name}`, which the robot's sensors decide"
+            ),
+            Self::Domain(e) => write!(f, "{e:?}"),
+        }
     }
 }
 
-impl From<PlanError> for MissionError {
-    fn from(e: PlanError) -> Self {
-        Self::Plan(e)
-    }
+/// The facts the robot's sensors decide.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Percepts {
+    /// Sonar and bumper.
+    pub path_clear: FactId,
+    /// Camera.
+    pub handle_seen: FactId,
+    /// Handle.
+    pub door_unlocked: FactId,
 }
 
-/// Builds the Fetch Tea mission with the scenario's sensor periods.
-pub fn fetch_tea(scenario: &Scenario) -> Result<(FetchTea, Ids), MissionError> {
-    let mut d: Domain<'static, 3, 3> = Domain::new();
-    let path_clear = d.add_fact("path_clear")?;
-    let at_door = d.add_fact("at_door")?;
-    let handle_seen = d.add_fact("handle_seen")?;
-    let door_open = d.add_fact("door_open")?;
-    let in_kitchen = d.add_fact("in_kitchen")?;
-    let fetch = d.add_event("fetch_tea")?;
-    let cyclic = |ms| SensorMode::Cyclic {
-        period: Duration::from_millis(ms),
+/// A mission set up for this robot: the mission, its behaviour bindings and percept facts.
+#[derive(Clone, Debug)]
+pub struct Robot<'a> {
+    /// The mission, with the scenario's sampling periods.
+    pub mission: FetchTea<'a>,
+    /// The behaviour of every sensor and action id.
+    pub bindings: Bindings<NaoSensor, NaoAction, 4, 8>,
+    /// Percept fact ids.
+    pub percepts: Percepts,
+}
+
+/// Loads a mission for this robot and gives its cyclic sensors the scenario's periods.
+pub fn robot(json: &'static [u8], scenario: &Scenario) -> Result<Robot<'static>, MissionError> {
+    let loaded = mission::load(json, &NaoRegistry).map_err(MissionError::Load)?;
+    let mut m = loaded.mission;
+    let fact = |name: &'static str| {
+        m.domain
+            .fact_id(name)
+            .ok_or(MissionError::MissingFact(name))
     };
-    let one = FactSet::single;
-    let sonar = d.add_sensor(SensorAction::new(
-        "sonar",
-        one(path_clear),
-        cyclic(scenario.sonar.period_ms),
-    ))?;
-    let bumper = d.add_sensor(SensorAction::new(
-        "bumper",
-        one(path_clear),
-        cyclic(scenario.bumper_period_ms),
-    ))?;
-    let camera = d.add_sensor(
-        SensorAction::new("camera", one(handle_seen), SensorMode::OneShot).with_pre(one(at_door)),
-    )?;
-    let go_to_door = d.add_action(ActuatorAction::new(
-        "go to door",
-        one(path_clear),
-        one(at_door),
-        FactSet::EMPTY,
-    ))?;
-    let open_door = d.add_action(ActuatorAction::new(
-        "open door",
-        one(at_door).with(handle_seen),
-        one(door_open),
-        FactSet::EMPTY,
-    ))?;
-    let enter_kitchen = d.add_action(ActuatorAction::new(
-        "enter kitchen",
-        one(door_open),
-        one(in_kitchen),
-        one(at_door),
-    ))?;
-    let mut library = PlanLibrary::new();
-    library.add(Plan::new(
-        "GetIn Kitchen",
-        fetch,
-        FactSet::EMPTY,
-        &[go_to_door, open_door, enter_kitchen],
-    )?)?;
-    let mission = Mission {
-        name: "fetch-tea",
-        domain: d,
-        library,
-        task: Task {
-            event: fetch,
-            init: FactSet::EMPTY,
-            goal: one(in_kitchen),
-        },
+    let percepts = Percepts {
+        path_clear: fact("path_clear")?,
+        handle_seen: fact("handle_seen")?,
+        door_unlocked: fact("door_unlocked")?,
     };
-    let ids = Ids {
-        path_clear,
-        at_door,
-        handle_seen,
-        door_open,
-        in_kitchen,
-        sonar,
-        bumper,
-        camera,
-        go_to_door,
-        open_door,
-        enter_kitchen,
-    };
-    Ok((mission, ids))
+    for i in 0..m.domain.sensors().len() {
+        let Some(id) = SensorId::new(i) else { break };
+        let period_ms = match loaded.bindings.sensor(id) {
+            Some(NaoSensor::Sonar) => scenario.sonar.period_ms,
+            Some(NaoSensor::Bumper) => scenario.bumper_period_ms,
+            _ => continue,
+        };
+        m.domain
+            .set_sensor_mode(
+                id,
+                SensorMode::Cyclic {
+                    period: Duration::from_millis(period_ms),
+                },
+            )
+            .map_err(MissionError::Domain)?;
+    }
+    Ok(Robot {
+        mission: m,
+        bindings: loaded.bindings,
+        percepts,
+    })
+}
+
+/// The Fetch Tea mission for `scenario`.
+pub fn fetch_tea(scenario: &Scenario) -> Result<Robot<'static>, MissionError> {
+    robot(FETCH_TEA, scenario)
 }
 
 /// The architecture a run uses.
@@ -194,42 +224,41 @@ pub fn config(scenario: &Scenario, arch: Arch) -> Config {
     }
 }
 
+/// The planner the robot uses when no library plan applies: shortest plans, 128 nodes.
+pub const PLANNER: Planner<128> = Planner::new(Strategy::BreadthFirst);
+
 /// Application-defined trace codes of the robot's behaviours.
 pub mod codes {
     /// The walk stopped for an obstacle and started a side step.
     pub const AVOID: u16 = 1;
     /// The side step ended and the walk resumed.
     pub const RESUME: u16 = 2;
+    /// The door handle did not give: the door is locked.
+    pub const LOCKED: u16 = 3;
 }
 
 /// The robot: the platform implementation of the mission's sensors and behaviours.
 pub struct Nao<'w, 's, L: WorldLog> {
     world: &'w World<'s, L>,
-    ids: Ids,
+    bindings: Bindings<NaoSensor, NaoAction, 4, 8>,
+    percepts: Percepts,
 }
 
 impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
-    /// The robot in `world`.
-    pub fn new(world: &'w World<'s, L>, ids: Ids) -> Self {
-        Self { world, ids }
+    /// The robot in `world`, running `robot`'s behaviours.
+    pub fn new(world: &'w World<'s, L>, robot: &Robot<'_>) -> Self {
+        Self {
+            world,
+            bindings: robot.bindings.clone(),
+            percepts: robot.percepts,
+        }
     }
 
-    fn device(&self, sensor: SensorId) -> Option<Device> {
-        [
-            (self.ids.sonar, Device::Sonar),
-            (self.ids.bumper, Device::Bumper),
-            (self.ids.camera, Device::Camera),
-        ]
-        .into_iter()
-        .find(|(id, _)| *id == sensor)
-        .map(|(_, d)| d)
-    }
-
-    /// "go to door": walk; when a percept says the path is not clear, stop and side-step, then
+    /// Walk to `place`; when a percept says the path is not clear, stop and side-step, then
     /// walk on. A violation counts as new evidence only if a sample showed it at or after the
     /// end of the last side step (the world settles the step before a sample at that instant;
     /// under SMPA the flag stays up, stale, until the next sense phase).
-    async fn go_to_door(&self, io: &ActionIo<'_>) -> Outcome {
+    async fn walk(&self, place: Place, io: &ActionIo<'_>) -> Outcome {
         let world = self.world;
         let mut handled: Option<Instant> = None;
         let mut stepping = false;
@@ -243,9 +272,9 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
                     handled = Some(Instant::now());
                     io.trace(codes::RESUME, 0);
                 }
-                if world.at_door() {
+                if world.at(place) {
                     world.stop();
-                    world.arrived();
+                    world.arrived(place);
                     return Outcome::Success;
                 }
                 let fresh = io
@@ -260,7 +289,7 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
                     continue;
                 }
                 if motion != Motion::Walking {
-                    world.walk();
+                    world.walk_to(place);
                 }
             }
             let wake = world.next_event();
@@ -274,6 +303,29 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
                 version = v;
             }
         }
+    }
+
+    /// "open door": press the handle (an on-demand sample), then push the door if it gives.
+    async fn open_door(&self, io: &ActionIo<'_>) -> Outcome {
+        let handle = (0..4)
+            .filter_map(SensorId::new)
+            .find(|s| self.bindings.sensor(*s) == Some(NaoSensor::Handle));
+        if let Some(handle) = handle {
+            let asked = Instant::now();
+            io.request(handle);
+            let mut version = io.version();
+            // Under SMPA the request is served in the next sense phase.
+            while io.sample(handle).is_none_or(|e| e.at < asked) {
+                version = io.changed(version).await;
+            }
+            if io.violation().is_some() {
+                io.trace(codes::LOCKED, 0);
+                return Outcome::Interrupted;
+            }
+        }
+        Timer::after(OPEN_DOOR).await;
+        self.world.open_door(Place::KitchenDoor);
+        Outcome::Success
     }
 }
 
@@ -291,18 +343,24 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
     }
 
     async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
-        let clear = FactSet::single(self.ids.path_clear);
+        let p = self.percepts;
+        let clear = FactSet::single(p.path_clear);
+        let when = |yes: bool, fact: FactId| {
+            if yes {
+                FactSet::single(fact)
+            } else {
+                FactSet::EMPTY
+            }
+        };
         Ok(match self.device(sensor).ok_or(SensorFault::Device(1))? {
-            Device::Sonar => self.world.sonar().map(|mm| {
-                let threshold_mm = (self.world.scenario().sonar.threshold_um / 1000) as u32;
-                Reading {
-                    value: Value::Mm(mm),
-                    holds: if mm > 0 && mm < threshold_mm {
-                        FactSet::EMPTY
-                    } else {
-                        clear
-                    },
-                }
+            Device::Sonar => self.world.sonar().map(|mm| Reading {
+                value: Value::Mm(mm),
+                // The rule the world registers obstacles by.
+                holds: if self.world.scenario().sonar.registers(i64::from(mm)) {
+                    FactSet::EMPTY
+                } else {
+                    clear
+                },
             }),
             Device::Bumper => {
                 let level = self.world.bumper();
@@ -315,31 +373,50 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
                 let seen = self.world.camera();
                 Some(Reading {
                     value: Value::Bool(seen),
-                    holds: if seen {
-                        FactSet::single(self.ids.handle_seen)
-                    } else {
-                        FactSet::EMPTY
-                    },
+                    holds: when(seen, p.handle_seen),
+                })
+            }
+            Device::Handle => {
+                let gives = self.world.handle();
+                Some(Reading {
+                    value: Value::Bool(gives),
+                    holds: when(gives, p.door_unlocked),
                 })
             }
         })
     }
 }
 
+impl<L: WorldLog> Nao<'_, '_, L> {
+    fn device(&self, sensor: SensorId) -> Option<Device> {
+        Some(match self.bindings.sensor(sensor)? {
+            NaoSensor::Sonar => Device::Sonar,
+            NaoSensor::Bumper => Device::Bumper,
+            NaoSensor::Camera => Device::Camera,
+            NaoSensor::Handle => Device::Handle,
+        })
+    }
+}
+
 impl<L: WorldLog> Actuator for Nao<'_, '_, L> {
     async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
-        if action == self.ids.go_to_door {
-            self.go_to_door(io).await
-        } else if action == self.ids.open_door {
-            Timer::after(OPEN_DOOR).await;
-            self.world.open_door();
-            Outcome::Success
-        } else if action == self.ids.enter_kitchen {
-            Timer::after(ENTER_KITCHEN).await;
-            self.world.enter_kitchen();
-            Outcome::Success
-        } else {
-            Outcome::Failure
+        let Some(behaviour) = self.bindings.action(action) else {
+            return Outcome::Failure;
+        };
+        match behaviour {
+            NaoAction::GoToDoor => self.walk(Place::KitchenDoor, io).await,
+            NaoAction::GoToBackDoor => self.walk(Place::BackDoor, io).await,
+            NaoAction::OpenDoor => self.open_door(io).await,
+            NaoAction::OpenBackDoor => {
+                Timer::after(OPEN_DOOR).await;
+                self.world.open_door(Place::BackDoor);
+                Outcome::Success
+            }
+            NaoAction::EnterKitchen | NaoAction::EnterByBackDoor => {
+                Timer::after(ENTER_KITCHEN).await;
+                self.world.enter_kitchen();
+                Outcome::Success
+            }
         }
     }
 
@@ -354,4 +431,4 @@ impl<L: WorldLog> Actuator for Nao<'_, '_, L> {
 
 /// The runtime type of a Fetch Tea run.
 pub type NaoRuntime<'r, 'w, 's, L, T> =
-    Runtime<'r, 'static, NoopRawMutex, Nao<'w, 's, L>, Nao<'w, 's, L>, T, 3, 3, 2, 4, 4>;
+    Runtime<'r, 'static, NoopRawMutex, Nao<'w, 's, L>, Nao<'w, 's, L>, T, 4, 8, 4, 6, 4>;

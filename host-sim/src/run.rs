@@ -10,7 +10,7 @@ use psmpa_core::{ControlError, Report, Runtime, TraceSink};
 
 use crate::robot::{self, Arch, MissionError, Nao};
 use crate::scenario::Scenario;
-use crate::world::{Fate, Tally, World, WorldLog};
+use crate::world::{ObstacleReport, Tally, World, WorldLog};
 
 /// How the control loop ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -31,7 +31,7 @@ pub struct Summary {
     /// What the world counted.
     pub tally: Tally,
     /// How each interference ended, in scenario order.
-    pub fates: heapless::Vec<Fate, { crate::scenario::MAX_INTERFERENCES }>,
+    pub obstacles: heapless::Vec<ObstacleReport, { crate::scenario::MAX_INTERFERENCES }>,
     /// When the run ended, ms: the time cost.
     pub time_cost_ms: u64,
     /// How the control loop ended.
@@ -50,13 +50,18 @@ pub async fn run<L: WorldLog, T: TraceSink>(
     log: L,
     sink: T,
 ) -> Result<(Summary, L, T), MissionError> {
-    let (mission, ids) = robot::fetch_tea(scenario)?;
+    let robot = robot::fetch_tea(scenario)?;
     let world = World::new(scenario, log);
-    let nao = Nao::new(&world, ids);
-    let runtime: robot::NaoRuntime<'_, '_, '_, L, T> =
-        Runtime::new(&mission, &nao, &nao, sink, robot::config(scenario, arch));
+    let nao = Nao::new(&world, &robot);
+    let runtime: robot::NaoRuntime<'_, '_, '_, L, T> = Runtime::new(
+        &robot.mission,
+        &nao,
+        &nao,
+        sink,
+        robot::config(scenario, arch),
+    );
     let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
-    let ending = match select(runtime.run(), deadline).await {
+    let ending = match select(runtime.run_planning(&robot::PLANNER), deadline).await {
         Either::First(Ok(report)) => Ending::Goal(report),
         Either::First(Err(error)) => Ending::Error(error),
         Either::Second(()) => {
@@ -67,7 +72,7 @@ pub async fn run<L: WorldLog, T: TraceSink>(
     let summary = Summary {
         arch,
         tally: world.tally(),
-        fates: world.fates(),
+        obstacles: world.obstacles(),
         time_cost_ms: Instant::now().as_millis(),
         ending,
         trace_hash: {

@@ -8,10 +8,28 @@ use core::fmt;
 use heapless::{String, Vec};
 use serde::Deserialize;
 
+/// A field that is present must hold a value: `null` is a wrong type, not "use the default".
+fn present<'de, D: serde::Deserializer<'de>, T: Deserialize<'de>>(
+    d: D,
+) -> Result<Option<T>, D::Error> {
+    T::deserialize(d).map(Some)
+}
+
+/// A number that is present must be finite: serde-json-core reads `null` as NaN, which would
+/// slip past every range check.
+fn number<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    let v = f64::deserialize(d)?;
+    if v.is_finite() {
+        Ok(Some(v))
+    } else {
+        Err(serde::de::Error::custom("expected a finite number"))
+    }
+}
+
 /// Most interferences a scenario can hold.
 pub const MAX_INTERFERENCES: usize = 32;
 /// Longest scenario name, in bytes.
-pub const MAX_NAME: usize = 48;
+pub const MAX_NAME: usize = 64;
 
 /// What a person puts in front of the robot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -28,8 +46,10 @@ pub enum Kind {
 #[serde(deny_unknown_fields)]
 pub struct RobotFile {
     /// Walking speed, m/s.
+    #[serde(default, deserialize_with = "number")]
     pub speed_mps: Option<f64>,
     /// Time a side step around a detected obstacle takes, s.
+    #[serde(default, deserialize_with = "number")]
     pub avoid_s: Option<f64>,
 }
 
@@ -38,16 +58,22 @@ pub struct RobotFile {
 #[serde(deny_unknown_fields)]
 pub struct SonarFile {
     /// Sampling period, ms.
+    #[serde(default, deserialize_with = "number")]
     pub period_ms: Option<f64>,
     /// Shortest distance the sonar measures, m.
+    #[serde(default, deserialize_with = "number")]
     pub min_m: Option<f64>,
     /// Longest distance; also the reading when nothing is in range, m.
+    #[serde(default, deserialize_with = "number")]
     pub max_m: Option<f64>,
     /// An obstacle counts as seen below this distance, m.
+    #[serde(default, deserialize_with = "number")]
     pub threshold_m: Option<f64>,
     /// Uniform noise amplitude, m.
+    #[serde(default, deserialize_with = "number")]
     pub noise_m: Option<f64>,
     /// Probability that a sample is lost.
+    #[serde(default, deserialize_with = "number")]
     pub dropout: Option<f64>,
 }
 
@@ -56,6 +82,7 @@ pub struct SonarFile {
 #[serde(deny_unknown_fields)]
 pub struct BumperFile {
     /// Sampling period, ms.
+    #[serde(default, deserialize_with = "number")]
     pub period_ms: Option<f64>,
 }
 
@@ -64,46 +91,74 @@ pub struct BumperFile {
 #[serde(deny_unknown_fields)]
 pub struct SmpaFile {
     /// Sense phase length, ms.
+    #[serde(default, deserialize_with = "number")]
     pub sense_ms: Option<f64>,
     /// Act phase length, ms.
+    #[serde(default, deserialize_with = "number")]
     pub act_ms: Option<f64>,
 }
 
-/// One interference as written in the file.
+/// `doors` as written in the file (an extension of the contract's format, for re-planning).
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DoorsFile {
+    /// Whether the kitchen door is locked.
+    #[serde(default, deserialize_with = "present")]
+    pub locked: Option<bool>,
+    /// How far beyond the kitchen door the back door is, m.
+    #[serde(default, deserialize_with = "number")]
+    pub back_door_m: Option<f64>,
+}
+
+/// One interference as written in the file. Every field has a default (the contract's first
+/// example: a box put down at 3.0 s, 0.45 m ahead, for 4.0 s).
 #[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct InterferenceFile {
-    /// Box or ball.
-    pub kind: Kind,
-    /// When the obstacle is put down, s.
-    pub at_s: f64,
+    /// Box or ball (default box).
+    #[serde(default, deserialize_with = "present")]
+    pub kind: Option<Kind>,
+    /// When the obstacle is put down, s (default 3.0).
+    #[serde(default, deserialize_with = "number")]
+    pub at_s: Option<f64>,
     /// How far in front of the robot, m (default 0.45 for a box, 0.05 for a ball).
+    #[serde(default, deserialize_with = "number")]
     pub ahead_m: Option<f64>,
     /// After how long the person takes it away again, s (default 4.0).
+    #[serde(default, deserialize_with = "number")]
     pub hold_s: Option<f64>,
 }
 
 /// A scenario file as written, before validation.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ScenarioFile<'a> {
-    /// Scenario name.
-    #[serde(borrow)]
-    pub name: &'a str,
+pub struct ScenarioFile {
+    /// Scenario name (escape sequences decoded).
+    pub name: String<MAX_NAME>,
     /// Seed of the noise and dropout generator.
+    #[serde(default, deserialize_with = "present")]
     pub seed: Option<u64>,
     /// Distance to the door, m.
+    #[serde(default, deserialize_with = "number")]
     pub door_m: Option<f64>,
     /// Longest run, s.
+    #[serde(default, deserialize_with = "number")]
     pub max_s: Option<f64>,
     /// The robot.
+    #[serde(default, deserialize_with = "present")]
     pub robot: Option<RobotFile>,
     /// The sonar.
+    #[serde(default, deserialize_with = "present")]
     pub sonar: Option<SonarFile>,
     /// The foot bumper.
+    #[serde(default, deserialize_with = "present")]
     pub bumper: Option<BumperFile>,
     /// The SMPA phases.
+    #[serde(default, deserialize_with = "present")]
     pub smpa: Option<SmpaFile>,
+    /// The doors (extension: a locked kitchen door makes the robot re-plan).
+    #[serde(default, deserialize_with = "present")]
+    pub doors: Option<DoorsFile>,
     /// The interferences, in any order.
     pub interferences: Interferences,
 }
@@ -154,6 +209,24 @@ pub struct Sonar {
     pub dropout: u64,
 }
 
+impl Sonar {
+    /// The threshold in whole millimetres, the sonar's resolution.
+    pub const fn threshold_mm(&self) -> i64 {
+        (self.threshold_um + 500) / 1000
+    }
+
+    /// The one rule both the world and the robot apply: a reading of `mm` counts as an
+    /// obstacle when it is above 0 (0 is a switched-off sonar) and below the threshold.
+    pub const fn registers(&self, mm: i64) -> bool {
+        mm > 0 && mm < self.threshold_mm()
+    }
+}
+
+/// A distance in µm as the sonar reports it: whole millimetres, rounded.
+pub const fn to_mm(um: i64) -> i64 {
+    (um + 500) / 1000
+}
+
 /// One interference, in integer units.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Interference {
@@ -190,6 +263,10 @@ pub struct Scenario {
     pub sense_ms: u64,
     /// SMPA act phase, ms.
     pub act_ms: u64,
+    /// Whether the kitchen door is locked.
+    pub door_locked: bool,
+    /// Distance from the kitchen door on to the back door, µm.
+    pub back_door_um: i64,
     /// The interferences, in file order.
     pub interferences: Vec<Interference, MAX_INTERFERENCES>,
 }
@@ -243,6 +320,8 @@ pub enum Problem {
     Negative(f64),
     /// Must be above zero.
     NotPositive(f64),
+    /// Rounds to zero milliseconds: must be at least 0.001 s.
+    BelowOneMillisecond(f64),
     /// Must be a whole number of milliseconds.
     NotWhole(f64),
     /// Outside `[min, max]`.
@@ -256,8 +335,6 @@ pub enum Problem {
     },
     /// The name is empty.
     Empty,
-    /// The name is longer than [`MAX_NAME`] bytes.
-    TooLong,
     /// `threshold_m` must lie in `(min_m, max_m]`.
     ThresholdOutsideRange,
 }
@@ -267,12 +344,12 @@ impl fmt::Display for Problem {
         match *self {
             Self::Negative(v) => write!(f, "must not be negative, got {v}"),
             Self::NotPositive(v) => write!(f, "must be greater than 0, got {v}"),
+            Self::BelowOneMillisecond(v) => write!(f, "must be at least 0.001 s, got {v}"),
             Self::NotWhole(v) => write!(f, "must be a whole number of milliseconds, got {v}"),
             Self::OutOfRange { value, min, max } => {
                 write!(f, "must lie between {min} and {max}, got {value}")
             }
             Self::Empty => f.write_str("must not be empty"),
-            Self::TooLong => write!(f, "must be at most {MAX_NAME} bytes long"),
             Self::ThresholdOutsideRange => {
                 f.write_str("threshold_m must lie above min_m and at most max_m")
             }
@@ -316,6 +393,9 @@ const MAX_M: f64 = 1_000.0;
 /// A non-negative number of seconds, rounded to ms.
 fn seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
     let ms = value * 1000.0;
+    if !value.is_finite() {
+        return Err(invalid(field, Problem::NotPositive(value)));
+    }
     if value < 0.0 {
         return Err(invalid(field, Problem::Negative(value)));
     }
@@ -334,6 +414,9 @@ fn seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
 
 /// A whole number of milliseconds, at least 1.
 fn millis(field: Field, value: f64) -> Result<u64, ScenarioError> {
+    if !value.is_finite() {
+        return Err(invalid(field, Problem::NotPositive(value)));
+    }
     if value < 0.0 {
         return Err(invalid(field, Problem::Negative(value)));
     }
@@ -359,6 +442,9 @@ fn millis(field: Field, value: f64) -> Result<u64, ScenarioError> {
 
 /// A non-negative distance in metres, rounded to µm.
 fn metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
+    if !value.is_finite() {
+        return Err(invalid(field, Problem::NotPositive(value)));
+    }
     if value < 0.0 {
         return Err(invalid(field, Problem::Negative(value)));
     }
@@ -375,6 +461,22 @@ fn metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
     Ok((value * 1_000_000.0 + 0.5) as i64)
 }
 
+/// A number of seconds that is at least 1 ms.
+fn positive_seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
+    let ms = seconds(field, value)?;
+    if ms == 0 {
+        return Err(invalid(
+            field,
+            if value > 0.0 {
+                Problem::BelowOneMillisecond(value)
+            } else {
+                Problem::NotPositive(value)
+            },
+        ));
+    }
+    Ok(ms)
+}
+
 fn positive_metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
     let um = metres(field, value)?;
     if um == 0 {
@@ -386,8 +488,8 @@ fn positive_metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
 impl Scenario {
     /// The default values of `SIMULATION.md`: 2 m door, 0.1 m/s, 100 ms sonar with a 0.5 m
     /// threshold, 20 ms bumper, SMPA 1 s sense / 3 s act, at most 600 s.
-    pub const DEFAULTS: ScenarioFile<'static> = ScenarioFile {
-        name: "default",
+    pub const DEFAULTS: ScenarioFile = ScenarioFile {
+        name: String::new(),
         seed: Some(42),
         door_m: Some(2.0),
         max_s: Some(600.0),
@@ -410,18 +512,24 @@ impl Scenario {
             sense_ms: Some(1000.0),
             act_ms: Some(3000.0),
         }),
+        doors: Some(DoorsFile {
+            locked: Some(false),
+            back_door_m: Some(3.0),
+        }),
         interferences: Interferences(Vec::new()),
     };
 
     /// Parses and validates a scenario file.
     pub fn parse(json: &[u8]) -> Result<Self, ScenarioError> {
-        let (file, _) =
-            serde_json_core::from_slice::<ScenarioFile<'_>>(json).map_err(ScenarioError::Json)?;
+        // Room to decode the longest string with escape sequences (a name).
+        let mut unescape = [0u8; 4 * MAX_NAME];
+        let (file, _) = serde_json_core::from_slice_escaped::<ScenarioFile>(json, &mut unescape)
+            .map_err(ScenarioError::Json)?;
         Self::validate(&file)
     }
 
     /// Validates a parsed file and converts it to integer units.
-    pub fn validate(file: &ScenarioFile<'_>) -> Result<Self, ScenarioError> {
+    pub fn validate(file: &ScenarioFile) -> Result<Self, ScenarioError> {
         // Every default is `Some` in DEFAULTS; `or` keeps the file's value when present.
         let d = Self::DEFAULTS;
         let dr = d.robot.unwrap_or_default();
@@ -437,18 +545,13 @@ impl Scenario {
         if file.name.is_empty() {
             return Err(invalid(Field::top("name"), Problem::Empty));
         }
-        let name = String::try_from(file.name)
-            .map_err(|_| invalid(Field::top("name"), Problem::TooLong))?;
+        let name = file.name.clone();
         let door_m = pick(file.door_m, d.door_m);
         let door_um = positive_metres(Field::top("door_m"), door_m)?;
-        let max_s = pick(file.max_s, d.max_s);
-        let max_ms = seconds(Field::top("max_s"), max_s)?;
-        if max_ms == 0 {
-            return Err(invalid(Field::top("max_s"), Problem::NotPositive(max_s)));
-        }
+        let max_ms = positive_seconds(Field::top("max_s"), pick(file.max_s, d.max_s))?;
         let speed = pick(r.speed_mps, dr.speed_mps);
         let speed_field = Field::of("robot", "speed_mps");
-        if speed < 0.0 {
+        if !speed.is_finite() || speed < 0.0 {
             return Err(invalid(speed_field, Problem::Negative(speed)));
         }
         if !(0.001..=10.0).contains(&speed) {
@@ -462,7 +565,9 @@ impl Scenario {
             ));
         }
         let speed_um_per_ms = (speed * 1000.0 + 0.5) as i64;
-        let avoid_ms = seconds(Field::of("robot", "avoid_s"), pick(r.avoid_s, dr.avoid_s))?;
+        // A side step takes time: one of no time could repeat forever at one instant.
+        let avoid_ms =
+            positive_seconds(Field::of("robot", "avoid_s"), pick(r.avoid_s, dr.avoid_s))?;
 
         let sonar = Sonar {
             period_ms: millis(
@@ -479,7 +584,7 @@ impl Scenario {
             dropout: {
                 let p = pick(s.dropout, ds.dropout);
                 let field = Field::of("sonar", "dropout");
-                if p < 0.0 {
+                if !p.is_finite() || p < 0.0 {
                     return Err(invalid(field, Problem::Negative(p)));
                 }
                 if p > 1.0 {
@@ -517,6 +622,13 @@ impl Scenario {
         )?;
         let sense_ms = millis(Field::of("smpa", "sense_ms"), pick(p.sense_ms, dp.sense_ms))?;
         let act_ms = millis(Field::of("smpa", "act_ms"), pick(p.act_ms, dp.act_ms))?;
+        let doors = file.doors.unwrap_or_default();
+        let default_doors = d.doors.unwrap_or_default();
+        let door_locked = doors.locked.or(default_doors.locked).unwrap_or(false);
+        let back_door_um = positive_metres(
+            Field::of("doors", "back_door_m"),
+            pick(doors.back_door_m, default_doors.back_door_m),
+        )?;
 
         let mut interferences = Vec::new();
         for (index, i) in file.interferences.0.iter().enumerate() {
@@ -525,13 +637,14 @@ impl Scenario {
                 index: Some(index),
                 name,
             };
-            let default_ahead = match i.kind {
+            let kind = i.kind.unwrap_or(Kind::Box);
+            let default_ahead = match kind {
                 Kind::Box => 0.45,
                 Kind::Ball => 0.05,
             };
             let item = Interference {
-                kind: i.kind,
-                at_ms: seconds(at("at_s"), i.at_s)?,
+                kind,
+                at_ms: seconds(at("at_s"), i.at_s.unwrap_or(3.0))?,
                 ahead_um: metres(at("ahead_m"), i.ahead_m.unwrap_or(default_ahead))?,
                 hold_ms: seconds(at("hold_s"), i.hold_s.unwrap_or(4.0))?,
             };
@@ -549,6 +662,8 @@ impl Scenario {
             bumper_period_ms,
             sense_ms,
             act_ms,
+            door_locked,
+            back_door_um,
             interferences,
         })
     }
@@ -644,5 +759,54 @@ mod tests {
             err(r#"{"name":"x","interferences":["#),
             ScenarioError::Json(_)
         ));
+    }
+
+    #[test]
+    fn null_is_a_wrong_type_and_escapes_are_decoded() {
+        assert!(matches!(
+            err(r#"{"name":"x","door_m":null,"interferences":[]}"#),
+            ScenarioError::Json(_)
+        ));
+        assert!(matches!(
+            err(r#"{"name":"x","sonar":{"noise_m":null},"interferences":[]}"#),
+            ScenarioError::Json(_)
+        ));
+        assert!(matches!(
+            err(r#"{"name":"x","interferences":[{"at_s":null}]}"#),
+            ScenarioError::Json(_)
+        ));
+        assert!(matches!(
+            err(r#"{"name":"x","robot":null,"interferences":[]}"#),
+            ScenarioError::Json(_)
+        ));
+        let s = Scenario::parse(br#"{"name":"caf\u00e9 \"one\"","interferences":[]}"#).unwrap();
+        assert_eq!(s.name.as_str(), "caf\u{e9} \"one\"");
+        let long = std::format!(
+            r#"{{"name":"{}","interferences":[]}}"#,
+            "n".repeat(MAX_NAME + 1)
+        );
+        assert!(matches!(err(&long), ScenarioError::Json(_)));
+    }
+
+    #[test]
+    fn interference_fields_default_to_the_contract_example() {
+        let s = Scenario::parse(br#"{"name":"x","interferences":[{}, {"kind":"ball"}]}"#).unwrap();
+        let [a, b] = [s.interferences[0], s.interferences[1]];
+        assert_eq!(
+            (a.kind, a.at_ms, a.ahead_um, a.hold_ms),
+            (Kind::Box, 3_000, 450_000, 4_000)
+        );
+        assert_eq!((b.kind, b.ahead_um), (Kind::Ball, 50_000));
+    }
+
+    #[test]
+    fn durations_that_cannot_take_time_are_rejected() {
+        let e = err(r#"{"name":"x","robot":{"avoid_s":0},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "robot.avoid_s: must be greater than 0, got 0"
+        );
+        let e = err(r#"{"name":"x","max_s":0.0004,"interferences":[]}"#);
+        assert_eq!(e.to_string(), "max_s: must be at least 0.001 s, got 0.0004");
     }
 }

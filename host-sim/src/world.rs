@@ -35,7 +35,7 @@ use rand_pcg::Pcg32;
 
 use psmpa_core::TraceHash;
 
-use crate::scenario::{Kind, MAX_INTERFERENCES, Scenario};
+use crate::scenario::{Kind, MAX_INTERFERENCES, Scenario, to_mm};
 
 /// The world's devices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -46,6 +46,8 @@ pub enum Device {
     Bumper,
     /// Camera (one-shot, sees the door handle).
     Camera,
+    /// The hand on the door handle (on demand: feels whether the door gives).
+    Handle,
 }
 
 impl Device {
@@ -55,6 +57,7 @@ impl Device {
             Self::Sonar => "sonar",
             Self::Bumper => "bumper",
             Self::Camera => "camera",
+            Self::Handle => "handle",
         }
     }
 
@@ -63,6 +66,25 @@ impl Device {
             Self::Sonar => 0,
             Self::Bumper => 1,
             Self::Camera => 2,
+            Self::Handle => 3,
+        }
+    }
+}
+
+/// Where the robot walks to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Place {
+    /// The kitchen door, `door_m` from the start.
+    KitchenDoor,
+    /// The back door, `back_door_m` further along.
+    BackDoor,
+}
+
+impl Place {
+    fn at_um(self, sc: &Scenario) -> i64 {
+        match self {
+            Self::KitchenDoor => sc.door_um,
+            Self::BackDoor => sc.door_um.saturating_add(sc.back_door_um),
         }
     }
 }
@@ -107,10 +129,12 @@ pub enum WorldEvent {
     AvoidDone(Option<u8>),
     /// SMPA: actuators held (sense phase) or released.
     Held(bool),
-    /// The robot reached the door.
-    AtDoor,
-    /// The door is open.
-    DoorOpened,
+    /// The robot reached a door.
+    Arrived(Place),
+    /// A door is open.
+    DoorOpened(Place),
+    /// The robot pressed the kitchen door's handle: the door is locked.
+    Locked,
     /// The robot entered the kitchen.
     InKitchen,
 }
@@ -145,9 +169,10 @@ impl WorldEvent {
             Self::AvoidStarted(t) => hash.write(&[12, opt(t)]),
             Self::AvoidDone(t) => hash.write(&[13, opt(t)]),
             Self::Held(h) => hash.write(&[14, u8::from(h)]),
-            Self::AtDoor => hash.write(&[15]),
-            Self::DoorOpened => hash.write(&[16]),
+            Self::Arrived(p) => hash.write(&[15, p as u8]),
+            Self::DoorOpened(p) => hash.write(&[16, p as u8]),
             Self::InKitchen => hash.write(&[17]),
+            Self::Locked => hash.write(&[18]),
         }
     }
 }
@@ -229,10 +254,12 @@ pub enum Motion {
 struct State<L> {
     now: u64,
     pos_um: i64,
+    /// Where a walk ends.
+    target_um: i64,
     motion: Motion,
     held: bool,
-    on: [bool; 3],
-    on_ms: [u64; 3],
+    on: [bool; 4],
+    on_ms: [u64; 4],
     obstacles: Vec<Obstacle, MAX_INTERFERENCES>,
     rng: Pcg32,
     at_door_ms: Option<u64>,
@@ -248,11 +275,27 @@ pub struct World<'s, L: WorldLog> {
     state: RefCell<State<L>>,
 }
 
+/// How one interference ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ObstacleReport {
+    /// Detected, collided with, or neither.
+    pub fate: Fate,
+    /// Put down (not due after the robot reached the kitchen door, nor after the run ended).
+    pub placed: bool,
+    /// Certain to register in at least one delivered sample (see the module doc).
+    pub detectable: bool,
+    /// Reaction latency, when detected and reacted to.
+    pub reaction_ms: Option<u64>,
+}
+
 /// What a run of the world amounted to.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Tally {
-    /// Interferences that were put down (those due after the robot reached the door are not).
+    /// Interferences in the scenario.
     pub interferences: u32,
+    /// Of which put down (those due after the robot reached the door, or after the run
+    /// ended, are not).
+    pub placed: u32,
     /// Registered before being touched.
     pub detected: u32,
     /// Touched unregistered.
@@ -263,8 +306,8 @@ pub struct Tally {
     pub max_reaction_ms: Option<u64>,
     /// Whether the robot reached the door.
     pub reached_door: bool,
-    /// On-time of sonar, bumper and camera, ms.
-    pub on_ms: [u64; 3],
+    /// On-time of sonar, bumper, camera and handle, ms.
+    pub on_ms: [u64; 4],
 }
 
 fn div_ceil(a: i64, b: i64) -> u64 {
@@ -287,13 +330,13 @@ impl<L: WorldLog> State<L> {
         self.log.log(now, pos, event);
     }
 
-    /// Where a walking robot must stop: the door or the nearest obstacle in the way.
-    fn limit_um(&self, door_um: i64) -> i64 {
+    /// Where a walking robot must stop: its target or the nearest obstacle in the way.
+    fn limit_um(&self) -> i64 {
         self.obstacles
             .iter()
             .filter(|o| o.blocks() && o.pos_um >= self.pos_um)
             .map(|o| o.pos_um)
-            .fold(door_um, i64::min)
+            .fold(self.target_um, i64::min)
     }
 
     fn touching(&self, o: &Obstacle) -> bool {
@@ -308,8 +351,8 @@ impl<L: WorldLog> State<L> {
         let d = o.pos_um - self.pos_um;
         let sonar = self.on[0]
             && o.kind == Kind::Box
-            && d >= sc.sonar.min_um
-            && d < sc.sonar.threshold_um
+            && (sc.sonar.min_um..=sc.sonar.max_um).contains(&d)
+            && sc.sonar.registers(to_mm(d))
             && self.nearest_box() == Some(d);
         let bumper = self.on[1] && self.touching(o);
         sonar || bumper
@@ -340,7 +383,7 @@ impl<L: WorldLog> State<L> {
             }
         }
         if self.moving() && sc.speed_um_per_ms > 0 {
-            let limit = self.limit_um(sc.door_um);
+            let limit = self.limit_um();
             if limit > self.pos_um {
                 consider(now.saturating_add(div_ceil(limit - self.pos_um, sc.speed_um_per_ms)));
             }
@@ -349,7 +392,9 @@ impl<L: WorldLog> State<L> {
                 for o in &self.obstacles {
                     let d = o.pos_um - self.pos_um;
                     if o.blocks() && o.kind == Kind::Box && o.fate == Fate::Unmet {
-                        for edge in [sc.sonar.threshold_um, sc.sonar.min_um] {
+                        // The reading rounds below the threshold once d < threshold_mm - 0.5 mm.
+                        let below = sc.sonar.threshold_mm() * 1000 - 500;
+                        for edge in [below, sc.sonar.min_um] {
                             if d >= edge {
                                 let dt = (d - edge) / sc.speed_um_per_ms + 1;
                                 consider(now.saturating_add(dt as u64));
@@ -376,7 +421,7 @@ impl<L: WorldLog> State<L> {
         }
         if self.moving() {
             let step = sc.speed_um_per_ms.saturating_mul(dt as i64);
-            let limit = self.limit_um(sc.door_um);
+            let limit = self.limit_um();
             self.pos_um = self.pos_um.saturating_add(step).min(limit).max(self.pos_um);
         }
         if let Motion::Avoiding { left_ms, target } = self.motion {
@@ -432,9 +477,9 @@ impl<L: WorldLog> State<L> {
             let Some(o) = self.obstacles.get(i).copied() else {
                 continue;
             };
-            // A touch with the bumper off and nothing registered is a collision; with the
-            // bumper on, the next bumper sample registers it.
-            if self.touching(&o) && o.fate == Fate::Unmet && !self.on[1] {
+            // Walking into an obstacle nothing registered, with the bumper off, is a
+            // collision; with the bumper on, the next bumper sample registers the touch.
+            if self.touching(&o) && o.fate == Fate::Unmet && !self.on[1] && self.moving() {
                 if let Some(o) = self.obstacles.get_mut(i) {
                     o.fate = Fate::Collided;
                 }
@@ -536,10 +581,11 @@ impl<'s, L: WorldLog> World<'s, L> {
             state: RefCell::new(State {
                 now: 0,
                 pos_um: 0,
+                target_um: scenario.door_um,
                 motion: Motion::Idle,
                 held: false,
-                on: [false; 3],
-                on_ms: [0; 3],
+                on: [false; 4],
+                on_ms: [0; 4],
                 obstacles,
                 rng: Pcg32::seed_from_u64(scenario.seed),
                 at_door_ms: None,
@@ -574,9 +620,9 @@ impl<'s, L: WorldLog> World<'s, L> {
         self.with(|s, _| s.motion)
     }
 
-    /// Whether the robot stands at the door.
-    pub fn at_door(&self) -> bool {
-        self.with(|s, sc| s.pos_um >= sc.door_um)
+    /// Whether the robot stands at `place`.
+    pub fn at(&self, place: Place) -> bool {
+        self.with(|s, sc| s.pos_um == place.at_um(sc))
     }
 
     /// When the world next changes by itself.
@@ -585,9 +631,10 @@ impl<'s, L: WorldLog> World<'s, L> {
             .map(Instant::from_millis)
     }
 
-    /// Starts walking to the door.
-    pub fn walk(&self) {
-        self.with(|s, _| {
+    /// Starts walking to `place`.
+    pub fn walk_to(&self, place: Place) {
+        self.with(|s, sc| {
+            s.target_um = place.at_um(sc);
             s.motion = Motion::Walking;
             s.emit(WorldEvent::Walk);
         });
@@ -615,29 +662,45 @@ impl<'s, L: WorldLog> World<'s, L> {
                 .min_by_key(|(_, o)| o.pos_um)
                 .map(|(i, _)| i as u8);
             s.motion = Motion::Avoiding {
-                left_ms: sc.avoid_ms,
+                // A side step takes time, so that it cannot repeat at one instant.
+                left_ms: sc.avoid_ms.max(1),
                 target,
             };
             s.emit(WorldEvent::AvoidStarted(target));
         });
     }
 
-    /// Notes that the walk to the door is over.
-    pub fn arrived(&self) {
+    /// Notes that a walk to a door is over. Interferences stop once the robot stands at the
+    /// kitchen door: the person interfered with the walk to it.
+    pub fn arrived(&self, place: Place) {
         self.with(|s, _| {
-            if s.at_door_ms.is_none() {
+            if place == Place::KitchenDoor && s.at_door_ms.is_none() {
                 s.at_door_ms = Some(s.now);
-                s.emit(WorldEvent::AtDoor);
             }
+            s.emit(WorldEvent::Arrived(place));
         });
     }
 
-    /// Opens the door.
-    pub fn open_door(&self) {
+    /// Opens a door.
+    pub fn open_door(&self, place: Place) {
         self.with(|s, _| {
             s.door_open = true;
-            s.emit(WorldEvent::DoorOpened);
+            s.emit(WorldEvent::DoorOpened(place));
         });
+    }
+
+    /// Presses the kitchen door's handle: whether the door gives (not locked). Only at the
+    /// kitchen door.
+    pub fn handle(&self) -> bool {
+        self.with(|s, sc| {
+            let at_door = s.pos_um == sc.door_um;
+            let gives = at_door && !sc.door_locked;
+            s.emit(WorldEvent::Sample(Device::Handle, u32::from(gives)));
+            if at_door && sc.door_locked {
+                s.emit(WorldEvent::Locked);
+            }
+            gives
+        })
     }
 
     /// Enters the kitchen.
@@ -683,8 +746,8 @@ impl<'s, L: WorldLog> World<'s, L> {
         });
     }
 
-    /// One sonar sample in mm, or `None` when it is lost to dropout. Registers the box it sees
-    /// below the threshold.
+    /// One sonar sample in mm, or `None` when it is lost to dropout. Registers the boxes it
+    /// sees, by the same rule the robot applies ([`Sonar::registers`](crate::scenario::Sonar::registers)).
     pub fn sonar(&self) -> Option<u32> {
         self.with(|s, sc| {
             let sonar = sc.sonar;
@@ -692,16 +755,12 @@ impl<'s, L: WorldLog> World<'s, L> {
                 s.emit(WorldEvent::SampleLost(Device::Sonar));
                 return None;
             }
-            let nearest = s
-                .obstacles
-                .iter()
-                .enumerate()
-                .filter(|(_, o)| o.blocks() && o.kind == Kind::Box && o.pos_um >= s.pos_um)
-                .min_by_key(|(_, o)| o.pos_um)
-                .map(|(i, o)| (i, o.pos_um - s.pos_um));
-            let seen = nearest.filter(|(_, d)| (sonar.min_um..=sonar.max_um).contains(d));
+            // The nearest box ahead, if it lies within the sonar's range.
+            let seen = s
+                .nearest_box()
+                .filter(|d| (sonar.min_um..=sonar.max_um).contains(d));
             let reading_um = match seen {
-                Some((_, d)) => {
+                Some(d) => {
                     let noise = if sonar.noise_um > 0 {
                         let span = 2 * sonar.noise_um as u64 + 1;
                         (u64::from(s.rng.next_u32()) % span) as i64 - sonar.noise_um
@@ -712,17 +771,32 @@ impl<'s, L: WorldLog> World<'s, L> {
                 }
                 None => sonar.max_um,
             };
-            if let Some((i, d)) = seen {
-                if d >= sonar.min_um + sonar.noise_um && d < sonar.threshold_um - sonar.noise_um {
-                    if let Some(o) = s.obstacles.get_mut(i) {
-                        o.certain_samples = o.certain_samples.saturating_add(1);
+            let mm = to_mm(reading_um);
+            if let Some(d) = seen {
+                // Certain to register whatever the noise: both ends of the noise band do.
+                let band = [d - sonar.noise_um, d + sonar.noise_um]
+                    .map(|x| to_mm(x.clamp(sonar.min_um, sonar.max_um)));
+                let certain = band.iter().all(|&r| sonar.registers(r));
+                let registered = sonar.registers(mm);
+                // Every box at that distance is what the echo came from.
+                for i in 0..s.obstacles.len() {
+                    let here = s.obstacles.get(i).is_some_and(|o| {
+                        o.blocks() && o.kind == Kind::Box && o.pos_um - s.pos_um == d
+                    });
+                    if !here {
+                        continue;
+                    }
+                    if certain {
+                        if let Some(o) = s.obstacles.get_mut(i) {
+                            o.certain_samples = o.certain_samples.saturating_add(1);
+                        }
+                    }
+                    if registered {
+                        s.register(i, Device::Sonar);
                     }
                 }
-                if reading_um < sonar.threshold_um {
-                    s.register(i, Device::Sonar);
-                }
             }
-            let mm = ((reading_um + 500) / 1000) as u32;
+            let mm = u32::try_from(mm).unwrap_or(u32::MAX);
             s.emit(WorldEvent::Sample(Device::Sonar, mm));
             Some(mm)
         })
@@ -749,7 +823,7 @@ impl<'s, L: WorldLog> World<'s, L> {
     /// One camera image: whether the door handle is in view (the robot is at the door).
     pub fn camera(&self) -> bool {
         self.with(|s, sc| {
-            let seen = s.pos_um >= sc.door_um;
+            let seen = s.pos_um == sc.door_um;
             s.emit(WorldEvent::Sample(Device::Camera, u32::from(seen)));
             seen
         })
@@ -765,7 +839,8 @@ impl<'s, L: WorldLog> World<'s, L> {
             };
             let count = |f: &dyn Fn(&Obstacle) -> bool| placed().filter(|o| f(o)).count() as u32;
             Tally {
-                interferences: count(&|_| true),
+                interferences: s.obstacles.len() as u32,
+                placed: count(&|_| true),
                 detected: count(&|o| matches!(o.fate, Fate::Detected(_))),
                 collisions: count(&|o| o.fate == Fate::Collided),
                 detectable: count(&|o| o.certain_samples > 0),
@@ -780,8 +855,18 @@ impl<'s, L: WorldLog> World<'s, L> {
     }
 
     /// How each interference ended, in scenario order.
-    pub fn fates(&self) -> Vec<Fate, MAX_INTERFERENCES> {
-        self.with(|s, _| s.obstacles.iter().map(|o| o.fate).collect())
+    pub fn obstacles(&self) -> Vec<ObstacleReport, MAX_INTERFERENCES> {
+        self.with(|s, _| {
+            s.obstacles
+                .iter()
+                .map(|o| ObstacleReport {
+                    fate: o.fate,
+                    placed: matches!(o.phase, Phase::Present | Phase::Removed | Phase::Avoided),
+                    detectable: o.certain_samples > 0,
+                    reaction_ms: o.reaction_ms,
+                })
+                .collect()
+        })
     }
 
     /// Hash of every world event so far.

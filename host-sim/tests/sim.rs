@@ -62,13 +62,15 @@ fn a_quiet_walk_takes_exactly_what_distance_speed_and_phases_say() {
     // 20 s walk, 1 s to open the door, 1 s to enter.
     assert_eq!(p.time_cost_ms, 22_000);
     assert!(matches!(p.ending, Ending::Goal(_)));
-    // Least commitment: sonar and bumper on exactly while walking, the camera while opening.
-    assert_eq!(p.tally.on_ms, [20_000, 20_000, 1_000]);
+    // Least commitment: sonar and bumper on exactly while walking; camera and handle while
+    // opening the door (the handle sample is taken on request, at once).
+    assert_eq!(p.tally.on_ms, [20_000, 20_000, 1_000, 1_000]);
     let s = run_summary(&sc, Arch::Smpa).unwrap();
     // 20 s of walking needs 7 act phases (the last one 2 s), each after a 1 s sense phase:
-    // 27 s; then "open door" senses 1 s and acts 1 s; "enter kitchen" runs 1 s.
-    assert_eq!(s.time_cost_ms, 30_000);
-    assert_eq!(s.tally.on_ms, [7_000, 7_000, 1_000]);
+    // 27 s. "open door": sense 1 s (camera), act 3 s (the handle request waits: the sensors are
+    // off), sense 1 s (handle sampled), act 1 s (push): 6 s. "enter kitchen" runs 1 s.
+    assert_eq!(s.time_cost_ms, 34_000);
+    assert_eq!(s.tally.on_ms, [7_000, 7_000, 2_000, 2_000]);
 }
 
 #[test]
@@ -76,15 +78,17 @@ fn a_box_inside_the_sonar_blind_zone_is_felt_by_the_bumper_under_psmpa_only() {
     let sc = scenario("blind-box");
     let p = run_summary(&sc, Arch::PSmpa).unwrap();
     assert!(
-        p.fates.iter().all(|f| *f == Fate::Detected(Device::Bumper)),
+        p.obstacles
+            .iter()
+            .all(|o| o.fate == Fate::Detected(Device::Bumper)),
         "{:?}",
-        p.fates
+        p.obstacles
     );
     let s = run_summary(&sc, Arch::Smpa).unwrap();
     assert!(
-        s.fates.iter().all(|f| *f == Fate::Collided),
+        s.obstacles.iter().all(|o| o.fate == Fate::Collided),
         "{:?}",
-        s.fates
+        s.obstacles
     );
 }
 
@@ -94,9 +98,9 @@ fn a_far_box_is_seen_once_it_comes_within_the_threshold() {
     let rec = run_recorded(&sc, Arch::PSmpa).unwrap();
     assert!(
         rec.summary
-            .fates
+            .obstacles
             .iter()
-            .all(|f| *f == Fate::Detected(Device::Sonar))
+            .all(|o| o.fate == Fate::Detected(Device::Sonar))
     );
     // The sonar reports it every sample, but it counts only below the threshold.
     let readings: Vec<u32> = rec
@@ -129,7 +133,8 @@ fn obstacles_that_come_and_go_inside_act_phases_are_missed_by_smpa() {
 /// Reaction latency without noise or dropout is below one sampling period of the sensor that
 /// detected the obstacle.
 #[test]
-fn noise_free_reactions_take_less_than_one_sensor_period() {
+fn noise_free_reactions_take_less_than_one_period_of_the_detecting_sensor() {
+    let mut checked = 0;
     for name in [
         "sonar-6",
         "sonar-7",
@@ -142,14 +147,21 @@ fn noise_free_reactions_take_less_than_one_sensor_period() {
         "mixed",
     ] {
         let sc = scenario(name);
-        let period = sc.sonar.period_ms.max(sc.bumper_period_ms);
         for arch in Arch::ALL {
-            let t = run_summary(&sc, arch).unwrap().tally;
-            if let Some(r) = t.max_reaction_ms {
-                assert!(r < period, "{name} {arch:?}: {r} ms");
+            for o in run_summary(&sc, arch).unwrap().obstacles {
+                let (Fate::Detected(device), Some(r)) = (o.fate, o.reaction_ms) else {
+                    continue;
+                };
+                let period = match device {
+                    Device::Sonar => sc.sonar.period_ms,
+                    _ => sc.bumper_period_ms,
+                };
+                assert!(r < period, "{name} {arch:?} {device:?}: {r} ms");
+                checked += 1;
             }
         }
     }
+    assert!(checked > 40);
 }
 
 /// Sonar and bumper both perceive `path_clear`: a bumper sample saying "free" must not clear a
@@ -211,19 +223,20 @@ fn trace_hashes_are_pinned() {
     assert_eq!(got.as_slice(), pins, "new hashes:\n{}", report.join("\n"));
 }
 
-const PINS: [(&str, u64, u64); 12] = [
-    ("sonar-6", 0x447d9c0c11e0c346, 0x33f861fefc906104),
-    ("sonar-7", 0x8a41be738c335bb3, 0x48e83dbd143b111c),
-    ("sonar-8", 0xec275f30d9403d9c, 0x2f1b77b71b82787f),
-    ("bumper-4", 0x4ec6e7001db3fde4, 0xa2521db1a2f5082e),
-    ("bumper-5", 0x03b0b5a3625437c8, 0xf9da2d580b784328),
-    ("bumper-6", 0x804562c9122ac8ee, 0x4a4c0840cd8673c4),
-    ("quiet", 0x1d90bb81e4347192, 0xef7d8c5fb6a48335),
-    ("blind-box", 0xa1b4170f48a1f33b, 0x5bb3f2e38c41e3cb),
-    ("far-box", 0xa826e5d036d92df9, 0x6152ecd7dfc4a7fe),
-    ("transient", 0x5be63e20368da769, 0xc1f3d1e6979d38f5),
-    ("noisy-sonar", 0xabd3b3939f3aea65, 0x37e58a17f3afba76),
-    ("mixed", 0xa3d588766550fcb4, 0x1e5558a153104b97),
+const PINS: [(&str, u64, u64); 13] = [
+    ("sonar-6", 0xb0ddef01d8c25214, 0xdd540fd836957b39),
+    ("sonar-7", 0x9f676d516f8319b3, 0x90d3292f5f341c72),
+    ("sonar-8", 0xdb9f2dcb255fa40a, 0xb96b354b182e6138),
+    ("bumper-4", 0x3edb0ef43ece770c, 0x88b3e0dd273688e3),
+    ("bumper-5", 0xccfe2c2abee442a0, 0x01868c71766d1316),
+    ("bumper-6", 0x3716d6cd3161204d, 0xef386f7a17e1aca6),
+    ("quiet", 0x2b6f443f43a3d9b1, 0xad7d394011a805b6),
+    ("blind-box", 0x5a5fd63a87c35dfe, 0xc13eba0ce78a0899),
+    ("far-box", 0x61c7ffc7292b90fa, 0x7059694187fe4e51),
+    ("transient", 0xcb01099d217d47bf, 0x7236ae7e462dd25e),
+    ("noisy-sonar", 0x4b4980071df710c6, 0x0d74c84c1ad3fe0b),
+    ("locked-door", 0x6bb16381538a1d62, 0x9b55392e4f7132d3),
+    ("mixed", 0x05353d56e803afaf, 0xd66518f0df79d463),
 ];
 
 #[test]
@@ -277,4 +290,195 @@ fn the_sweep_psmpa_misses_nothing_detectable_and_smpa_misses_much() {
         .install(|| sweep::sweep(7, 300, &Arch::ALL, false).unwrap());
     assert_eq!(again.psmpa, stats.psmpa);
     assert_eq!(again.smpa, stats.smpa);
+}
+
+/// The kitchen door is locked: "open door" presses the handle (an on-demand sample), the
+/// precondition `door_unlocked` fails, the plan fails, and the control loop plans again from
+/// the current beliefs: the back door. Run with `--nocapture` to read the trace.
+#[test]
+fn a_locked_kitchen_door_makes_the_robot_replan_through_the_back_door() {
+    use psmpa_core::{Failure, PlanId};
+    let sc = scenario("locked-door");
+    let robot = psmpa_sim::robot::fetch_tea(&sc).unwrap();
+    let d = &robot.mission.domain;
+    let open_door = d.action_id("open door").unwrap();
+    for arch in Arch::ALL {
+        let rec = run_recorded(&sc, arch).unwrap();
+        let Ending::Goal(report) = rec.summary.ending else {
+            panic!("{arch:?}: {:?}", rec.summary.ending)
+        };
+        assert_eq!((report.plans_started, report.plans_failed), (2, 1));
+        println!("{arch:?}:");
+        for (t, e) in &rec.trace.0 {
+            if !matches!(
+                e,
+                TraceEvent::Sample { .. }
+                    | TraceEvent::SensorOn { .. }
+                    | TraceEvent::SensorOff { .. }
+            ) {
+                println!(
+                    "  {:>8.3} s  {}",
+                    t.as_millis() as f64 / 1000.0,
+                    psmpa_sim::cli::outputs::describe(&robot.mission, e)
+                );
+            }
+        }
+        let plan_events: Vec<TraceEvent> = rec
+            .trace
+            .0
+            .iter()
+            .map(|(_, e)| *e)
+            .filter(|e| {
+                matches!(
+                    e,
+                    TraceEvent::PlanSelected { .. }
+                        | TraceEvent::PlanFailed { .. }
+                        | TraceEvent::PlanGenerated { .. }
+                        | TraceEvent::PlanSucceeded { .. }
+                )
+            })
+            .collect();
+        let first = PlanId::new(0).unwrap();
+        assert!(matches!(plan_events[0], TraceEvent::PlanSelected { plan, .. } if plan == first));
+        assert_eq!(
+            plan_events[1],
+            TraceEvent::PlanFailed {
+                plan: first,
+                reason: Failure::ActionInterrupted { action: open_door }
+            }
+        );
+        assert!(matches!(
+            plan_events[2],
+            TraceEvent::PlanGenerated { length: 3, .. }
+        ));
+        assert!(matches!(
+            plan_events[3],
+            TraceEvent::PlanSelected {
+                plan: PlanId::GENERATED,
+                ..
+            }
+        ));
+        assert_eq!(
+            plan_events[4],
+            TraceEvent::PlanSucceeded {
+                plan: PlanId::GENERATED
+            }
+        );
+        let states: Vec<&str> = rec
+            .trace
+            .0
+            .iter()
+            .filter_map(|(_, e)| match e {
+                TraceEvent::StateEntered { action, .. } => Some(d.action(*action).unwrap().name),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            states,
+            [
+                "go to door",
+                "open door",
+                "go to back door",
+                "open back door",
+                "enter by back door"
+            ]
+        );
+    }
+}
+
+#[test]
+fn the_simulator_runs_the_mission_from_its_json_file() {
+    let robot = psmpa_sim::robot::fetch_tea(&scenario("sonar-6")).unwrap();
+    assert_eq!(robot.mission.name, "fetch-tea");
+    let d = &robot.mission.domain;
+    assert_eq!(d.actions().len(), 6);
+    assert_eq!(d.sensors().len(), 4);
+    for (i, a) in d.actions().iter().enumerate() {
+        assert!(
+            robot
+                .bindings
+                .action(psmpa_core::ActionId::new(i).unwrap())
+                .is_some(),
+            "{}",
+            a.name
+        );
+    }
+    // The scenario's sampling periods replace the file's.
+    let mut sc = scenario("sonar-6");
+    sc.sonar.period_ms = 37;
+    let robot = psmpa_sim::robot::fetch_tea(&sc).unwrap();
+    let sonar = robot.mission.domain.sensor_id("sonar").unwrap();
+    assert_eq!(
+        robot.mission.domain.sensor(sonar).unwrap().mode,
+        psmpa_core::SensorMode::Cyclic {
+            period: embassy_time::Duration::from_millis(37)
+        }
+    );
+}
+
+fn inline(json: &str) -> Scenario {
+    Scenario::parse(json.as_bytes()).unwrap()
+}
+
+/// Review findings, kept as regressions.
+#[test]
+fn a_box_just_below_the_threshold_is_seen_alike_by_world_and_robot() {
+    // 0.4996 m rounds to a 500 mm reading: not below the 500 mm threshold, for both.
+    let sc = inline(
+        r#"{"name":"r","interferences":[{"kind":"box","at_s":4.5,"ahead_m":0.4996,"hold_s":20}]}"#,
+    );
+    for arch in Arch::ALL {
+        let s = run_summary(&sc, arch).unwrap();
+        let o = s.obstacles[0];
+        // Never registered by a reading the robot takes for clear: either both say "box"
+        // (detected) or the robot walks into it with the bumper off (a collision), never a
+        // detection the robot did not act on.
+        assert!(
+            matches!(o.fate, Fate::Detected(_) | Fate::Collided),
+            "{arch:?}: {o:?}"
+        );
+        if let Fate::Detected(Device::Sonar) = o.fate {
+            assert!(
+                o.reaction_ms.is_some(),
+                "{arch:?}: detected but never reacted to"
+            );
+        }
+    }
+}
+
+#[test]
+fn boxes_put_down_together_are_all_registered_by_one_echo() {
+    let items: Vec<String> = (0..8)
+        .map(|_| r#"{"kind":"box","at_s":3}"#.to_owned())
+        .collect();
+    let sc = inline(&format!(
+        r#"{{"name":"pile","interferences":[{}]}}"#,
+        items.join(",")
+    ));
+    let s = run_summary(&sc, Arch::PSmpa).unwrap();
+    assert_eq!(s.tally.detected, 8);
+    assert!(s.tally.max_reaction_ms.unwrap() < sc.sonar.period_ms);
+}
+
+#[test]
+fn a_ball_lying_at_the_door_is_no_collision_for_psmpa() {
+    let sc = inline(
+        r#"{"name":"ball-at-door","door_m":2.0,"interferences":[{"kind":"ball","at_s":17,"ahead_m":0.3,"hold_s":30}]}"#,
+    );
+    let s = run_summary(&sc, Arch::PSmpa).unwrap();
+    assert_eq!(s.tally.collisions, 0);
+}
+
+#[test]
+fn interferences_count_the_scenario_list_even_when_not_all_are_put_down() {
+    // The second is due long after the robot reached the door.
+    let sc = inline(
+        r#"{"name":"late","interferences":[{"kind":"box","at_s":3},{"kind":"box","at_s":500}]}"#,
+    );
+    let s = run_summary(&sc, Arch::PSmpa).unwrap();
+    assert_eq!(
+        (s.tally.interferences, s.tally.placed, s.tally.detected),
+        (2, 1, 1)
+    );
+    assert!(!s.obstacles[1].placed);
 }

@@ -490,3 +490,21 @@ fn sensor_stores_keep_the_latest_sample_with_its_time() {
     assert!(model.goal_holds());
     assert_eq!(model.percept(ids.range), Some(last));
 }
+
+/// SMPA phases of no time are taken as one tick each: the run ends instead of alternating
+/// forever at one instant.
+#[test]
+fn zero_length_smpa_phases_do_not_livelock() {
+    let zero = Policy::Smpa {
+        sense: Duration::from_ticks(0),
+        act: Duration::from_ticks(0),
+    };
+    let r = run(zero, &[]);
+    r.result.unwrap();
+    // 10 s of walking in 1-tick act phases alternating with 1-tick sense phases.
+    assert!(
+        r.elapsed >= Duration::from_secs(20) && r.elapsed < Duration::from_secs(22),
+        "{:?}",
+        r.elapsed
+    );
+}

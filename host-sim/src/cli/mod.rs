@@ -1,6 +1,7 @@
 //! The pieces of the `psmpa-sim` command line: reports, Table I, sweeps and the trace, plot and
 //! timeline outputs.
 
+pub mod check;
 pub mod outputs;
 pub mod report;
 pub mod sweep;

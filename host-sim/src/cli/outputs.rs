@@ -19,11 +19,11 @@ fn secs(ms: u64) -> f64 {
 }
 
 /// A core trace event in words, with the mission's names.
-pub fn describe(mission: &FetchTea, e: &TraceEvent) -> String {
+pub fn describe(mission: &FetchTea<'_>, e: &TraceEvent) -> String {
     let d = &mission.domain;
     let action = |a: psmpa_core::ActionId| d.action(a).map_or("?", |a| a.name);
     let sensor = |s: psmpa_core::SensorId| d.sensor(s).map_or("?", |s| s.name);
-    let plan = |p: psmpa_core::PlanId| mission.library.get(p).map_or("?", |p| p.name);
+    let plan = |p: psmpa_core::PlanId| mission.library.get(p).map_or("generated plan", |p| p.name);
     match *e {
         TraceEvent::ModelEstablished { beliefs } => format!("model established {beliefs:?}"),
         TraceEvent::PlanSelected { plan: p, .. } => format!("plan selected: {}", plan(p)),
@@ -61,6 +61,14 @@ pub fn describe(mission: &FetchTea, e: &TraceEvent) -> String {
             "walk: stop and side-step".to_owned()
         }
         TraceEvent::User { code, .. } if code == codes::RESUME => "walk: resume".to_owned(),
+        TraceEvent::User { code, .. } if code == codes::LOCKED => {
+            "open door: the handle does not give, the door is locked".to_owned()
+        }
+        TraceEvent::PlanGenerated { length, expanded } => {
+            format!(
+                "no library plan applies: the planner generated {length} actions ({expanded} nodes expanded)"
+            )
+        }
         other => format!("{other:?}"),
     }
 }
@@ -88,7 +96,7 @@ fn world_text(e: &WorldEvent) -> String {
 /// The trace as CSV: `time_s,sonar_m,bumper,position_m,source,event`. World events and runtime
 /// events are merged in time order; readings show 0 while a sensor is off, as on the robot.
 pub fn trace_csv(scenario: &Scenario, rec: &Recorded) -> String {
-    let mission = crate::robot::fetch_tea(scenario).map(|(m, _)| m).ok();
+    let mission = crate::robot::fetch_tea(scenario).map(|r| r.mission).ok();
     let mut out = String::from("time_s,sonar_m,bumper,position_m,source,event\n");
     let (mut sonar, mut bumper, mut pos) = (0.0f64, 0u32, 0i64);
     let mut world = rec.world.0.iter().peekable();
@@ -286,7 +294,7 @@ pub fn plot(path: &Path, scenario: &Scenario, runs: &[Recorded]) -> Result<(), S
 /// The run as a Chrome trace-event JSON document: one track per behaviour (plan, action
 /// state, each sensor, SMPA phase, the robot's legs) plus instants for obstacles.
 pub fn timeline(scenario: &Scenario, rec: &Recorded) -> serde_json::Value {
-    let mission = crate::robot::fetch_tea(scenario).map(|(m, _)| m).ok();
+    let mission = crate::robot::fetch_tea(scenario).map(|r| r.mission).ok();
     let name = |e: &TraceEvent| {
         mission
             .as_ref()
@@ -399,7 +407,7 @@ pub fn timeline(scenario: &Scenario, rec: &Recorded) -> serde_json::Value {
         let next = match e {
             WorldEvent::Walk => Some("walking"),
             WorldEvent::AvoidStarted(_) => Some("side step"),
-            WorldEvent::Stop | WorldEvent::AvoidDone(_) | WorldEvent::AtDoor => None,
+            WorldEvent::Stop | WorldEvent::AvoidDone(_) | WorldEvent::Arrived(_) => None,
             WorldEvent::Appeared { .. }
             | WorldEvent::Removed(_)
             | WorldEvent::Detected(..)
@@ -415,6 +423,19 @@ pub fn timeline(scenario: &Scenario, rec: &Recorded) -> serde_json::Value {
             }
         }
         legs = next.map(|l| (l, t));
+    }
+    // Close what was still running when the run ended (at max_s, or on an error).
+    let end = rec.summary.time_cost_ms;
+    let mut still_open: Vec<((usize, String), u64)> = open.into_iter().collect();
+    still_open.sort();
+    for ((tid, label), start) in still_open {
+        events.push(json!({"ph": "X", "pid": 1, "tid": tid, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
+    }
+    if let Some((label, start)) = phase {
+        events.push(json!({"ph": "X", "pid": 1, "tid": 6, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
+    }
+    if let Some((label, start)) = legs {
+        events.push(json!({"ph": "X", "pid": 1, "tid": 7, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
     }
     json!({"traceEvents": events, "displayTimeUnit": "ms"})
 }

@@ -142,15 +142,22 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
     );
     let _ = writeln!(out, "  outcome          {}", ending(&summary.ending));
     let _ = writeln!(out, "  trace hash       {}", j.trace_hash);
-    for (i, (item, fate)) in scenario
+    for (i, (item, report)) in scenario
         .interferences
         .iter()
-        .zip(summary.fates.iter())
+        .zip(summary.obstacles.iter())
         .enumerate()
     {
-        let what = match fate {
-            Fate::Unmet => "not met (taken away first, or due after the door)".to_owned(),
-            Fate::Detected(d) => format!("detected by the {}", device(*d)),
+        let what = match report.fate {
+            _ if !report.placed => "not put down (due after the robot reached the door)".to_owned(),
+            Fate::Unmet => "not met (taken away before the robot came near)".to_owned(),
+            Fate::Detected(d) => format!(
+                "detected by the {}{}",
+                device(d),
+                report
+                    .reaction_ms
+                    .map_or(String::new(), |r| format!(", reaction {r} ms"))
+            ),
             Fate::Collided => "collision".to_owned(),
         };
         let _ = writeln!(

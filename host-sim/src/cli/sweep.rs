@@ -76,6 +76,8 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
         bumper_period_ms: [10, 20, 50][uniform(r, 0, 2) as usize],
         sense_ms: uniform(r, 5, 20) * 100,
         act_ms: uniform(r, 10, 40) * 100,
+        door_locked: false,
+        back_door_um: 3_000_000,
         interferences,
     }
 }
@@ -91,7 +93,7 @@ pub struct ArchStats {
     pub detected: u64,
     /// Physically detectable (certain to register in a P-SMPA sample; see `world`).
     pub detectable: u64,
-    /// Detectable ones this architecture did not detect.
+    /// Detectable obstacles this architecture did not detect, counted obstacle by obstacle.
     pub missed_detectable: u64,
     /// Collisions.
     pub collisions: u64,
@@ -108,12 +110,20 @@ pub struct ArchStats {
 }
 
 impl ArchStats {
-    fn add(&mut self, s: &Summary, detectable: u32, missed: u32) {
+    fn add(&mut self, s: &Summary, detectable: &[bool]) {
+        let detectable_count = detectable.iter().filter(|d| **d).count() as u32;
+        // Obstacle by obstacle: detectable (in the P-SMPA run) but not detected here.
+        let missed = s
+            .obstacles
+            .iter()
+            .zip(detectable)
+            .filter(|(o, d)| **d && !matches!(o.fate, crate::world::Fate::Detected(_)))
+            .count() as u32;
         let t = &s.tally;
         self.scenarios += 1;
         self.interferences += u64::from(t.interferences);
         self.detected += u64::from(t.detected);
-        self.detectable += u64::from(detectable);
+        self.detectable += u64::from(detectable_count);
         self.missed_detectable += u64::from(missed);
         self.collisions += u64::from(t.collisions);
         self.reached_door += u64::from(t.reached_door);
@@ -189,20 +199,21 @@ pub fn sweep(
     let mut ratios = Vec::new();
     for result in results {
         let summaries = result?;
-        // Detectability is a property of the scenario, measured on the P-SMPA run.
-        let detectable = summaries
+        // Detectability is a property of each obstacle of the scenario, measured on the
+        // P-SMPA run (whose sensors run for the whole walk).
+        let detectable: Vec<bool> = summaries
             .iter()
             .find(|s| s.arch == Arch::PSmpa)
-            .map(|s| s.tally.detectable);
+            .map(|s| s.obstacles.iter().map(|o| o.detectable).collect())
+            .unwrap_or_default();
         let mut times = [None, None];
         for s in &summaries {
-            let missed = detectable.map_or(0, |d| d.saturating_sub(s.tally.detected));
             let slot = match s.arch {
                 Arch::PSmpa => &mut stats.psmpa,
                 Arch::Smpa => &mut stats.smpa,
             };
             slot.get_or_insert_with(ArchStats::default)
-                .add(s, detectable.unwrap_or(0), missed);
+                .add(s, &detectable);
             times[usize::from(s.arch == Arch::Smpa)] = Some(s.time_cost_ms);
         }
         if let [Some(p), Some(s)] = times {

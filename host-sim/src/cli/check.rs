@@ -1,0 +1,206 @@
+//! `psmpa-sim check`: validates a mission file for this robot and shows what Algorithm 2 makes
+//! of it: each plan's FSM with the sensors that run beside every action state.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use psmpa_core::mission::{self, AnyBehaviour, LoadError, Problem, Registry};
+use psmpa_core::planner::{Planner, Strategy};
+use psmpa_core::{Fsm, Mission, PlanId, SensorSet, Target};
+
+use crate::robot::NaoRegistry;
+
+/// Capacities used when the mission is checked without this robot: the largest the core
+/// supports in a fact set, a sensor set and a plan set.
+type Large<'a> = Mission<'a, 32, 64, 32, 16>;
+
+/// A mission that failed to load, as one line naming the file and what is wrong.
+pub fn error_line(file: &Path, bytes: &[u8], e: &LoadError<'_>) -> String {
+    let mut line = format!("{}: {e}", file.display());
+    if matches!(e.problem, Problem::Json(_)) {
+        // serde-json-core reports no position: ask serde_json where the text breaks.
+        if let Err(json) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
+            let _ = write!(line, " (line {}, column {})", json.line(), json.column());
+        }
+    }
+    line
+}
+
+fn names<const NS: usize, const NA: usize>(
+    d: &psmpa_core::Domain<'_, NS, NA>,
+    set: psmpa_core::FactSet,
+) -> String {
+    let v: Vec<&str> = set.iter().filter_map(|f| d.fact_name(f)).collect();
+    format!("{{{}}}", v.join(", "))
+}
+
+fn sensors<'a, const NS: usize, const NA: usize>(
+    d: &psmpa_core::Domain<'a, NS, NA>,
+    set: SensorSet,
+) -> Vec<&'a str> {
+    set.iter()
+        .filter_map(|s| d.sensor(s).map(|s| s.name))
+        .collect()
+}
+
+fn target(t: Target) -> String {
+    match t {
+        Target::State(i) => format!("δ{i}"),
+        Target::Done => "done".to_owned(),
+        Target::Failed => "failed".to_owned(),
+    }
+}
+
+/// The report of a valid mission, and its Graphviz graph.
+pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usize>(
+    m: &Mission<'_, NS, NA, NP, L>,
+) -> (String, String) {
+    let d = &m.domain;
+    let mut out = String::new();
+    let mut dot = String::from(
+        "digraph mission {\n  rankdir=LR;\n  node [shape=box, fontname=\"sans-serif\"];\n",
+    );
+    let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+    let _ = writeln!(
+        out,
+        "mission {}: {}, {}, {}, {}, {}",
+        m.name,
+        count(d.fact_names().len(), "fact"),
+        count(d.event_names().len(), "event"),
+        count(d.sensors().len(), "sensor"),
+        count(d.actions().len(), "action"),
+        count(m.library.plans().len(), "plan")
+    );
+    let _ = writeln!(
+        out,
+        "task: {} from {} to {}",
+        d.event_name(m.task.event).unwrap_or("?"),
+        names(d, m.task.init),
+        names(d, m.task.goal)
+    );
+    for (i, plan) in m.library.plans().iter().enumerate() {
+        let Some(id) = PlanId::new(i) else { break };
+        let _ = writeln!(
+            out,
+            "\nplan \"{}\" (trigger {}, context {})",
+            plan.name,
+            d.event_name(plan.trigger).unwrap_or("?"),
+            names(d, plan.context)
+        );
+        let _ = writeln!(
+            dot,
+            "  subgraph cluster_{i} {{\n    label=\"{}\";",
+            plan.name.replace('"', "'")
+        );
+        let _ = writeln!(
+            dot,
+            "    p{i}_done [label=\"done\", shape=doublecircle];\n    p{i}_failed [label=\"failed\", shape=circle, color=red];"
+        );
+        match Fsm::<L>::compile(id, plan, d) {
+            Ok(fsm) => {
+                for (k, state) in fsm.states().iter().enumerate() {
+                    let action = d.action(state.action).map_or("?", |a| a.name);
+                    let par = sensors(d, state.sensors);
+                    let kind = if state.is_parallel() {
+                        format!("δ'{k} = {action} ∥ {{{}}}", par.join(", "))
+                    } else {
+                        format!("δ{k}  = {action}")
+                    };
+                    let _ = writeln!(
+                        out,
+                        "  {kind:<48} success → {}, failure → {}",
+                        target(state.on_success),
+                        target(state.on_failure)
+                    );
+                    let label = if par.is_empty() {
+                        action.to_owned()
+                    } else {
+                        format!("{action}\\n∥ {}", par.join(", "))
+                    };
+                    let peripheries = if state.is_parallel() { 2 } else { 1 };
+                    let _ = writeln!(
+                        dot,
+                        "    p{i}_s{k} [label=\"{}\", peripheries={peripheries}];",
+                        label.replace('"', "'")
+                    );
+                    for (t, style) in [
+                        (state.on_success, "color=black"),
+                        (state.on_failure, "color=red, style=dashed"),
+                    ] {
+                        let to = match t {
+                            Target::State(j) => format!("p{i}_s{j}"),
+                            Target::Done => format!("p{i}_done"),
+                            Target::Failed => format!("p{i}_failed"),
+                        };
+                        let _ = writeln!(dot, "    p{i}_s{k} -> {to} [{style}];");
+                    }
+                }
+            }
+            Err(e) => {
+                let _ = writeln!(out, "  does not compile: {e:?}");
+            }
+        }
+        let _ = writeln!(dot, "  }}");
+    }
+    dot.push_str("}\n");
+    let actions = d.actions();
+    match Planner::<4096>::new(Strategy::BreadthFirst).plan::<16>(
+        actions,
+        m.task
+            .init
+            .union(d.perception_of(SensorSet::from_bits(u32::MAX))),
+        m.task.goal,
+    ) {
+        Ok(found) => {
+            let steps: Vec<&str> = found
+                .body
+                .iter()
+                .filter_map(|a| d.action(*a).map(|a| a.name))
+                .collect();
+            let _ = writeln!(
+                out,
+                "\nplanner, from the initial state with every percept holding: {} ({} actions, {} nodes expanded)",
+                steps.join(" → "),
+                steps.len(),
+                found.expanded
+            );
+        }
+        Err(e) => {
+            let _ = writeln!(
+                out,
+                "\nplanner, from the initial state with every percept holding: no plan ({e:?})"
+            );
+        }
+    }
+    (out, dot)
+}
+
+/// Loads `bytes` for this robot (or for any platform) and describes it.
+pub fn check(
+    file: &Path,
+    bytes: &'static [u8],
+    any_platform: bool,
+) -> Result<(String, String), String> {
+    fn with<R: Registry>(
+        file: &Path,
+        bytes: &'static [u8],
+        registry: &R,
+        large: bool,
+    ) -> Result<(String, String), String> {
+        if large {
+            let loaded: mission::Loaded<'_, R::Sensor, R::Action, 32, 64, 32, 16> =
+                mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
+            let m: Large<'_> = loaded.mission;
+            Ok(describe(&m))
+        } else {
+            let loaded: mission::Loaded<'_, R::Sensor, R::Action, 4, 8, 4, 6> =
+                mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
+            Ok(describe(&loaded.mission))
+        }
+    }
+    if any_platform {
+        with(file, bytes, &AnyBehaviour, true)
+    } else {
+        with(file, bytes, &NaoRegistry, false)
+    }
+}

@@ -1,0 +1,175 @@
+//! `psmpa-sim check`: valid missions are described, bad ones rejected with status 2 and one
+//! clear line.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_psmpa-sim"))
+}
+
+fn fetch_tea() -> String {
+    std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/fetch-tea.json"),
+    )
+    .unwrap()
+}
+
+fn file(name: &str, content: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("psmpa-check-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, content).unwrap();
+    path
+}
+
+#[test]
+fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
+    let dot = std::env::temp_dir().join(format!("psmpa-check-{}.dot", std::process::id()));
+    let out = bin()
+        .arg("check")
+        .arg(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/fetch-tea.json"))
+        .arg("--dot")
+        .arg(&dot)
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("δ'0 = go to door ∥ {sonar, bumper}"),
+        "{text}"
+    );
+    assert!(
+        text.contains("δ'1 = open door ∥ {camera, handle}"),
+        "{text}"
+    );
+    assert!(text.contains("δ2  = enter kitchen"), "{text}");
+    assert!(
+        text.contains("go to door → open door → enter kitchen (3 actions"),
+        "{text}"
+    );
+    let graph = std::fs::read_to_string(dot).unwrap();
+    assert!(graph.starts_with("digraph mission {"));
+    assert!(graph.contains("p0_s0 [label=\"go to door\\n∥ sonar, bumper\", peripheries=2];"));
+    assert!(graph.contains("p0_s2 -> p0_done"));
+}
+
+/// Each broken copy of fetch-tea.json: what to replace, and what the one line must say.
+#[test]
+fn bad_missions_are_rejected_with_one_clear_line() {
+    let good = fetch_tea();
+    let cases: [(&str, &str, &[&str]); 8] = [
+        (
+            r#""pre": ["door_open", "at_door"]"#,
+            r#""pre": ["door_opened", "at_door"]"#,
+            &["actions[2].pre", "unknown fact `door_opened`"],
+        ),
+        (
+            r#""events": ["fetch_tea"]"#,
+            r#""events": ["fetch_tea", "fetch_tea"]"#,
+            &["events[1]", "duplicate name `fetch_tea`"],
+        ),
+        (
+            r#""body": ["go to door", "open door", "enter kitchen"]"#,
+            r#""body": ["go to door", "open the door", "enter kitchen"]"#,
+            &["plans[0].body", "unknown action `open the door`"],
+        ),
+        (
+            r#""body": ["go to door", "open door", "enter kitchen"]"#,
+            r#""body": []"#,
+            &["plans[0].body", "empty"],
+        ),
+        (
+            r#"{ "name": "go to door","#,
+            r#"{ "name": "go to door", "speed": 2,"#,
+            &["actions[0]", "unknown field `speed`"],
+        ),
+        (
+            r#""name": "camera""#,
+            r#""name": "lidar""#,
+            &["sensors[2].name", "no behaviour called `lidar`"],
+        ),
+        (
+            r#""mode": "one-shot""#,
+            r#""mode": "once""#,
+            &["sensors[2].mode", "unknown sensor mode `once`"],
+        ),
+        (r#""task": {"#, r#""task": ["#, &["malformed JSON", "line"]),
+    ];
+    for (i, (from, to, expected)) in cases.iter().enumerate() {
+        assert!(good.contains(from), "case {i}: `{from}` not in the mission");
+        let path = file(&format!("bad-{i}.json"), &good.replacen(from, to, 1));
+        let out = bin().arg("check").arg(&path).output().unwrap();
+        let stderr = String::from_utf8(out.stderr).unwrap();
+        assert_eq!(out.status.code(), Some(2), "case {i}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "case {i}: {stderr}");
+        assert!(
+            stderr.contains(&path.display().to_string()),
+            "case {i}: {stderr}"
+        );
+        for fragment in *expected {
+            assert!(
+                stderr.contains(fragment),
+                "case {i}: expected `{fragment}` in {stderr}"
+            );
+        }
+        assert!(!stderr.contains("panicked"));
+    }
+}
+
+#[test]
+fn an_unreachable_goal_and_an_unbound_behaviour_name_their_cause() {
+    let good = fetch_tea();
+    // Nothing adds back_door_open any more: entering by the back door can never happen, and with
+    // the goal requiring it the mission is rejected.
+    let unreachable = good
+        .replacen(r#""add": ["back_door_open"]"#, r#""add": []"#, 1)
+        .replacen(
+            r#""goal": ["in_kitchen"]"#,
+            r#""goal": ["back_door_open"]"#,
+            1,
+        );
+    let out = bin()
+        .arg("check")
+        .arg(file("unreachable.json", &unreachable))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr.contains("task.goal: goal fact `back_door_open` can never hold"),
+        "{stderr}"
+    );
+
+    // Behaviours the robot does not have: fine for the logic alone, rejected for the robot.
+    let many = good.replacen(
+        r#"    { "name": "go to door","#,
+        r#"    { "name": "a1" }, { "name": "a2" }, { "name": "a3" },
+    { "name": "go to door","#,
+        1,
+    );
+    let out = bin()
+        .args(["check", "--any-platform"])
+        .arg(file("many-any.json", &many))
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = bin()
+        .arg("check")
+        .arg(file("many.json", &many))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr.contains("no behaviour called `a1`"), "{stderr}");
+}
