@@ -17,6 +17,9 @@ pub const MAX_FACTS: usize = 64;
 pub struct FactId(u8);
 
 impl FactId {
+    /// The first fact of a domain.
+    pub const FIRST: Self = Self(0);
+
     /// The fact with index `index`, or `None` when `index >= MAX_FACTS`.
     pub const fn new(index: usize) -> Option<Self> {
         if index < MAX_FACTS {

@@ -26,7 +26,8 @@
 //! ```
 //!
 //! Sensor `mode` is `cyclic` (with `period_ms`), `one-shot` or `on-demand`; `timeout_ms`
-//! (default 500) bounds a sample. `pre`, `add`, `del`, `context` and `init` default to `[]`.
+//! (default 500) bounds a sample. Both are whole numbers of milliseconds: the loader parses
+//! integers only, so a microcontroller needs no float parser. `pre`, `add`, `del`, `context` and `init` default to `[]`.
 
 use core::fmt;
 
@@ -87,6 +88,22 @@ impl Registry for AnyBehaviour {
 pub struct Bindings<S, A, const NS: usize, const NA: usize> {
     sensors: Vec<S, NS>,
     actions: Vec<A, NA>,
+}
+
+impl<S, A, const NS: usize, const NA: usize> Default for Bindings<S, A, NS, NA> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<S, A, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
+    /// Nothing bound; usable in a `static`.
+    pub const fn new() -> Self {
+        Self {
+            sensors: Vec::new(),
+            actions: Vec::new(),
+        }
+    }
 }
 
 impl<S: Copy, A: Copy, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
@@ -219,7 +236,7 @@ impl fmt::Display for LoadError<'_> {
             Problem::Capacity { what, limit } => {
                 write!(f, "more than {limit} {what} (the runtime's capacity)")
             }
-            Problem::Period => f.write_str("a cyclic sensor needs `period_ms` of at least 1"),
+            Problem::Period => f.write_str("needs a whole number of milliseconds of at least 1"),
             Problem::UnreachableGoal(n) => {
                 write!(
                     f,
@@ -277,8 +294,9 @@ struct Builder<
     const NP: usize,
     const L: usize,
 > {
-    mission: Mission<'a, NS, NA, NP, L>,
-    bindings: Bindings<R::Sensor, R::Action, NS, NA>,
+    /// Written in place: the mission is never copied while it is built.
+    mission: &'r mut Mission<'a, NS, NA, NP, L>,
+    bindings: &'r mut Bindings<R::Sensor, R::Action, NS, NA>,
     registry: &'r R,
     at: Location,
     error: Option<LoadError<'a>>,
@@ -596,17 +614,17 @@ struct Fields<'a> {
     name: Option<&'a str>,
     mode: Option<&'a str>,
     event: Option<&'a str>,
-    number: [Option<f64>; 2],
+    number: [Option<u64>; 2],
     sets: [Option<FactSet>; 3],
     body: bool,
 }
 
-/// A whole number of milliseconds, at least 1.
-fn millis<'a>(v: f64) -> Result<Duration, Problem<'a>> {
-    if !(1.0..=4_294_967_295.0).contains(&v) || v != (v as u64) as f64 {
+/// A number of milliseconds, at least 1. Integers only: no float parser on a microcontroller.
+fn millis<'a>(v: u64) -> Result<Duration, Problem<'a>> {
+    if v == 0 || v > u64::from(u32::MAX) {
         return Err(Problem::Period);
     }
-    Ok(Duration::from_millis(v as u64))
+    Ok(Duration::from_millis(v))
 }
 
 impl<'a> Visitor<'a> for Entry<'_, 'a> {
@@ -825,21 +843,32 @@ pub fn load<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, 
     json: &'a [u8],
     registry: &R,
 ) -> Result<Loaded<'a, R::Sensor, R::Action, NS, NA, NP, L>, LoadError<'a>> {
+    let mut out = Loaded::empty();
+    load_into(json, registry, &mut out.mission, &mut out.bindings)?;
+    Ok(out)
+}
+
+/// [`load`] into `mission` and `bindings`, in place: the mission is never copied, which keeps
+/// a microcontroller's stack small. Both are emptied first; after an error they hold what was
+/// read so far.
+pub fn load_into<
+    'a,
+    R: Registry,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+>(
+    json: &'a [u8],
+    registry: &R,
+    mission: &mut Mission<'a, NS, NA, NP, L>,
+    bindings: &mut Bindings<R::Sensor, R::Action, NS, NA>,
+) -> Result<(), LoadError<'a>> {
+    *mission = Mission::empty();
+    *bindings = Bindings::new();
     let mut b: Builder<'a, '_, R, NS, NA, NP, L> = Builder {
-        mission: Mission {
-            name: "",
-            domain: Domain::new(),
-            library: PlanLibrary::new(),
-            task: Task {
-                event: EventId::FIRST,
-                init: FactSet::EMPTY,
-                goal: FactSet::EMPTY,
-            },
-        },
-        bindings: Bindings {
-            sensors: Vec::new(),
-            actions: Vec::new(),
-        },
+        mission,
+        bindings,
         registry,
         at: Location::default(),
         error: None,
@@ -873,7 +902,7 @@ pub fn load<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, 
             problem: Problem::MissingField(key),
         });
     }
-    let m = &b.mission;
+    let m = &*b.mission;
     let possible = reachable(&m.domain, m.task.init);
     if let Some(fact) = m.task.goal.difference(possible).iter().next() {
         return Err(LoadError {
@@ -885,10 +914,7 @@ pub fn load<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, 
             problem: Problem::UnreachableGoal(m.domain.fact_name(fact).unwrap_or("?")),
         });
     }
-    Ok(Loaded {
-        mission: b.mission,
-        bindings: b.bindings,
-    })
+    Ok(())
 }
 
 /// A loaded mission and the platform behaviours bound to its sensors and actions.
@@ -898,6 +924,34 @@ pub struct Loaded<'a, S, A, const NS: usize, const NA: usize, const NP: usize, c
     pub mission: Mission<'a, NS, NA, NP, L>,
     /// The behaviour of every sensor and action id.
     pub bindings: Bindings<S, A, NS, NA>,
+}
+
+impl<S, A, const NS: usize, const NA: usize, const NP: usize, const L: usize>
+    Loaded<'_, S, A, NS, NA, NP, L>
+{
+    /// Nothing loaded yet; usable in a `static`.
+    pub const fn empty() -> Self {
+        Self {
+            mission: Mission::empty(),
+            bindings: Bindings::new(),
+        }
+    }
+}
+
+impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> Mission<'_, NS, NA, NP, L> {
+    /// A mission with nothing in it; usable in a `static`.
+    pub const fn empty() -> Self {
+        Self {
+            name: "",
+            domain: Domain::new(),
+            library: PlanLibrary::new(),
+            task: Task {
+                event: EventId::FIRST,
+                init: FactSet::EMPTY,
+                goal: FactSet::EMPTY,
+            },
+        }
+    }
 }
 
 #[cfg(test)]
@@ -1021,7 +1075,7 @@ mod tests {
             ),
             (
                 with(r#""period_ms": 50"#, r#""period_ms": 0"#),
-                "sensors[0].period_ms: a cyclic sensor needs `period_ms` of at least 1",
+                "sensors[0].period_ms: needs a whole number of milliseconds of at least 1",
             ),
             (
                 with(r#""name": "x""#, r#""name": "teleport""#),

@@ -143,39 +143,72 @@ pub struct Robot<'a> {
 
 /// Loads a mission for this robot and gives its cyclic sensors the scenario's periods.
 pub fn robot(json: &'static [u8], scenario: &Scenario) -> Result<Robot<'static>, MissionError> {
-    let loaded = mission::load(json, &NaoRegistry).map_err(MissionError::Load)?;
-    let mut m = loaded.mission;
-    let fact = |name: &'static str| {
-        m.domain
-            .fact_id(name)
-            .ok_or(MissionError::MissingFact(name))
-    };
-    let percepts = Percepts {
-        path_clear: fact("path_clear")?,
-        handle_seen: fact("handle_seen")?,
-        door_unlocked: fact("door_unlocked")?,
-    };
-    for i in 0..m.domain.sensors().len() {
-        let Some(id) = SensorId::new(i) else { break };
-        let period_ms = match loaded.bindings.sensor(id) {
-            Some(NaoSensor::Sonar) => scenario.sonar.period_ms,
-            Some(NaoSensor::Bumper) => scenario.bumper_period_ms,
-            _ => continue,
-        };
-        m.domain
-            .set_sensor_mode(
-                id,
-                SensorMode::Cyclic {
-                    period: Duration::from_millis(period_ms),
-                },
-            )
-            .map_err(MissionError::Domain)?;
+    let mut robot = Robot::load(json)?;
+    robot.apply(scenario)?;
+    Ok(robot)
+}
+
+impl Robot<'static> {
+    /// Loads a mission for this robot, binding its behaviours.
+    pub fn load(json: &'static [u8]) -> Result<Self, MissionError> {
+        let mut robot = Self::empty();
+        robot.load_into(json)?;
+        Ok(robot)
     }
-    Ok(Robot {
-        mission: m,
-        bindings: loaded.bindings,
-        percepts,
-    })
+
+    /// [`load`](Self::load) in place: no copy of the mission on the stack (firmware).
+    pub fn load_into(&mut self, json: &'static [u8]) -> Result<(), MissionError> {
+        mission::load_into(json, &NaoRegistry, &mut self.mission, &mut self.bindings)
+            .map_err(MissionError::Load)?;
+        let d = &self.mission.domain;
+        let fact = |name: &'static str| d.fact_id(name).ok_or(MissionError::MissingFact(name));
+        self.percepts = Percepts {
+            path_clear: fact("path_clear")?,
+            handle_seen: fact("handle_seen")?,
+            door_unlocked: fact("door_unlocked")?,
+        };
+        Ok(())
+    }
+}
+
+impl Robot<'_> {
+    /// No mission yet; usable in a `static`.
+    pub const fn empty() -> Self {
+        let none = FactId::FIRST;
+        Self {
+            mission: Mission::empty(),
+            bindings: Bindings::new(),
+            percepts: Percepts {
+                path_clear: none,
+                handle_seen: none,
+                door_unlocked: none,
+            },
+        }
+    }
+}
+
+impl Robot<'_> {
+    /// Gives the sonar and the bumper the scenario's sampling periods.
+    pub fn apply(&mut self, scenario: &Scenario) -> Result<(), MissionError> {
+        for i in 0..self.mission.domain.sensors().len() {
+            let Some(id) = SensorId::new(i) else { break };
+            let period_ms = match self.bindings.sensor(id) {
+                Some(NaoSensor::Sonar) => scenario.sonar.period_ms,
+                Some(NaoSensor::Bumper) => scenario.bumper_period_ms,
+                _ => continue,
+            };
+            self.mission
+                .domain
+                .set_sensor_mode(
+                    id,
+                    SensorMode::Cyclic {
+                        period: Duration::from_millis(period_ms),
+                    },
+                )
+                .map_err(MissionError::Domain)?;
+        }
+        Ok(())
+    }
 }
 
 /// The Fetch Tea mission for `scenario`.
@@ -224,8 +257,9 @@ pub fn config(scenario: &Scenario, arch: Arch) -> Config {
     }
 }
 
-/// The planner the robot uses when no library plan applies: shortest plans, 128 nodes.
-pub const PLANNER: Planner<128> = Planner::new(Strategy::BreadthFirst);
+/// The planner the robot uses when no library plan applies: shortest plans, 64 nodes (the
+/// Fetch Tea domain needs a handful; 64 keep the search's stack at about 2 KiB).
+pub const PLANNER: Planner<64> = Planner::new(Strategy::BreadthFirst);
 
 /// Application-defined trace codes of the robot's behaviours.
 pub mod codes {
@@ -430,5 +464,5 @@ impl<L: WorldLog> Actuator for Nao<'_, '_, L> {
 }
 
 /// The runtime type of a Fetch Tea run.
-pub type NaoRuntime<'r, 'w, 's, L, T> =
-    Runtime<'r, 'static, NoopRawMutex, Nao<'w, 's, L>, Nao<'w, 's, L>, T, 4, 8, 4, 6, 4>;
+pub type NaoRuntime<'r, 'a, 'w, 's, L, T> =
+    Runtime<'r, 'a, NoopRawMutex, Nao<'w, 's, L>, Nao<'w, 's, L>, T, 4, 8, 4, 6, 4>;

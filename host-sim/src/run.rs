@@ -8,7 +8,7 @@ use embassy_futures::select::{Either, select};
 use embassy_time::{Instant, Timer};
 use psmpa_core::{ControlError, Report, Runtime, TraceSink};
 
-use crate::robot::{self, Arch, MissionError, Nao};
+use crate::robot::{self, Arch, MissionError, Nao, Robot};
 use crate::scenario::Scenario;
 use crate::world::{ObstacleReport, Tally, World, WorldLog};
 
@@ -51,9 +51,21 @@ pub async fn run<L: WorldLog, T: TraceSink>(
     sink: T,
 ) -> Result<(Summary, L, T), MissionError> {
     let robot = robot::fetch_tea(scenario)?;
+    Ok(run_robot(&robot, scenario, arch, log, sink).await)
+}
+
+/// Runs a mission already loaded for `scenario` ([`robot::fetch_tea`]). The run starts at the
+/// current instant; the host and the firmware start it at tick 0 so their traces agree.
+pub async fn run_robot<L: WorldLog, T: TraceSink>(
+    robot: &Robot<'_>,
+    scenario: &Scenario,
+    arch: Arch,
+    log: L,
+    sink: T,
+) -> (Summary, L, T) {
     let world = World::new(scenario, log);
-    let nao = Nao::new(&world, &robot);
-    let runtime: robot::NaoRuntime<'_, '_, '_, L, T> = Runtime::new(
+    let nao = Nao::new(&world, robot);
+    let runtime: robot::NaoRuntime<'_, '_, '_, '_, L, T> = Runtime::new(
         &robot.mission,
         &nao,
         &nao,
@@ -83,5 +95,5 @@ pub async fn run<L: WorldLog, T: TraceSink>(
         trace_events: runtime.trace_events(),
     };
     let sink = runtime.into_sink();
-    Ok((summary, world.into_log(), sink))
+    (summary, world.into_log(), sink)
 }

@@ -6,7 +6,7 @@
 use core::fmt;
 
 use heapless::{String, Vec};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 /// A field that is present must hold a value: `null` is a wrong type, not "use the default".
 fn present<'de, D: serde::Deserializer<'de>, T: Deserialize<'de>>(
@@ -32,7 +32,7 @@ pub const MAX_INTERFERENCES: usize = 32;
 pub const MAX_NAME: usize = 64;
 
 /// What a person puts in front of the robot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Kind {
     /// A tall box (0.8 m): the sonar sees it.
@@ -193,19 +193,26 @@ impl<'de> Deserialize<'de> for Interferences {
 }
 
 /// The sonar, in integer units.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
 pub struct Sonar {
     /// Sampling period, ms.
+    #[serde(rename = "p")]
     pub period_ms: u64,
     /// Shortest measured distance, µm.
+    #[serde(rename = "lo")]
     pub min_um: i64,
     /// Longest measured distance, µm.
+    #[serde(rename = "hi")]
     pub max_um: i64,
     /// Detection threshold, µm.
+    #[serde(rename = "t")]
     pub threshold_um: i64,
     /// Noise amplitude, µm.
+    #[serde(rename = "e")]
     pub noise_um: i64,
     /// A sample is lost when a uniform `u32` draw is below this (probability × 2³²).
+    #[serde(rename = "x")]
     pub dropout: u64,
 }
 
@@ -228,47 +235,171 @@ pub const fn to_mm(um: i64) -> i64 {
 }
 
 /// One interference, in integer units.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
 pub struct Interference {
     /// Box or ball.
+    #[serde(rename = "k")]
     pub kind: Kind,
     /// When it is put down, ms.
-    pub at_ms: u64,
-    /// How far in front of the robot, µm.
-    pub ahead_um: i64,
+    #[serde(rename = "t")]
+    pub at_ms: u32,
+    /// How far in front of the robot, µm (at most 1 km).
+    #[serde(rename = "a")]
+    pub ahead_um: i32,
     /// How long until a person takes it away, ms.
-    pub hold_ms: u64,
+    #[serde(rename = "h")]
+    pub hold_ms: u32,
 }
 
 /// A validated scenario in integer units.
-#[derive(Clone, Debug, PartialEq, Eq)]
+///
+/// Its serde form is the *canonical* scenario: compact JSON with integer fields only and
+/// short keys, made at build time from a scenario file ([`to_canonical`](Self::to_canonical))
+/// so that a microcontroller reads it with serde-json-core at boot, with no float parser and
+/// little flash ([`from_canonical`](Self::from_canonical)). It is not a file format for people:
+/// write scenario files.
+#[derive(Clone, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
 pub struct Scenario {
     /// Name.
+    #[serde(rename = "n")]
     pub name: String<MAX_NAME>,
     /// PRNG seed.
+    #[serde(rename = "s")]
     pub seed: u64,
     /// Distance to the door, µm.
+    #[serde(rename = "d")]
     pub door_um: i64,
     /// Longest run, ms.
+    #[serde(rename = "m")]
     pub max_ms: u64,
     /// Walking speed, µm per ms (= mm/s).
+    #[serde(rename = "v")]
     pub speed_um_per_ms: i64,
     /// Side step duration, ms.
+    #[serde(rename = "a")]
     pub avoid_ms: u64,
     /// The sonar.
+    #[serde(rename = "o")]
     pub sonar: Sonar,
     /// Bumper period, ms.
+    #[serde(rename = "b")]
     pub bumper_period_ms: u64,
     /// SMPA sense phase, ms.
+    #[serde(rename = "ss")]
     pub sense_ms: u64,
     /// SMPA act phase, ms.
+    #[serde(rename = "sa")]
     pub act_ms: u64,
     /// Whether the kitchen door is locked.
+    #[serde(rename = "l")]
     pub door_locked: bool,
     /// Distance from the kitchen door on to the back door, µm.
+    #[serde(rename = "bd")]
     pub back_door_um: i64,
     /// The interferences, in file order.
+    #[serde(rename = "i")]
     pub interferences: Vec<Interference, MAX_INTERFERENCES>,
+}
+
+/// The canonical keys of [`Scenario`], in declaration order (see its `serde` renames).
+const CANONICAL_KEYS: [&str; 13] = [
+    "n", "s", "d", "m", "v", "a", "o", "b", "ss", "sa", "l", "bd", "i",
+];
+
+/// Fills a scenario from its canonical form, field by field.
+struct Fill<'s>(&'s mut Scenario);
+
+impl<'de> serde::de::DeserializeSeed<'de> for Fill<'_> {
+    type Value = ();
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_map(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for Fill<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a canonical scenario")
+    }
+    fn visit_map<M: serde::de::MapAccess<'de>>(self, mut map: M) -> Result<(), M::Error> {
+        let s = self.0;
+        s.interferences.clear();
+        let mut seen = 0u16;
+        while let Some(key) = map.next_key::<&str>()? {
+            let Some(index) = CANONICAL_KEYS.iter().position(|k| *k == key) else {
+                return Err(serde::de::Error::unknown_field(key, &CANONICAL_KEYS));
+            };
+            seen |= 1 << index;
+            match key {
+                "n" => s.name = map.next_value()?,
+                "s" => s.seed = map.next_value()?,
+                "d" => s.door_um = map.next_value()?,
+                "m" => s.max_ms = map.next_value()?,
+                "v" => s.speed_um_per_ms = map.next_value()?,
+                "a" => s.avoid_ms = map.next_value()?,
+                "o" => s.sonar = map.next_value()?,
+                "b" => s.bumper_period_ms = map.next_value()?,
+                "ss" => s.sense_ms = map.next_value()?,
+                "sa" => s.act_ms = map.next_value()?,
+                "l" => s.door_locked = map.next_value()?,
+                "bd" => s.back_door_um = map.next_value()?,
+                _ => map.next_value_seed(Items(&mut s.interferences))?,
+            }
+        }
+        if seen != (1 << CANONICAL_KEYS.len()) - 1 {
+            return Err(serde::de::Error::custom(
+                "a canonical scenario has every field",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Pushes interferences one by one into the scenario's list.
+struct Items<'v>(&'v mut Vec<Interference, MAX_INTERFERENCES>);
+
+impl<'de> serde::de::DeserializeSeed<'de> for Items<'_> {
+    type Value = ();
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_seq(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for Items<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "at most {MAX_INTERFERENCES} interferences")
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        while let Some(item) = seq.next_element::<Interference>()? {
+            self.0
+                .push(item)
+                .map_err(|_| serde::de::Error::invalid_length(MAX_INTERFERENCES + 1, &self))?;
+        }
+        Ok(())
+    }
+}
+
+/// Why a scenario has no canonical form.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CanonicalError {
+    /// The name holds a quote, backslash or control character.
+    NameNeedsEscapes,
+    /// The output buffer is too small.
+    TooLong,
+}
+
+impl fmt::Display for CanonicalError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::NameNeedsEscapes => {
+                "the name must not contain quotes, backslashes or control characters"
+            }
+            Self::TooLong => "the canonical form does not fit the buffer",
+        })
+    }
 }
 
 /// Where in a scenario file something is wrong.
@@ -519,6 +650,61 @@ impl Scenario {
         interferences: Interferences(Vec::new()),
     };
 
+    /// Writes the canonical form into `out` and returns its length. The name must be plain
+    /// (no quote, backslash or control character): the canonical reader does not unescape,
+    /// which keeps the unescaping code, and the panic paths it brings, out of firmware.
+    pub fn to_canonical(&self, out: &mut [u8]) -> Result<usize, CanonicalError> {
+        if self
+            .name
+            .chars()
+            .any(|c| c == '"' || c == '\\' || c.is_control())
+        {
+            return Err(CanonicalError::NameNeedsEscapes);
+        }
+        serde_json_core::to_slice(self, out).map_err(|_| CanonicalError::TooLong)
+    }
+
+    /// An empty scenario, to be filled by [`read_canonical`](Self::read_canonical).
+    pub const fn empty() -> Self {
+        Self {
+            name: String::new(),
+            seed: 0,
+            door_um: 0,
+            max_ms: 0,
+            speed_um_per_ms: 0,
+            avoid_ms: 0,
+            sonar: Sonar {
+                period_ms: 0,
+                min_um: 0,
+                max_um: 0,
+                threshold_um: 0,
+                noise_um: 0,
+                dropout: 0,
+            },
+            bumper_period_ms: 0,
+            sense_ms: 0,
+            act_ms: 0,
+            door_locked: false,
+            back_door_um: 0,
+            interferences: Vec::new(),
+        }
+    }
+
+    /// Reads the canonical form into `self`, in place: no copy of the scenario is ever on the
+    /// stack (a microcontroller reads it at boot with a few hundred bytes of stack).
+    pub fn read_canonical(&mut self, json: &[u8]) -> Result<(), serde_json_core::de::Error> {
+        let mut de = serde_json_core::de::Deserializer::new(json, None);
+        serde::de::DeserializeSeed::deserialize(Fill(self), &mut de)?;
+        de.end().map(|_| ())
+    }
+
+    /// Reads the canonical form (integers only, already validated when it was made).
+    pub fn from_canonical(json: &[u8]) -> Result<Self, serde_json_core::de::Error> {
+        let mut s = Self::empty();
+        s.read_canonical(json)?;
+        Ok(s)
+    }
+
     /// Parses and validates a scenario file.
     pub fn parse(json: &[u8]) -> Result<Self, ScenarioError> {
         // Room to decode the longest string with escape sequences (a name).
@@ -642,11 +828,12 @@ impl Scenario {
                 Kind::Box => 0.45,
                 Kind::Ball => 0.05,
             };
+            // Within range of 32 bits: times are at most a day, distances at most 1 km.
             let item = Interference {
                 kind,
-                at_ms: seconds(at("at_s"), i.at_s.unwrap_or(3.0))?,
-                ahead_um: metres(at("ahead_m"), i.ahead_m.unwrap_or(default_ahead))?,
-                hold_ms: seconds(at("hold_s"), i.hold_s.unwrap_or(4.0))?,
+                at_ms: seconds(at("at_s"), i.at_s.unwrap_or(3.0))? as u32,
+                ahead_um: metres(at("ahead_m"), i.ahead_m.unwrap_or(default_ahead))? as i32,
+                hold_ms: seconds(at("hold_s"), i.hold_s.unwrap_or(4.0))? as u32,
             };
             // Cannot overflow: the file held at most MAX_INTERFERENCES.
             let _ = interferences.push(item);
@@ -808,5 +995,34 @@ mod tests {
         );
         let e = err(r#"{"name":"x","max_s":0.0004,"interferences":[]}"#);
         assert_eq!(e.to_string(), "max_s: must be at least 0.001 s, got 0.0004");
+    }
+
+    #[test]
+    fn every_shipped_scenario_survives_the_canonical_form_unchanged() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut n = 0;
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            let s = Scenario::parse(&std::fs::read(&path).unwrap()).unwrap();
+            let mut buf = [0u8; 4096];
+            let len = s.to_canonical(&mut buf).unwrap();
+            let text = core::str::from_utf8(&buf[..len]).unwrap();
+            assert!(!text.contains('.'), "integers only: {text}");
+            assert_eq!(
+                Scenario::from_canonical(&buf[..len]).unwrap(),
+                s,
+                "{}",
+                path.display()
+            );
+            n += 1;
+        }
+        assert!(n >= 12);
+        // Names that need escapes have no canonical form (it is read without unescaping).
+        let s = Scenario::parse(br#"{"name":"a \"b\"","interferences":[]}"#).unwrap();
+        let mut buf = [0u8; 4096];
+        assert_eq!(
+            s.to_canonical(&mut buf),
+            Err(CanonicalError::NameNeedsEscapes)
+        );
     }
 }

@@ -211,16 +211,17 @@ pub enum Fate {
 #[derive(Clone, Copy, Debug)]
 struct Obstacle {
     kind: Kind,
-    at_ms: u64,
-    ahead_um: i64,
-    hold_ms: u64,
+    // 32 bits: a scenario spans at most a day, and puts obstacles at most 1 km ahead.
+    at_ms: u32,
+    ahead_um: i32,
+    hold_ms: u32,
     pos_um: i64,
     phase: Phase,
     fate: Fate,
     /// Start of the current interval in which an active sensor could register it.
-    registrable_since: Option<u64>,
-    reaction_ms: Option<u64>,
-    certain_samples: u32,
+    registrable_since: Option<u32>,
+    reaction_ms: Option<u32>,
+    certain_samples: u16,
     /// Some active sensor has registered it (also after a collision): a side step can aim at it.
     sensed: bool,
 }
@@ -231,7 +232,7 @@ impl Obstacle {
     }
 
     fn removal_ms(&self) -> u64 {
-        self.at_ms.saturating_add(self.hold_ms)
+        u64::from(self.at_ms) + u64::from(self.hold_ms)
     }
 }
 
@@ -310,6 +311,11 @@ pub struct Tally {
     pub on_ms: [u64; 4],
 }
 
+/// A time in ms as 32 bits (a scenario spans at most a day).
+fn ms32(t: u64) -> u32 {
+    u32::try_from(t).unwrap_or(u32::MAX)
+}
+
 fn div_ceil(a: i64, b: i64) -> u64 {
     if b <= 0 || a <= 0 {
         return 0;
@@ -377,7 +383,7 @@ impl<L: WorldLog> State<L> {
         };
         for o in &self.obstacles {
             match o.phase {
-                Phase::Pending => consider(o.at_ms),
+                Phase::Pending => consider(u64::from(o.at_ms)),
                 Phase::Present => consider(o.removal_ms()),
                 _ => {}
             }
@@ -455,12 +461,12 @@ impl<L: WorldLog> State<L> {
             if o.phase == Phase::Present && o.removal_ms() <= now {
                 self.set_phase(i, Phase::Removed);
                 self.emit(WorldEvent::Removed(index));
-            } else if o.phase == Phase::Pending && o.at_ms <= now {
+            } else if o.phase == Phase::Pending && u64::from(o.at_ms) <= now {
                 if self.at_door_ms.is_some() {
                     self.set_phase(i, Phase::Skipped);
                     self.emit(WorldEvent::Skipped(index));
                 } else {
-                    let at_um = self.pos_um.saturating_add(o.ahead_um);
+                    let at_um = self.pos_um.saturating_add(i64::from(o.ahead_um));
                     if let Some(o) = self.obstacles.get_mut(i) {
                         o.pos_um = at_um;
                         o.phase = Phase::Present;
@@ -489,7 +495,7 @@ impl<L: WorldLog> State<L> {
                 let registrable = self.registrable(&o, sc);
                 if let Some(o) = self.obstacles.get_mut(i) {
                     o.registrable_since = if registrable {
-                        o.registrable_since.or(Some(now))
+                        o.registrable_since.or(Some(ms32(now)))
                     } else {
                         None
                     };
@@ -526,11 +532,11 @@ impl<L: WorldLog> State<L> {
         }
         o.fate = Fate::Detected(by);
         // With noise a reading can register a box a little before the noise-free instant.
-        let first = o.registrable_since.map_or(now, |f| f.min(now));
-        o.registrable_since = Some(first);
+        let first = o.registrable_since.map_or(now, |f| u64::from(f).min(now));
+        o.registrable_since = Some(ms32(first));
         let reacted = (!moving && o.reaction_ms.is_none()).then(|| now - first);
         if let Some(r) = reacted {
-            o.reaction_ms = Some(r);
+            o.reaction_ms = Some(ms32(r));
         }
         self.emit(WorldEvent::Detected(i as u8, by));
         if let Some(r) = reacted {
@@ -548,8 +554,8 @@ impl<L: WorldLog> State<L> {
             if let (Fate::Detected(_), None, Some(first)) =
                 (o.fate, o.reaction_ms, o.registrable_since)
             {
-                let r = now - first;
-                o.reaction_ms = Some(r);
+                let r = now.saturating_sub(u64::from(first));
+                o.reaction_ms = Some(ms32(r));
                 self.emit(WorldEvent::Reacted(i as u8, r));
             }
         }
@@ -847,7 +853,8 @@ impl<'s, L: WorldLog> World<'s, L> {
                 max_reaction_ms: placed()
                     .filter(|o| matches!(o.fate, Fate::Detected(_)))
                     .filter_map(|o| o.reaction_ms)
-                    .max(),
+                    .max()
+                    .map(u64::from),
                 reached_door: s.at_door_ms.is_some(),
                 on_ms: s.on_ms,
             }
@@ -863,7 +870,7 @@ impl<'s, L: WorldLog> World<'s, L> {
                     fate: o.fate,
                     placed: matches!(o.phase, Phase::Present | Phase::Removed | Phase::Avoided),
                     detectable: o.certain_samples > 0,
-                    reaction_ms: o.reaction_ms,
+                    reaction_ms: o.reaction_ms.map(u64::from),
                 })
                 .collect()
         })

@@ -168,7 +168,7 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
                 crate::scenario::Kind::Box => "box",
                 crate::scenario::Kind::Ball => "ball",
             },
-            seconds(item.at_ms),
+            seconds(u64::from(item.at_ms)),
         );
     }
     out

@@ -51,9 +51,9 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
             * 1_000;
         let _ = interferences.push(Interference {
             kind,
-            at_ms: uniform(r, 0, walk_ms),
-            ahead_um,
-            hold_ms: uniform(r, 500, 10_000),
+            at_ms: uniform(r, 0, walk_ms) as u32,
+            ahead_um: ahead_um as i32,
+            hold_ms: uniform(r, 500, 10_000) as u32,
         });
     }
     let mut name = heapless::String::new();

@@ -1,0 +1,125 @@
+//! Links the firmware with the top-level `memory.x` and embeds its data:
+//!
+//! * every `scenarios/*.json`, validated here by the host's parser and embedded in its
+//!   canonical form (integers only), which the firmware reads with serde-json-core at boot;
+//! * `missions/fetch-tea.json` without insignificant whitespace.
+
+use std::{env, fs, path::Path, path::PathBuf};
+
+use psmpa_sim::scenario::Scenario;
+
+/// The JSON text without whitespace outside strings.
+fn minify(json: &[u8]) -> Vec<u8> {
+    let (mut out, mut in_string, mut escaped) = (Vec::with_capacity(json.len()), false, false);
+    for &b in json {
+        if in_string {
+            out.push(b);
+            match (escaped, b) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => {}
+            }
+        } else if !b.is_ascii_whitespace() {
+            in_string = b == b'"';
+            out.push(b);
+        }
+    }
+    out
+}
+
+/// The minified mission without its top-level `"description"` (documentation the loader
+/// skips: no need to carry it in flash).
+fn without_description(json: &[u8]) -> Vec<u8> {
+    let text = String::from_utf8_lossy(json);
+    let key = "\"description\":\"";
+    let Some(start) = text.find(key) else {
+        return json.to_vec();
+    };
+    // The value ends at the first unescaped quote.
+    let value = start + key.len();
+    let mut end = value;
+    let bytes = text.as_bytes();
+    while end < bytes.len() && !(bytes[end] == b'"' && bytes[end - 1] != b'\\') {
+        end += 1;
+    }
+    // Drop the key, the value and the comma after it.
+    let mut out = String::from(&text[..start]);
+    out.push_str(text[end + 1..].trim_start_matches(','));
+    out.into_bytes()
+}
+
+fn write(path: &Path, bytes: &[u8]) {
+    if let Err(e) = fs::write(path, bytes) {
+        panic!("cannot write {}: {e}", path.display());
+    }
+}
+
+fn main() {
+    let out = PathBuf::from(env::var_os("OUT_DIR").unwrap_or_default());
+    let root = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default()).join("..");
+
+    let memory = root.join("memory.x");
+    if let Err(e) = fs::copy(&memory, out.join("memory.x")) {
+        panic!("cannot copy {}: {e}", memory.display());
+    }
+    // No device interrupts are used: the vector table ends after 16 default entries
+    // (src/main.rs); cortex-m-rt's "device" feature wants a device.x, which has nothing to add.
+    write(&out.join("device.x"), b"");
+    println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rerun-if-changed={}", memory.display());
+    if env::var("TARGET").is_ok_and(|t| t.starts_with("thumb")) {
+        println!("cargo:rustc-link-arg-bins=--nmagic");
+        println!("cargo:rustc-link-arg-bins=-Tlink.x");
+        println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
+    }
+
+    let mission = root.join("missions/fetch-tea.json");
+    match fs::read(&mission) {
+        Ok(json) => write(
+            &out.join("fetch-tea.json"),
+            &without_description(&minify(&json)),
+        ),
+        Err(e) => panic!("cannot read {}: {e}", mission.display()),
+    }
+    println!("cargo:rerun-if-changed={}", mission.display());
+
+    let dir = root.join("scenarios");
+    let mut names: Vec<String> = fs::read_dir(&dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(".json"))
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    let mut list = String::from(
+        "/// The embedded scenarios: (file name, canonical JSON).\npub static SCENARIOS: &[(&str, &[u8])] = &[\n",
+    );
+    for name in &names {
+        let path = dir.join(name);
+        println!("cargo:rerun-if-changed={}", path.display());
+        let json =
+            fs::read(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+        let scenario = Scenario::parse(&json).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut canonical = vec![0u8; 16 * 1024];
+        let len = scenario.to_canonical(&mut canonical).unwrap_or_else(|e| {
+            panic!(
+                "{}: no canonical form for the firmware: {e}",
+                path.display()
+            )
+        });
+        canonical.truncate(len);
+        let target = out.join(format!("canonical-{name}"));
+        write(&target, &canonical);
+        list.push_str(&format!(
+            "    ({name:?}, include_bytes!({:?})),\n",
+            target.display().to_string()
+        ));
+    }
+    list.push_str("];\n");
+    write(&out.join("scenarios.rs"), list.as_bytes());
+    println!("cargo:rerun-if-changed={}", dir.display());
+}

@@ -1,0 +1,182 @@
+//! psmpa on a Cortex-M4F (QEMU mps2-an386): the same core, the same Fetch Tea mission and the
+//! same simulated world as the host simulator. Every embedded scenario runs under both
+//! architectures from tick 0; each run logs the summary fields of `psmpa-sim run --json`,
+//! which `cargo xtask qemu` compares with the host.
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!(
+        "psmpa-firmware runs on the target: cargo run -p psmpa-firmware --target thumbv7em-none-eabihf --release"
+    );
+}
+
+#[cfg(target_os = "none")]
+mod executor;
+#[cfg(target_os = "none")]
+mod time_driver;
+
+#[cfg(target_os = "none")]
+mod firmware {
+    use core::mem::MaybeUninit;
+
+    use cortex_m_rt::{ExceptionFrame, entry, exception};
+    use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
+    use defmt::{error, info};
+    use defmt_semihosting as _;
+    use psmpa_sim::robot::{Arch, Robot};
+    use psmpa_sim::scenario::Scenario;
+
+    use crate::{executor, time_driver};
+
+    include!(concat!(env!("OUT_DIR"), "/scenarios.rs"));
+
+    /// `missions/fetch-tea.json`, whitespace removed at build time.
+    static FETCH_TEA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fetch-tea.json"));
+
+    defmt::timestamp!("{=u64:ms}", embassy_time::Instant::now().as_millis());
+
+    unsafe extern "C" {
+        fn DefaultHandler();
+    }
+
+    /// The device part of the vector table: no device interrupt is ever enabled, so 16 entries
+    /// to the default handler do (cortex-m-rt's default has 240, 960 bytes of flash).
+    #[unsafe(link_section = ".vector_table.interrupts")]
+    #[unsafe(no_mangle)]
+    static __INTERRUPTS: [unsafe extern "C" fn(); 16] = [DefaultHandler; 16];
+
+    #[entry]
+    fn main() -> ! {
+        // `#[entry]` makes these `&'static mut`, safely: main runs once.
+        static mut EXECUTOR: MaybeUninit<embassy_executor::raw::Executor> = MaybeUninit::uninit();
+        static mut ROBOT: Robot<'static> = Robot::empty();
+        static mut SCENARIO: Scenario = Scenario::empty();
+        let Some(mut core) = cortex_m::Peripherals::take() else {
+            fail("peripherals already taken")
+        };
+        time_driver::start(&mut core.SYST);
+        info!(
+            "psmpa firmware: {=usize} scenarios, core clock {=u32} Hz, tick {=u64} Hz",
+            SCENARIOS.len(),
+            time_driver::CORE_HZ,
+            embassy_time_driver::TICK_HZ
+        );
+        load_robot(ROBOT);
+        let (robot, scenario) = (ROBOT, SCENARIO);
+        executor::run(EXECUTOR, |spawner| match missions(robot, scenario) {
+            Ok(task) => spawner.spawn(task),
+            Err(_) => fail("the mission task is already running"),
+        })
+    }
+
+    /// Reads a scenario's canonical form in place, out of line: no copy of it on the stack.
+    #[inline(never)]
+    fn parse(slot: &mut Scenario, json: &[u8]) -> bool {
+        let ok = slot.read_canonical(json).is_ok();
+        // A test build breaks the first scenario on purpose: xtask qemu must notice.
+        #[cfg(feature = "inject-fault")]
+        if let Some(first) = slot.interferences.first_mut() {
+            first.at_ms += 37;
+        }
+        ok
+    }
+
+    /// Loads the mission once, in place, out of line.
+    #[inline(never)]
+    fn load_robot(robot: &mut Robot<'static>) {
+        if robot.load_into(FETCH_TEA).is_err() {
+            fail("the Fetch Tea mission does not load");
+        }
+    }
+
+    #[embassy_executor::task]
+    async fn missions(robot: &'static mut Robot<'static>, scenario: &'static mut Scenario) {
+        for (file, json) in SCENARIOS {
+            if !parse(scenario, json) {
+                error!("{=str}: invalid scenario", file);
+                fail("invalid scenario");
+            }
+            if robot.apply(scenario).is_err() {
+                fail("the scenario's sensor periods do not apply");
+            }
+            for arch in Arch::ALL {
+                // Everything is prepared: the run's first poll happens at tick 0.
+                time_driver::restart();
+                let (s, (), ()) = psmpa_sim::run::run_robot(robot, scenario, arch, (), ()).await;
+                let t = s.tally;
+                info!(
+                    "result scenario={=str} arch={=str} interferences={=u32} detected={=u32} collisions={=u32} reached_door={=bool} time_cost_ms={=u64} max_reaction_ms={=i64} sonar_on_ms={=u64} bumper_on_ms={=u64} trace_hash={=u64:016x}",
+                    scenario.name.as_str(),
+                    arch.name(),
+                    t.interferences,
+                    t.detected,
+                    t.collisions,
+                    t.reached_door,
+                    s.time_cost_ms,
+                    t.max_reaction_ms.map_or(-1, |ms| ms as i64),
+                    t.on_ms[0],
+                    t.on_ms[1],
+                    s.trace_hash
+                );
+            }
+        }
+        let (used, size) = stack_high_water();
+        info!("stack high-water {=u32} of {=u32} bytes", used, size);
+        debug::exit(EXIT_SUCCESS);
+    }
+
+    /// cortex-m-rt's `paint-stack` fills the stack region with a pattern at reset: the
+    /// deepest word it no longer holds is the high-water mark.
+    fn stack_high_water() -> (u32, u32) {
+        unsafe extern "C" {
+            static mut _stack_end: u32;
+            static mut _stack_start: u32;
+        }
+        let bottom = (&raw const _stack_end).cast::<u32>();
+        let top = (&raw const _stack_start).cast::<u32>();
+        let mut p = bottom;
+        // SAFETY: [bottom, top) is the stack region, word aligned, and readable.
+        while p < top && unsafe { p.read_volatile() } == cortex_m_rt::STACK_PAINT_VALUE {
+            p = p.wrapping_add(1);
+        }
+        (
+            (top as u32).wrapping_sub(p as u32),
+            (top as u32).wrapping_sub(bottom as u32),
+        )
+    }
+
+    fn fail(what: &str) -> ! {
+        error!("failure: {=str}", what);
+        debug::exit(EXIT_FAILURE);
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
+    #[panic_handler]
+    fn panic(info: &core::panic::PanicInfo) -> ! {
+        match info.location() {
+            Some(l) => error!("panic at {=str}:{=u32}", l.file(), l.line()),
+            None => error!("panic"),
+        }
+        debug::exit(EXIT_FAILURE);
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
+    #[exception]
+    unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+        error!(
+            "HardFault at pc {=u32:#010x}, lr {=u32:#010x}",
+            frame.pc(),
+            frame.lr()
+        );
+        debug::exit(EXIT_FAILURE);
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+}
