@@ -15,6 +15,18 @@ for component in clippy rustfmt; do
   grep -q "^$component" <<<"$installed_components" || rustup component add "$component"
 done
 
+step "system tools: QEMU, ARM binutils, defmt-print (installed only when missing)"
+missing=()
+command -v qemu-system-arm >/dev/null || missing+=(qemu-system-arm)
+command -v arm-none-eabi-objdump >/dev/null || missing+=(binutils-arm-none-eabi)
+if ((${#missing[@]})); then
+  sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo=sudo
+  $sudo apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q "${missing[@]}"
+fi
+command -v defmt-print >/dev/null || cargo install defmt-print --locked
+
 step "format"
 cargo fmt --all --check
 
@@ -35,6 +47,18 @@ done
 
 step "the simulated world builds without std (the firmware runs it)"
 cargo build -p psmpa-sim --no-default-features --target thumbv7em-none-eabihf --release
+
+step "firmware: clippy for the target"
+cargo clippy -p psmpa-firmware --target thumbv7em-none-eabihf --profile firmware -- -D warnings
+
+step "firmware in QEMU: every scenario, both architectures, equal to the host"
+cargo xtask qemu
+
+step "the check can fail: a deliberately broken scenario must be caught"
+cargo xtask qemu --inject-fault --expect-failure
+
+step "firmware size: flash, static RAM, stack high-water against budget and snapshot"
+cargo xtask size
 
 step "psmpa-core uses no allocator"
 # `extern crate std/alloc` is allowed only right under `#[cfg(test)]`.

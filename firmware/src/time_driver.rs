@@ -1,7 +1,12 @@
-//! The embassy-time driver: SysTick interrupts at the tick rate (1 kHz, the same as the host,
-//! so that `Duration` rounding and therefore traces agree). Each tick compares the count with
-//! the earliest deadline and wakes what is due at that very tick, as the host's virtual clock
-//! does when it jumps to a deadline.
+//! The embassy-time driver on SysTick, tickless: a SysTick period runs from the current tick to
+//! the next deadline, in whole ticks of the tick rate (1 kHz, the host's, so that `Duration`
+//! rounding and therefore traces agree). The interrupt comes at the deadline tick itself, and
+//! only then: a run with a sample every 20 ms takes 50 interrupts a second, not 1000.
+//!
+//! `now = base + elapsed cycles / cycles per tick`. Starting a new period at the current tick
+//! keeps time continuous and monotonic; the fraction of the tick in progress is stretched,
+//! which shifts the tick grid against the core clock by less than a tick and is not observable
+//! by the program. Under QEMU's `-icount` all of it is deterministic.
 
 use core::cell::{Cell, RefCell};
 use core::task::Waker;
@@ -17,16 +22,56 @@ use embassy_time_queue_utils::Queue;
 pub const CORE_HZ: u32 = 25_000_000;
 /// Core cycles per tick.
 pub const CYCLES_PER_TICK: u32 = CORE_HZ / embassy_time_driver::TICK_HZ as u32;
+/// The longest SysTick period in whole ticks (the reload value has 24 bits).
+const MAX_PERIOD: u32 = 0x00FF_FFFF / CYCLES_PER_TICK;
 
 struct SysTickDriver {
-    ticks: Mutex<Cell<u64>>,
+    /// The tick at which the current SysTick period started.
+    base: Mutex<Cell<u64>>,
+    /// Its length in ticks.
+    period: Mutex<Cell<u32>>,
     /// The earliest deadline in `queue`, `u64::MAX` when there is none.
     alarm: Mutex<Cell<u64>>,
     queue: Mutex<RefCell<Queue>>,
 }
 
+/// SysTick's registers (the driver is their only user).
+fn syst() -> &'static cortex_m::peripheral::syst::RegisterBlock {
+    // SAFETY: a fixed, always-mapped system peripheral; only this module touches it.
+    unsafe { &*SYST::PTR }
+}
+
 impl SysTickDriver {
-    /// Wakes what is due at `now` and arms the next deadline.
+    fn now_in(&self, cs: CriticalSection<'_>) -> u64 {
+        let (base, period) = (self.base.borrow(cs).get(), self.period.borrow(cs).get());
+        let reload = syst().rvr.read();
+        let before = syst().cvr.read();
+        // Interrupts are masked here, but the counter runs: it may have wrapped.
+        if SCB::is_pendst_pending() {
+            let after = syst().cvr.read();
+            base + u64::from(period) + u64::from((reload - after) / CYCLES_PER_TICK)
+        } else {
+            base + u64::from((reload - before) / CYCLES_PER_TICK)
+        }
+    }
+
+    /// Starts a SysTick period at tick `now` that ends at the earliest deadline.
+    fn program(&self, cs: CriticalSection<'_>, now: u64) {
+        let alarm = self.alarm.borrow(cs).get();
+        let ticks = alarm.saturating_sub(now).clamp(1, u64::from(MAX_PERIOD)) as u32;
+        let s = syst();
+        // SAFETY: SysTick is only driven from here; writing CVR makes the counter reload from
+        // RVR at the next clock (no interrupt: it did not count down to 0).
+        unsafe {
+            s.rvr.write(ticks * CYCLES_PER_TICK - 1);
+            s.cvr.write(0);
+        }
+        SCB::clear_pendst();
+        self.base.borrow(cs).set(now);
+        self.period.borrow(cs).set(ticks);
+    }
+
+    /// Wakes what is due at `now` and remembers the next deadline.
     fn expire(&self, cs: CriticalSection<'_>, now: u64) {
         let next = self.queue.borrow_ref_mut(cs).next_expiration(now);
         self.alarm.borrow(cs).set(next);
@@ -35,23 +80,27 @@ impl SysTickDriver {
 
 impl Driver for SysTickDriver {
     fn now(&self) -> u64 {
-        // Two words on this core: read them in one critical section.
-        critical_section::with(|cs| self.ticks.borrow(cs).get())
+        critical_section::with(|cs| self.now_in(cs))
     }
 
     fn schedule_wake(&self, at: u64, waker: &Waker) {
         critical_section::with(|cs| {
             if self.queue.borrow_ref_mut(cs).schedule_wake(at, waker) {
+                let now = self.now_in(cs);
                 // A deadline already past is woken at once.
-                let now = self.ticks.borrow(cs).get();
                 self.expire(cs, now);
+                let end = self.base.borrow(cs).get() + u64::from(self.period.borrow(cs).get());
+                if self.alarm.borrow(cs).get() < end {
+                    self.program(cs, now);
+                }
             }
         });
     }
 }
 
 embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver {
-    ticks: Mutex::new(Cell::new(0)),
+    base: Mutex::new(Cell::new(0)),
+    period: Mutex::new(Cell::new(MAX_PERIOD)),
     alarm: Mutex::new(Cell::new(u64::MAX)),
     queue: Mutex::new(RefCell::new(Queue::new())),
 });
@@ -59,33 +108,27 @@ embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDri
 #[exception]
 fn SysTick() {
     critical_section::with(|cs| {
-        let now = DRIVER.ticks.borrow(cs).get().wrapping_add(1);
-        DRIVER.ticks.borrow(cs).set(now);
-        if now >= DRIVER.alarm.borrow(cs).get() {
-            DRIVER.expire(cs, now);
-        }
+        // The period ended: this is its last tick.
+        let now = DRIVER.base.borrow(cs).get() + u64::from(DRIVER.period.borrow(cs).get());
+        DRIVER.expire(cs, now);
+        DRIVER.program(cs, now);
     });
 }
 
-/// Starts the clock: SysTick from the core clock, one interrupt per tick.
+/// Starts the clock at tick 0: SysTick from the core clock, interrupting at deadlines.
 pub fn start(syst: &mut SYST) {
     syst.set_clock_source(SystClkSource::Core);
-    syst.set_reload(CYCLES_PER_TICK - 1);
-    syst.clear_current();
+    critical_section::with(|cs| DRIVER.program(cs, 0));
     syst.enable_interrupt();
     syst.enable_counter();
 }
 
-/// Puts the clock back to tick 0 with no timer pending, and a full tick before the next
-/// interrupt: every run starts at 0, as every host simulation does. Wakers of the previous
-/// run are dropped (their futures are gone).
+/// Puts the clock back to tick 0 with no timer pending: every run starts at 0, as every host
+/// simulation does. Wakers of the previous run are dropped (their futures are gone).
 pub fn restart() {
     critical_section::with(|cs| {
-        DRIVER.ticks.borrow(cs).set(0);
-        DRIVER.alarm.borrow(cs).set(u64::MAX);
         *DRIVER.queue.borrow_ref_mut(cs) = Queue::new();
-        // SAFETY: only this module uses SysTick; writing CVR reloads the counter.
-        unsafe { (*SYST::PTR).cvr.write(0) };
-        SCB::clear_pendst();
+        DRIVER.alarm.borrow(cs).set(u64::MAX);
+        DRIVER.program(cs, 0);
     });
 }

@@ -1,0 +1,76 @@
+//! `cargo xtask`: the project's tasks around the firmware.
+//!
+//! * `qemu`: build the firmware, run it in QEMU (`-icount`: deterministic), decode its defmt
+//!   log and check that every embedded scenario, under both architectures, gives the same
+//!   result and trace hash as the host simulator.
+//! * `size`: flash and static RAM of the firmware and its stack high-water mark in QEMU,
+//!   checked against the budget and the committed snapshot `firmware/size.json`.
+
+mod firmware;
+mod size;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "cargo xtask", about = "psmpa project tasks")]
+struct Cli {
+    #[command(subcommand)]
+    task: Task,
+}
+
+#[derive(Subcommand)]
+enum Task {
+    /// Runs the firmware in QEMU and checks every scenario against the host simulator.
+    Qemu {
+        /// Build with the `inject-fault` feature: one scenario is broken on purpose, and the
+        /// check must fail.
+        #[arg(long)]
+        inject_fault: bool,
+        /// Succeed only if the check fails (to show that it can).
+        #[arg(long)]
+        expect_failure: bool,
+    },
+    /// Reports flash, static RAM and stack high-water against the budget and the snapshot.
+    Size {
+        /// Write the measured figures as the new snapshot.
+        #[arg(long)]
+        bless: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let result = match Cli::parse().task {
+        Task::Qemu {
+            inject_fault,
+            expect_failure,
+        } => firmware::qemu_check(inject_fault).then_expect(expect_failure),
+        Task::Size { bless } => size::run(bless),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+trait ThenExpect {
+    fn then_expect(self, failure: bool) -> Result<(), String>;
+}
+
+impl ThenExpect for Result<(), String> {
+    /// With `failure`, turns a failure into success and a success into a failure.
+    fn then_expect(self, failure: bool) -> Result<(), String> {
+        match (self, failure) {
+            (r, false) => r,
+            (Ok(()), true) => Err("the check passed, but a failure was expected".to_owned()),
+            (Err(e), true) => {
+                println!("the check failed, as expected: {e}");
+                Ok(())
+            }
+        }
+    }
+}
