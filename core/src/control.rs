@@ -151,19 +151,24 @@ impl<
 
     /// The actions with the preconditions the planner must satisfy from the beliefs: facts
     /// that a sensor running beside the action perceives are checked by that sensor when the
-    /// action runs, so they are assumed to hold unless a sample already showed them false.
+    /// action runs, so they are assumed to hold unless a sample already showed them false. An
+    /// action beside a sensor that failed cannot be monitored: it never applies.
     fn planning_actions(&self) -> Vec<ActuatorAction<'a>, NA> {
         let domain = &self.mission.domain;
         let known_false = self.known_false();
+        let faulty = self.faulty_sensors();
         domain
             .actions()
             .iter()
             .map(|a| {
-                let checked = domain.perception_of(domain.sensors_serving(a.pre));
-                ActuatorAction {
-                    pre: a.pre.difference(checked.difference(known_false)),
-                    ..*a
-                }
+                let serving = domain.sensors_serving(a.pre);
+                let checked = domain.perception_of(serving);
+                let pre = if serving.bits() & faulty.bits() != 0 {
+                    FactSet::ALL
+                } else {
+                    a.pre.difference(checked.difference(known_false))
+                };
+                ActuatorAction { pre, ..*a }
             })
             .collect()
     }

@@ -241,6 +241,8 @@ struct Shared<const NS: usize> {
     lost: [Cell<u8>; NS],
     /// Facts some sample has decided (true or false) since the start.
     sensed: Cell<FactSet>,
+    /// Sensors that failed: out of service for the rest of the mission.
+    faulty: Cell<SensorSet>,
     violation: Cell<Option<Violation>>,
     requests: Cell<SensorSet>,
     version: Cell<u32>,
@@ -401,6 +403,7 @@ impl<
                 fresh: Cell::new(SensorSet::EMPTY),
                 lost: [const { Cell::new(0) }; NS],
                 sensed: Cell::new(FactSet::EMPTY),
+                faulty: Cell::new(SensorSet::EMPTY),
                 violation: Cell::new(None),
                 requests: Cell::new(SensorSet::EMPTY),
                 version: Cell::new(0),
@@ -546,9 +549,23 @@ impl<
             .map_or(crate::action::SensorAction::DEFAULT_TIMEOUT, |s| s.timeout)
     }
 
+    /// A sensor failed: it is out of service for the rest of the mission (a state that needs
+    /// it fails at once, the planner does not count on it), until [`clear_faults`](Self::clear_faults).
     fn sensor_failed(&self, sensor: SensorId, fault: SensorFault) -> Failure {
+        self.shared
+            .lock(|s| s.faulty.set(s.faulty.get().with(sensor)));
         self.trace(TraceEvent::SensorFailed { sensor, fault });
         Failure::SensorFault { sensor, fault }
+    }
+
+    /// The sensors that failed and are out of service.
+    pub fn faulty_sensors(&self) -> SensorSet {
+        self.shared.lock(|s| s.faulty.get())
+    }
+
+    /// Puts every failed sensor back into service (after a repair or a reset of the device).
+    pub fn clear_faults(&self) {
+        self.shared.lock(|s| s.faulty.set(SensorSet::EMPTY));
     }
 
     /// Declares which sensors run from now on (for sensor fusion); none has sampled yet.

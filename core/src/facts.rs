@@ -44,6 +44,9 @@ impl FactSet {
     /// The empty set `∅`.
     pub const EMPTY: Self = Self(0);
 
+    /// Every fact a set can hold: as a precondition, one that never holds in practice.
+    pub const ALL: Self = Self(u64::MAX);
+
     /// The set whose members are the set bits of `bits` (bit `i` is fact `i`).
     pub const fn from_bits(bits: u64) -> Self {
         Self(bits)

@@ -105,9 +105,21 @@ mod firmware {
                 fail("the scenario's sensor periods do not apply");
             }
             for arch in Arch::ALL {
-                // Everything is prepared: the run's first poll happens at tick 0.
+                // Everything is prepared: the run starts at tick 0, in a poll of its own.
                 time_driver::restart();
+                embassy_futures::yield_now().await;
+                executor::take_polls();
                 let (s, (), ()) = psmpa_sim::run::run_robot(robot, scenario, arch, (), ()).await;
+                let polls = executor::take_polls();
+                info!(
+                    "polls scenario={=str} arch={=str} count={=u32} max_cycles={=u32} max_at_ms={=u64} total_cycles={=u64}",
+                    scenario.name.as_str(),
+                    arch.name(),
+                    polls.count,
+                    polls.max_cycles,
+                    polls.max_at,
+                    polls.total_cycles
+                );
                 let t = s.tally;
                 info!(
                     "result scenario={=str} arch={=str} interferences={=u32} detected={=u32} collisions={=u32} reached_door={=bool} time_cost_ms={=u64} max_reaction_ms={=i64} sonar_on_ms={=u64} bumper_on_ms={=u64} trace_hash={=u64:016x}",

@@ -7,6 +7,11 @@
 //! keeps time continuous and monotonic; the fraction of the tick in progress is stretched,
 //! which shifts the tick grid against the core clock by less than a tick and is not observable
 //! by the program. Under QEMU's `-icount` all of it is deterministic.
+//!
+//! Logical time: while the executor polls, `now()` answers the instant the poll began
+//! ([`latch`]/[`release`]), as on the host, where time only moves between polls. What a task
+//! observes then depends on what happened, not on how fast the core ran it; timers still fire
+//! on the real counter, and how long polls take is measured in cycles ([`cycles`]).
 
 use core::cell::{Cell, RefCell};
 use core::task::Waker;
@@ -28,8 +33,12 @@ const MAX_PERIOD: u32 = 0x00FF_FFFF / CYCLES_PER_TICK;
 struct SysTickDriver {
     /// The tick at which the current SysTick period started.
     base: Mutex<Cell<u64>>,
+    /// Core cycles counted before the current SysTick period (for measuring, not timing).
+    cycles_before: Mutex<Cell<u64>>,
     /// Its length in ticks.
     period: Mutex<Cell<u32>>,
+    /// The instant the running poll began, while the executor polls.
+    latched: Mutex<Cell<Option<u64>>>,
     /// The earliest deadline in `queue`, `u64::MAX` when there is none.
     alarm: Mutex<Cell<u64>>,
     queue: Mutex<RefCell<Queue>>,
@@ -42,6 +51,17 @@ fn syst() -> &'static cortex_m::peripheral::syst::RegisterBlock {
 }
 
 impl SysTickDriver {
+    /// Core cycles since the current period started (a wrap not yet handled included).
+    fn elapsed(&self) -> u32 {
+        let reload = syst().rvr.read();
+        let before = syst().cvr.read();
+        if SCB::is_pendst_pending() {
+            reload + 1 + (reload - syst().cvr.read())
+        } else {
+            reload - before
+        }
+    }
+
     fn now_in(&self, cs: CriticalSection<'_>) -> u64 {
         let (base, period) = (self.base.borrow(cs).get(), self.period.borrow(cs).get());
         let reload = syst().rvr.read();
@@ -59,6 +79,8 @@ impl SysTickDriver {
     fn program(&self, cs: CriticalSection<'_>, now: u64) {
         let alarm = self.alarm.borrow(cs).get();
         let ticks = alarm.saturating_sub(now).clamp(1, u64::from(MAX_PERIOD)) as u32;
+        let counted = self.cycles_before.borrow(cs);
+        counted.set(counted.get() + u64::from(self.elapsed()));
         let s = syst();
         // SAFETY: SysTick is only driven from here; writing CVR makes the counter reload from
         // RVR at the next clock (no interrupt: it did not count down to 0).
@@ -80,7 +102,12 @@ impl SysTickDriver {
 
 impl Driver for SysTickDriver {
     fn now(&self) -> u64 {
-        critical_section::with(|cs| self.now_in(cs))
+        critical_section::with(|cs| {
+            self.latched
+                .borrow(cs)
+                .get()
+                .unwrap_or_else(|| self.now_in(cs))
+        })
     }
 
     fn schedule_wake(&self, at: u64, waker: &Waker) {
@@ -100,7 +127,9 @@ impl Driver for SysTickDriver {
 
 embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver {
     base: Mutex::new(Cell::new(0)),
+    cycles_before: Mutex::new(Cell::new(0)),
     period: Mutex::new(Cell::new(MAX_PERIOD)),
+    latched: Mutex::new(Cell::new(None)),
     alarm: Mutex::new(Cell::new(u64::MAX)),
     queue: Mutex::new(RefCell::new(Queue::new())),
 });
@@ -130,5 +159,28 @@ pub fn restart() {
         *DRIVER.queue.borrow_ref_mut(cs) = Queue::new();
         DRIVER.alarm.borrow(cs).set(u64::MAX);
         DRIVER.program(cs, 0);
+        let latched = DRIVER.latched.borrow(cs);
+        if latched.get().is_some() {
+            latched.set(Some(0));
+        }
     });
+}
+
+/// A poll begins: `now()` answers this instant until [`release`].
+pub fn latch() {
+    critical_section::with(|cs| {
+        let now = DRIVER.now_in(cs);
+        DRIVER.latched.borrow(cs).set(Some(now));
+    });
+}
+
+/// The poll ended: `now()` follows the counter again.
+pub fn release() {
+    critical_section::with(|cs| DRIVER.latched.borrow(cs).set(None));
+}
+
+/// Core cycles since the clock started, from SysTick's counter: a cycle stamp for measuring
+/// how long code runs (exact under QEMU's `-icount`, where each instruction is one cycle).
+pub fn cycles() -> u64 {
+    critical_section::with(|cs| DRIVER.cycles_before.borrow(cs).get() + u64::from(DRIVER.elapsed()))
 }

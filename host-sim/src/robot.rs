@@ -271,11 +271,17 @@ pub mod codes {
     pub const LOCKED: u16 = 3;
 }
 
+/// How far the robot must walk, by odometry, while an echo in range keeps the same distance,
+/// before the sonar counts as stuck: walking towards an object must bring its echo closer.
+pub const STUCK_AFTER_UM: i64 = 50_000;
+
 /// The robot: the platform implementation of the mission's sensors and behaviours.
 pub struct Nao<'w, 's, L: WorldLog> {
     world: &'w World<'s, L>,
     bindings: Bindings<NaoSensor, NaoAction, 4, 8>,
     percepts: Percepts,
+    /// The sonar's last echo in range and the odometry when it was first read.
+    echo: core::cell::Cell<Option<(u32, i64)>>,
 }
 
 impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
@@ -285,6 +291,7 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
             world,
             bindings: robot.bindings.clone(),
             percepts: robot.percepts,
+            echo: core::cell::Cell::new(None),
         }
     }
 
@@ -387,15 +394,25 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
             }
         };
         Ok(match self.device(sensor).ok_or(SensorFault::Device(1))? {
-            Device::Sonar => self.world.sonar().map(|mm| Reading {
-                value: Value::Mm(mm),
-                // The rule the world registers obstacles by.
-                holds: if self.world.scenario().sonar.registers(i64::from(mm)) {
-                    FactSet::EMPTY
-                } else {
-                    clear
-                },
-            }),
+            Device::Sonar => {
+                if self.world.sonar_fault() == Some(crate::scenario::FaultKind::Silent) {
+                    // The echo never comes: the runtime's sample timeout notices.
+                    core::future::pending::<()>().await;
+                }
+                let Some(mm) = self.world.sonar() else {
+                    return Ok(None);
+                };
+                self.check_sonar(mm)?;
+                Some(Reading {
+                    value: Value::Mm(mm),
+                    // The rule the world registers obstacles by.
+                    holds: if self.world.scenario().sonar.registers(i64::from(mm)) {
+                        FactSet::EMPTY
+                    } else {
+                        clear
+                    },
+                })
+            }
             Device::Bumper => {
                 let level = self.world.bumper();
                 Some(Reading {
@@ -422,6 +439,34 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
 }
 
 impl<L: WorldLog> Nao<'_, '_, L> {
+    /// The sonar driver's plausibility checks: a reading outside the sonar's range is a device
+    /// fault; an echo in range that keeps the same distance while the robot walks on is stuck.
+    /// (A sonar stuck at its maximum, "nothing in range", cannot be told from an empty path.)
+    fn check_sonar(&self, mm: u32) -> Result<(), SensorFault> {
+        let sonar = self.world.scenario().sonar;
+        let (min, max) = (
+            crate::scenario::to_mm(sonar.min_um),
+            crate::scenario::to_mm(sonar.max_um),
+        );
+        if !(min..=max).contains(&i64::from(mm)) {
+            return Err(SensorFault::OutOfRange);
+        }
+        if i64::from(mm) == max {
+            self.echo.set(None);
+            return Ok(());
+        }
+        let at = self.world.position_um();
+        match self.echo.get() {
+            Some((last, since)) if last == mm => {
+                if at - since >= STUCK_AFTER_UM {
+                    return Err(SensorFault::Stuck);
+                }
+            }
+            _ => self.echo.set(Some((mm, at))),
+        }
+        Ok(())
+    }
+
     fn device(&self, sensor: SensorId) -> Option<Device> {
         Some(match self.bindings.sensor(sensor)? {
             NaoSensor::Sonar => Device::Sonar,

@@ -110,6 +110,29 @@ pub struct DoorsFile {
     pub back_door_m: Option<f64>,
 }
 
+/// How the sonar fails (extension of the contract's format).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultKind {
+    /// It stops answering: a sample never completes.
+    Silent,
+    /// It reports distances beyond its range.
+    OutOfRange,
+    /// It keeps reporting the same distance.
+    Stuck,
+}
+
+/// `fault` as written in the file: from `at_s` on, the sonar fails.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultFile {
+    /// How it fails.
+    pub kind: FaultKind,
+    /// When, s.
+    #[serde(default, deserialize_with = "number")]
+    pub at_s: Option<f64>,
+}
+
 /// One interference as written in the file. Every field has a default (the contract's first
 /// example: a box put down at 3.0 s, 0.45 m ahead, for 4.0 s).
 #[derive(Clone, Copy, Debug, Deserialize)]
@@ -159,6 +182,9 @@ pub struct ScenarioFile {
     /// The doors (extension: a locked kitchen door makes the robot re-plan).
     #[serde(default, deserialize_with = "present")]
     pub doors: Option<DoorsFile>,
+    /// A sonar fault (extension: the robot must notice and stop).
+    #[serde(default, deserialize_with = "present")]
+    pub fault: Option<FaultFile>,
     /// The interferences, in any order.
     pub interferences: Interferences,
 }
@@ -259,8 +285,7 @@ pub struct Interference {
 /// so that a microcontroller reads it with serde-json-core at boot, with no float parser and
 /// little flash ([`from_canonical`](Self::from_canonical)). It is not a file format for people:
 /// write scenario files.
-#[derive(Clone, Debug, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
 pub struct Scenario {
     /// Name.
     #[serde(rename = "n")]
@@ -298,15 +323,20 @@ pub struct Scenario {
     /// Distance from the kitchen door on to the back door, µm.
     #[serde(rename = "bd")]
     pub back_door_um: i64,
+    /// A sonar fault and when it starts, ms.
+    #[serde(rename = "f")]
+    pub fault: Option<(FaultKind, u32)>,
     /// The interferences, in file order.
     #[serde(rename = "i")]
     pub interferences: Vec<Interference, MAX_INTERFERENCES>,
 }
 
 /// The canonical keys of [`Scenario`], in declaration order (see its `serde` renames).
-const CANONICAL_KEYS: [&str; 13] = [
-    "n", "s", "d", "m", "v", "a", "o", "b", "ss", "sa", "l", "bd", "i",
+const CANONICAL_KEYS: [&str; 14] = [
+    "n", "s", "d", "m", "v", "a", "o", "b", "ss", "sa", "l", "bd", "f", "i",
 ];
+/// The bit of `"f"` in the keys seen: the only optional one.
+const FAULT_KEY: u16 = 1 << 12;
 
 /// Fills a scenario from its canonical form, field by field.
 struct Fill<'s>(&'s mut Scenario);
@@ -326,6 +356,7 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
     fn visit_map<M: serde::de::MapAccess<'de>>(self, mut map: M) -> Result<(), M::Error> {
         let s = self.0;
         s.interferences.clear();
+        s.fault = None;
         let mut seen = 0u16;
         while let Some(key) = map.next_key::<&str>()? {
             let Some(index) = CANONICAL_KEYS.iter().position(|k| *k == key) else {
@@ -345,10 +376,12 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
                 "sa" => s.act_ms = map.next_value()?,
                 "l" => s.door_locked = map.next_value()?,
                 "bd" => s.back_door_um = map.next_value()?,
+                "f" => s.fault = map.next_value()?,
                 _ => map.next_value_seed(Items(&mut s.interferences))?,
             }
         }
-        if seen != (1 << CANONICAL_KEYS.len()) - 1 {
+        // Every key but the fault, which the writer leaves out when there is none.
+        if seen | FAULT_KEY != (1 << CANONICAL_KEYS.len()) - 1 {
             return Err(serde::de::Error::custom(
                 "a canonical scenario has every field",
             ));
@@ -647,6 +680,7 @@ impl Scenario {
             locked: Some(false),
             back_door_m: Some(3.0),
         }),
+        fault: None,
         interferences: Interferences(Vec::new()),
     };
 
@@ -686,6 +720,7 @@ impl Scenario {
             act_ms: 0,
             door_locked: false,
             back_door_um: 0,
+            fault: None,
             interferences: Vec::new(),
         }
     }
@@ -851,6 +886,13 @@ impl Scenario {
             act_ms,
             door_locked,
             back_door_um,
+            fault: match file.fault {
+                Some(f) => Some((
+                    f.kind,
+                    seconds(Field::of("fault", "at_s"), f.at_s.unwrap_or(0.0))? as u32,
+                )),
+                None => None,
+            },
             interferences,
         })
     }
@@ -1014,6 +1056,11 @@ mod tests {
                 "{}",
                 path.display()
             );
+            // With a fault, too.
+            let mut faulty = s.clone();
+            faulty.fault = Some((FaultKind::Stuck, 1234));
+            let len = faulty.to_canonical(&mut buf).unwrap();
+            assert_eq!(Scenario::from_canonical(&buf[..len]).unwrap(), faulty);
             n += 1;
         }
         assert!(n >= 12);

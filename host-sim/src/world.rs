@@ -35,7 +35,7 @@ use rand_pcg::Pcg32;
 
 use psmpa_core::TraceHash;
 
-use crate::scenario::{Kind, MAX_INTERFERENCES, Scenario, to_mm};
+use crate::scenario::{FaultKind, Kind, MAX_INTERFERENCES, Scenario, to_mm};
 
 /// The world's devices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -266,6 +266,10 @@ struct State<L> {
     at_door_ms: Option<u64>,
     door_open: bool,
     in_kitchen: bool,
+    /// The reading a stuck sonar keeps reporting.
+    stuck_mm: Option<u32>,
+    /// A command changed the state since the last settle.
+    dirty: bool,
     hash: TraceHash,
     log: L,
 }
@@ -511,7 +515,12 @@ impl<L: WorldLog> State<L> {
     }
 
     fn advance_to(&mut self, t: u64, sc: &Scenario) {
+        // Nothing moved and nothing was commanded since the last settle: nothing to do.
+        if t <= self.now && !self.dirty {
+            return;
+        }
         self.settle(sc);
+        self.dirty = false;
         while self.now < t {
             let next = self.next_event(sc).map_or(t, |n| n.min(t));
             self.integrate(next - self.now, sc);
@@ -597,6 +606,8 @@ impl<'s, L: WorldLog> World<'s, L> {
                 at_door_ms: None,
                 door_open: false,
                 in_kitchen: false,
+                stuck_mm: None,
+                dirty: true,
                 hash: TraceHash::new(),
                 log,
             }),
@@ -613,27 +624,37 @@ impl<'s, L: WorldLog> World<'s, L> {
         let now = Instant::now().as_millis();
         let mut s = self.state.borrow_mut();
         s.advance_to(now, self.scenario);
-        f(&mut s, self.scenario)
+        let r = f(&mut s, self.scenario);
+        s.dirty = true;
+        r
+    }
+
+    /// [`with`](Self::with) for queries that change nothing.
+    fn view<R>(&self, f: impl FnOnce(&State<L>, &Scenario) -> R) -> R {
+        let now = Instant::now().as_millis();
+        let mut s = self.state.borrow_mut();
+        s.advance_to(now, self.scenario);
+        f(&s, self.scenario)
     }
 
     /// The robot's position, µm.
     pub fn position_um(&self) -> i64 {
-        self.with(|s, _| s.pos_um)
+        self.view(|s, _| s.pos_um)
     }
 
     /// What the legs do.
     pub fn motion(&self) -> Motion {
-        self.with(|s, _| s.motion)
+        self.view(|s, _| s.motion)
     }
 
     /// Whether the robot stands at `place`.
     pub fn at(&self, place: Place) -> bool {
-        self.with(|s, sc| s.pos_um == place.at_um(sc))
+        self.view(|s, sc| s.pos_um == place.at_um(sc))
     }
 
     /// When the world next changes by itself.
     pub fn next_event(&self) -> Option<Instant> {
-        self.with(|s, sc| s.next_event(sc))
+        self.view(|s, sc| s.next_event(sc))
             .map(Instant::from_millis)
     }
 
@@ -752,11 +773,36 @@ impl<'s, L: WorldLog> World<'s, L> {
         });
     }
 
+    /// The sonar's fault, once it has started.
+    pub fn sonar_fault(&self) -> Option<FaultKind> {
+        self.view(|s, sc| {
+            sc.fault
+                .filter(|(_, at)| s.now >= u64::from(*at))
+                .map(|(kind, _)| kind)
+        })
+    }
+
     /// One sonar sample in mm, or `None` when it is lost to dropout. Registers the boxes it
     /// sees, by the same rule the robot applies ([`Sonar::registers`](crate::scenario::Sonar::registers)).
+    /// A faulty sonar (see [`sonar_fault`](Self::sonar_fault)) registers nothing: it reports
+    /// beyond its range, or the same reading again and again.
     pub fn sonar(&self) -> Option<u32> {
+        let fault = self.sonar_fault();
         self.with(|s, sc| {
             let sonar = sc.sonar;
+            match fault {
+                Some(FaultKind::OutOfRange) => {
+                    let mm = u32::try_from(to_mm(sonar.max_um) + 1_500).unwrap_or(u32::MAX);
+                    s.emit(WorldEvent::Sample(Device::Sonar, mm));
+                    return Some(mm);
+                }
+                Some(FaultKind::Stuck) if s.stuck_mm.is_some() => {
+                    let mm = s.stuck_mm.unwrap_or_default();
+                    s.emit(WorldEvent::Sample(Device::Sonar, mm));
+                    return Some(mm);
+                }
+                _ => {}
+            }
             if sonar.dropout > 0 && u64::from(s.rng.next_u32()) < sonar.dropout {
                 s.emit(WorldEvent::SampleLost(Device::Sonar));
                 return None;
@@ -803,6 +849,10 @@ impl<'s, L: WorldLog> World<'s, L> {
                 }
             }
             let mm = u32::try_from(mm).unwrap_or(u32::MAX);
+            if fault == Some(FaultKind::Stuck) {
+                // The first reading after the fault is the one it sticks at.
+                s.stuck_mm = Some(mm);
+            }
             s.emit(WorldEvent::Sample(Device::Sonar, mm));
             Some(mm)
         })
@@ -837,7 +887,7 @@ impl<'s, L: WorldLog> World<'s, L> {
 
     /// The outcome so far.
     pub fn tally(&self) -> Tally {
-        self.with(|s, _| {
+        self.view(|s, _| {
             let placed = || {
                 s.obstacles
                     .iter()
@@ -863,7 +913,7 @@ impl<'s, L: WorldLog> World<'s, L> {
 
     /// How each interference ended, in scenario order.
     pub fn obstacles(&self) -> Vec<ObstacleReport, MAX_INTERFERENCES> {
-        self.with(|s, _| {
+        self.view(|s, _| {
             s.obstacles
                 .iter()
                 .map(|o| ObstacleReport {

@@ -482,3 +482,101 @@ fn interferences_count_the_scenario_list_even_when_not_all_are_put_down() {
     );
     assert!(!s.obstacles[1].placed);
 }
+
+/// A walk towards a box 1.2 m ahead (in the sonar's range, beyond its threshold) during which
+/// the sonar fails at 3 s.
+fn with_sonar_fault(kind: &str) -> psmpa_sim::sim::Recorded {
+    let sc = inline(&format!(
+        r#"{{"name":"fault","door_m":3.0,"fault":{{"kind":"{kind}","at_s":3.0}},
+            "interferences":[{{"kind":"box","at_s":2.0,"ahead_m":1.2,"hold_s":60}}]}}"#
+    ));
+    run_recorded(&sc, Arch::PSmpa).unwrap()
+}
+
+/// The sonar fault was detected, the action failed safe (the robot never moved again), no plan
+/// could run without the sonar, and nothing was hit. Returns when the fault was detected.
+fn assert_fails_safe(rec: &psmpa_sim::sim::Recorded, expected: psmpa_core::SensorFault) -> u64 {
+    use psmpa_core::Failure;
+    use psmpa_sim::world::WorldEvent;
+    let detected = rec
+        .trace
+        .0
+        .iter()
+        .find_map(|(t, e)| match *e {
+            TraceEvent::SensorFailed { fault, .. } => Some((t.as_millis(), fault)),
+            _ => None,
+        })
+        .expect("the fault is noticed");
+    assert_eq!(detected.1, expected);
+    assert!(rec.trace.0.iter().any(|(_, e)| matches!(
+        e,
+        TraceEvent::PlanFailed {
+            reason: Failure::SensorFault { fault, .. },
+            ..
+        } if *fault == expected
+    )));
+    // Fail safe: from the fault on, the robot stands still.
+    let positions: Vec<i64> = rec
+        .world
+        .0
+        .iter()
+        .filter(|(t, _, _)| *t >= detected.0)
+        .map(|(_, p, _)| *p)
+        .collect();
+    assert!(!positions.is_empty());
+    assert!(
+        positions.iter().all(|p| *p == positions[0]),
+        "moved after the fault"
+    );
+    assert!(
+        rec.world
+            .0
+            .iter()
+            .any(|(t, _, e)| *t == detected.0 && *e == WorldEvent::Stop)
+    );
+    assert_eq!(rec.summary.tally.collisions, 0);
+    // Without a working sonar no plan can monitor path_clear: a clear error, not a hang.
+    assert!(
+        matches!(
+            rec.summary.ending,
+            Ending::Error(psmpa_core::ControlError::Planning { .. })
+        ),
+        "{:?}",
+        rec.summary.ending
+    );
+    detected.0
+}
+
+#[test]
+fn a_sonar_that_stops_answering_times_out_and_the_robot_stops() {
+    let at = assert_fails_safe(
+        &with_sonar_fault("silent"),
+        psmpa_core::SensorFault::Timeout,
+    );
+    // The first sample due at or after 3 s never completes; its 50 ms timeout expires.
+    assert_eq!(at, 3_050);
+}
+
+#[test]
+fn a_sonar_reading_beyond_its_range_is_a_fault_and_the_robot_stops() {
+    let at = assert_fails_safe(
+        &with_sonar_fault("out-of-range"),
+        psmpa_core::SensorFault::OutOfRange,
+    );
+    assert_eq!(at, 3_000);
+}
+
+#[test]
+fn a_stuck_sonar_is_caught_by_odometry_and_the_robot_stops() {
+    let at = assert_fails_safe(&with_sonar_fault("stuck"), psmpa_core::SensorFault::Stuck);
+    // The echo stays at one distance while the robot walks 5 cm (0.5 s at 0.1 m/s).
+    assert_eq!(at, 3_500);
+}
+
+#[test]
+fn a_sonar_stuck_while_the_robot_stands_is_not_a_false_alarm() {
+    // Standing before a box (side-stepping it), readings repeat: that is no fault.
+    let sc = scenario("sonar-6");
+    let s = run_summary(&sc, Arch::PSmpa).unwrap();
+    assert!(matches!(s.ending, Ending::Goal(_)));
+}

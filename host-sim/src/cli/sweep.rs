@@ -78,6 +78,7 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
         act_ms: uniform(r, 10, 40) * 100,
         door_locked: false,
         back_door_um: 3_000_000,
+        fault: None,
         interferences,
     }
 }
