@@ -60,6 +60,9 @@ cargo xtask qemu --inject-fault --expect-failure
 step "firmware size: flash, static RAM, stack high-water against budget and snapshot"
 cargo xtask size
 
+step "firmware stack: static worst case from the binary, at least the QEMU high-water mark"
+cargo xtask stack
+
 step "psmpa-core uses no allocator"
 # `extern crate std/alloc` is allowed only right under `#[cfg(test)]`.
 awk 'FNR == 1 { prev = "" }

@@ -186,6 +186,9 @@ pub enum Problem<'a> {
     UnreachableGoal(&'a str),
     /// The platform has no behaviour of this name.
     Unbound(&'a str),
+    /// Arrays and objects nested deeper than [`MAX_DEPTH`] (the parser recurses once per
+    /// level, so the depth bounds its stack).
+    TooDeep,
 }
 
 /// A JSON error of `serde-json-core`, which carries no message of its own.
@@ -244,6 +247,7 @@ impl fmt::Display for LoadError<'_> {
                 )
             }
             Problem::Unbound(n) => write!(f, "the platform has no behaviour called `{n}`"),
+            Problem::TooDeep => write!(f, "nested deeper than {MAX_DEPTH} levels"),
         }
     }
 }
@@ -834,11 +838,45 @@ pub fn reachable<const NS: usize, const NA: usize>(
     }
 }
 
+/// The deepest nesting of arrays and objects a mission may have. The format itself needs 4
+/// (`plans[i].body[j]`); deeper input is refused before parsing, because skipping an unknown
+/// value recurses once per level and a microcontroller's stack is small.
+pub const MAX_DEPTH: usize = 8;
+
+/// Whether arrays and objects in `json` nest deeper than `limit`, outside strings. O(n).
+fn too_deep(json: &[u8], limit: usize) -> bool {
+    let (mut depth, mut in_string, mut escaped) = (0usize, false, false);
+    for &c in json {
+        if in_string {
+            match (escaped, c) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => {}
+            }
+            continue;
+        }
+        match c {
+            b'"' => in_string = true,
+            b'[' | b'{' => {
+                depth = depth.saturating_add(1);
+                if depth > limit {
+                    return true;
+                }
+            }
+            b']' | b'}' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    false
+}
+
 /// Loads a mission file, binding its behaviours through `registry`.
 ///
 /// Errors say what and where ([`LoadError`]): JSON that does not parse, an unknown field or
 /// fact or event or action, a duplicate name, a capacity exceeded (naming the limit), an empty
-/// plan body, a goal no action can ever add, a behaviour the platform does not have.
+/// plan body, a goal no action can ever add, a behaviour the platform does not have, nesting
+/// deeper than [`MAX_DEPTH`].
 pub fn load<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L: usize>(
     json: &'a [u8],
     registry: &R,
@@ -866,6 +904,12 @@ pub fn load_into<
 ) -> Result<(), LoadError<'a>> {
     *mission = Mission::empty();
     *bindings = Bindings::new();
+    if too_deep(json, MAX_DEPTH) {
+        return Err(LoadError {
+            at: Location::default(),
+            problem: Problem::TooDeep,
+        });
+    }
     let mut b: Builder<'a, '_, R, NS, NA, NP, L> = Builder {
         mission,
         bindings,
@@ -1022,6 +1066,27 @@ mod tests {
         "actions": [{"name": "x", "pre": ["a"], "add": ["b"]}],
         "plans": [{"name": "p", "trigger": "go", "body": ["x"]}],
         "task": {"event": "go", "goal": ["b"]}}"#;
+
+    #[test]
+    fn nesting_deeper_than_the_limit_is_refused_before_parsing() {
+        let nested = |depth: usize| {
+            let mut json = String::from(SMALL.strip_suffix('}').unwrap());
+            json.push_str(", \"description\": ");
+            json.extend(core::iter::repeat_n('[', depth));
+            json.push_str("\"[[[[[[[[[[ in a string \\\" [[[[[[\"");
+            json.extend(core::iter::repeat_n(']', depth));
+            json.push('}');
+            json
+        };
+        // The top-level object is one level, the description the rest.
+        assert!(load_str(&nested(MAX_DEPTH - 1)).is_ok());
+        let deep = nested(MAX_DEPTH);
+        assert_eq!(load_str(&deep).unwrap_err().problem, Problem::TooDeep);
+        assert_eq!(error(&deep), "top level: nested deeper than 8 levels");
+        // What a microcontroller's stack could never parse is refused just as fast.
+        let hostile = nested(100_000);
+        assert_eq!(load_str(&hostile).unwrap_err().problem, Problem::TooDeep);
+    }
 
     #[test]
     fn key_order_does_not_matter() {

@@ -170,11 +170,17 @@ mod firmware {
         }
     }
 
+    /// Set by the first panic: a panic while logging one exits at once, so the handler nests
+    /// at most once (the stack bound of `cargo xtask stack` relies on it).
+    static PANICKING: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
     #[panic_handler]
     fn panic(info: &core::panic::PanicInfo) -> ! {
-        match info.location() {
-            Some(l) => error!("panic at {=str}:{=u32}", l.file(), l.line()),
-            None => error!("panic"),
+        if !PANICKING.swap(true, core::sync::atomic::Ordering::Relaxed) {
+            match info.location() {
+                Some(l) => error!("panic at {=str}:{=u32}", l.file(), l.line()),
+                None => error!("panic"),
+            }
         }
         debug::exit(EXIT_FAILURE);
         loop {

@@ -888,26 +888,35 @@ impl<'s, L: WorldLog> World<'s, L> {
     /// The outcome so far.
     pub fn tally(&self) -> Tally {
         self.view(|s, _| {
-            let placed = || {
-                s.obstacles
-                    .iter()
-                    .filter(|o| matches!(o.phase, Phase::Present | Phase::Removed | Phase::Avoided))
-            };
-            let count = |f: &dyn Fn(&Obstacle) -> bool| placed().filter(|o| f(o)).count() as u32;
-            Tally {
+            // One pass, no closures through pointers: the firmware's stack bound stays tight.
+            let mut t = Tally {
                 interferences: s.obstacles.len() as u32,
-                placed: count(&|_| true),
-                detected: count(&|o| matches!(o.fate, Fate::Detected(_))),
-                collisions: count(&|o| o.fate == Fate::Collided),
-                detectable: count(&|o| o.certain_samples > 0),
-                max_reaction_ms: placed()
-                    .filter(|o| matches!(o.fate, Fate::Detected(_)))
-                    .filter_map(|o| o.reaction_ms)
-                    .max()
-                    .map(u64::from),
+                placed: 0,
+                detected: 0,
+                collisions: 0,
+                detectable: 0,
+                max_reaction_ms: None,
                 reached_door: s.at_door_ms.is_some(),
                 on_ms: s.on_ms,
+            };
+            let placed = s
+                .obstacles
+                .iter()
+                .filter(|o| matches!(o.phase, Phase::Present | Phase::Removed | Phase::Avoided));
+            for o in placed {
+                t.placed += 1;
+                t.detectable += u32::from(o.certain_samples > 0);
+                match o.fate {
+                    Fate::Detected(_) => {
+                        t.detected += 1;
+                        let reaction = o.reaction_ms.map(u64::from);
+                        t.max_reaction_ms = t.max_reaction_ms.max(reaction);
+                    }
+                    Fate::Collided => t.collisions += 1,
+                    Fate::Unmet => {}
+                }
             }
+            t
         })
     }
 

@@ -13,12 +13,14 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-const TARGET: &str = "thumbv7em-none-eabihf";
-const PROFILE: &str = "firmware";
+/// The firmware's target.
+pub const TARGET: &str = "thumbv7em-none-eabihf";
+/// The firmware's cargo profile.
+pub const PROFILE: &str = "firmware";
 
 /// Paths in panic locations, mapped to fixed prefixes: sizes do not depend on where the
 /// registry or the checkout lives.
-fn rustflags() -> String {
+pub fn rustflags() -> String {
     let cargo_home = std::env::var("CARGO_HOME")
         .map(PathBuf::from)
         .unwrap_or_else(|_| {

@@ -5,9 +5,12 @@
 //!   result and trace hash as the host simulator.
 //! * `size`: flash and static RAM of the firmware and its stack high-water mark in QEMU,
 //!   checked against the budget and the committed snapshot `firmware/size.json`.
+//! * `stack`: a static bound on the firmware's stack from its call graph and frame sizes,
+//!   checked against the high-water mark the same binary measures in QEMU.
 
 mod firmware;
 mod size;
+mod stack;
 
 use std::process::ExitCode;
 
@@ -38,6 +41,9 @@ enum Task {
         #[arg(long)]
         bless: bool,
     },
+    /// Bounds the firmware's worst-case stack from its binary and checks the bound against
+    /// the high-water mark measured in QEMU (needs the nightly toolchain).
+    Stack,
 }
 
 fn main() -> ExitCode {
@@ -47,6 +53,7 @@ fn main() -> ExitCode {
             expect_failure,
         } => firmware::qemu_check(inject_fault).then_expect(expect_failure),
         Task::Size { bless } => size::run(bless),
+        Task::Stack => stack::run(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

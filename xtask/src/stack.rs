@@ -1,0 +1,960 @@
+//! `cargo xtask stack`: the worst-case stack of the firmware, computed from its binary.
+//!
+//! * Frames: LLVM's, from a build with `-Z emit-stack-sizes`; for functions compiled without
+//!   it (the precompiled `compiler_builtins`), from the prologue (`push`, `vpush`, `sub sp`).
+//! * Call graph, from `arm-none-eabi-objdump -d`: `bl`/`blx` targets and branches out of a
+//!   function (tail calls). A call through a register is resolved by looking back, inside its
+//!   basic block, for the load that set the register:
+//!   - from a literal pool: a direct call (size-optimised code hoists addresses so);
+//!   - from `[rN, #k]`: slot `k` of a table (trait-object vtables, `RawWakerVTable`): any
+//!     function stored `k` bytes into a table whose address the program uses;
+//!   - otherwise: any function whose address is taken.
+//!
+//!   Addresses come from the relocations the linker keeps (`--emit-relocs`), never from
+//!   guessing which words look like pointers. Function pointers the code stores at run time
+//!   (not in a table) join every indirect call, unless [`ONLY_FROM`] names their one caller.
+//! * Bound: `worst(f) = frame(f) + max(worst(callee))`. A cycle is an error unless
+//!   [`BOUNDED_RECURSION`] says why the code bounds it. The firmware's bound adds the exceptions
+//!   that preempt thread mode (SysTick, then HardFault) with their hardware frames.
+//! * Check: the analysed code is byte for byte the shipped firmware, and the bound is at least
+//!   the high-water mark the same code measures in QEMU over every scenario.
+//!
+//! What it cannot see: a jump table landing between a load and its call (the look-back would
+//! then pick one of two loads); stack used by inline assembly outside the frame.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use object::{Object, ObjectSection, ObjectSymbol, RelocationKind, SectionFlags, SymbolKind};
+
+use crate::firmware;
+
+/// Cycles in the call graph that the code bounds: a cycle through a function whose name
+/// contains the pattern repeats at most `depth` times, for the reason given.
+const BOUNDED_RECURSION: &[(&str, u64, &str)] = &[
+    (
+        "deserialize_ignored_any",
+        psmpa_core::mission::MAX_DEPTH as u64,
+        "skipping a JSON value recurses per level; the mission loader refuses nesting deeper \
+         than psmpa_core::mission::MAX_DEPTH before it parses",
+    ),
+    (
+        "core::panicking::panic_fmt",
+        2,
+        "the panic handler logs on its first entry only, so a panic while logging ends there",
+    ),
+    (
+        "core::str::slice_error_fail",
+        2,
+        "core's string-slicing panic slices its message at a char boundary it has just found, \
+         which cannot fail again",
+    ),
+];
+
+/// Function pointers stored at run time that only one caller calls: (callee pattern, caller
+/// pattern, why).
+const ONLY_FROM: &[(&str, &str, &str)] = &[
+    (
+        "embassy_executor::raw::TaskStorage<",
+        "psmpa_firmware::executor::run",
+        "the executor's poll loop is the only caller of a task's poll function",
+    ),
+    (
+        " as core::fmt::",
+        "core::fmt::write",
+        "the formatting functions in fmt::Arguments are called by core::fmt::write only",
+    ),
+];
+
+/// Hardware exception frame with the floating-point context, plus the alignment word.
+const EXCEPTION_FRAME: u64 = 108;
+
+/// One disassembled instruction.
+#[derive(Debug, Clone)]
+struct Insn {
+    addr: u64,
+    mnemonic: String,
+    args: String,
+}
+
+/// How a call through a register was resolved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Site {
+    /// Slot at this byte offset of a table.
+    Slot(u64),
+    /// Anything whose address is taken (the call's address, for the report).
+    Unknown(u64),
+}
+
+#[derive(Debug, Default, Clone)]
+struct Function {
+    name: String,
+    /// LLVM's frame size, or the prologue's.
+    frame: Option<u64>,
+    from_prologue: bool,
+    /// Direct callees (start addresses), including calls resolved through literal pools.
+    calls: BTreeSet<u64>,
+    /// Calls through registers not resolved to one target.
+    sites: BTreeSet<Site>,
+}
+
+/// The firmware's functions and what its pointers may reach.
+struct Program {
+    funcs: BTreeMap<u64, Function>,
+    /// Functions stored in an allocated section (a vtable, a waker vtable) by the address of
+    /// the word.
+    table_words: BTreeMap<u64, u64>,
+    /// Every address a relocated word holds: candidate table starts.
+    referenced: BTreeSet<u64>,
+    /// Relocated words of allocated sections other than the code, by address.
+    relocated: BTreeMap<u64, u64>,
+    /// Addresses of zero words that are referenced (a vtable without a drop function).
+    zero: BTreeSet<u64>,
+    /// Functions whose address is loaded from a literal pool and not just called: stored
+    /// somewhere at run time.
+    stored: BTreeSet<u64>,
+}
+
+impl Program {
+    /// Whether a table of function pointers that the program refers to starts at `start` and
+    /// reaches slot `k`: a trait-object vtable (drop function or 0, size, align, methods) or a
+    /// table of pointers only (`RawWakerVTable`). Every word up to the slot must fit, and no
+    /// other table may start before it.
+    fn is_table(&self, start: u64, k: u64) -> bool {
+        if !self.referenced.contains(&start) {
+            return false;
+        }
+        // A table ends where the next one the program refers to begins.
+        if (4..=k)
+            .step_by(4)
+            .any(|o| self.referenced.contains(&(start + o)))
+        {
+            return false;
+        }
+        let function = |at: u64| self.table_words.contains_key(&at);
+        let plain = |at: u64| !self.relocated.contains_key(&at);
+        let vtable = (function(start) || self.zero.contains(&start))
+            && plain(start + 4)
+            && plain(start + 8)
+            && (12..=k).step_by(4).all(|o| function(start + o));
+        let pointers = (0..=k).step_by(4).all(|o| function(start + o));
+        vtable || pointers
+    }
+}
+
+fn demangle(name: &str) -> String {
+    format!("{:#}", rustc_demangle::demangle(name))
+}
+
+/// Builds the firmware for analysis: the same compiler and flags as the shipped firmware, plus
+/// `-Z emit-stack-sizes` (a section beside the code) and `--emit-relocs` (which words are
+/// addresses). `RUSTC_BOOTSTRAP` unlocks the `-Z` flag on the stable compiler, so the code
+/// analysed is the code shipped; [`run`] checks that byte for byte. (A compiler that believes
+/// it is nightly mangles names the v0 way, which moves code: legacy keeps stable's layout.)
+fn build() -> Result<PathBuf, String> {
+    let target_dir = firmware::root().join("target/stack");
+    let flags = [
+        firmware::rustflags().as_str(),
+        "-Zemit-stack-sizes",
+        "-Clink-arg=--emit-relocs",
+        "-Zunstable-options",
+        "-Csymbol-mangling-version=legacy",
+    ]
+    .join("\x1f");
+    let status = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+        .current_dir(firmware::root())
+        .args(["build", "--quiet", "-p", "psmpa-firmware", "--target"])
+        .args([firmware::TARGET, "--profile", firmware::PROFILE])
+        .env("CARGO_ENCODED_RUSTFLAGS", flags)
+        .env("CARGO_TARGET_DIR", &target_dir)
+        .env("RUSTC_BOOTSTRAP", "1")
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err("the firmware does not build with -Z emit-stack-sizes".to_owned());
+    }
+    Ok(target_dir
+        .join(firmware::TARGET)
+        .join(firmware::PROFILE)
+        .join("psmpa-firmware"))
+}
+
+/// LLVM's frame sizes by function address: `(u32 address, ULEB128 size)` records.
+fn stack_sizes(elf: &object::File<'_>) -> Result<HashMap<u64, u64>, String> {
+    let section = elf
+        .section_by_name(".stack_sizes")
+        .ok_or("no .stack_sizes section: was the firmware built with -Z emit-stack-sizes?")?;
+    let data = section.uncompressed_data().map_err(|e| e.to_string())?;
+    let mut out = HashMap::new();
+    let mut rest: &[u8] = &data;
+    while let Some((addr, tail)) = rest.split_first_chunk::<4>() {
+        let (mut size, mut shift, mut used) = (0u64, 0, 0);
+        for &b in tail {
+            used += 1;
+            size |= u64::from(b & 0x7f) << shift;
+            shift += 7;
+            if b < 0x80 {
+                break;
+            }
+        }
+        out.insert(u64::from(u32::from_le_bytes(*addr)) & !1, size);
+        rest = tail.get(used..).unwrap_or_default();
+    }
+    Ok(out)
+}
+
+/// Number of registers in a list such as `{r4, r5, lr}` or `{d8-d11}`.
+fn register_count(list: &str) -> u64 {
+    let list = list.split_once('{').map_or(list, |(_, l)| l);
+    let list = list.split('}').next().unwrap_or("");
+    let number = |r: &str| {
+        r.trim_start_matches(|c: char| c.is_ascii_alphabetic())
+            .parse::<u64>()
+            .ok()
+    };
+    list.split(',')
+        .map(str::trim)
+        .filter(|r| !r.is_empty())
+        .map(|r| match r.split_once('-') {
+            Some((a, b)) => number(b)
+                .zip(number(a))
+                .map_or(1, |(b, a)| b.saturating_sub(a) + 1),
+            None => 1,
+        })
+        .sum()
+}
+
+/// Frame size from the prologue: pushes, vpushes and `sub sp` before the first branch.
+/// `None` if the stack pointer moves in a way it does not understand.
+fn prologue(code: &[Insn]) -> Option<u64> {
+    let mut size = 0u64;
+    let mut pending_imm: Option<u64> = None;
+    for Insn { mnemonic, args, .. } in code.iter().take(16) {
+        match mnemonic.as_str() {
+            "push" | "push.w" => size += 4 * register_count(args),
+            "stmdb" | "stmdb.w" if args.starts_with("sp!") => size += 4 * register_count(args),
+            "vpush" | "vstmdb" => {
+                let list = args.split_once('{').map_or(args.as_str(), |(_, l)| l);
+                let width = if list.trim_start().starts_with('d') {
+                    8
+                } else {
+                    4
+                };
+                size += width * register_count(args);
+            }
+            "sub" | "sub.w" | "subw" if args.starts_with("sp") => {
+                let last = args.split('@').next().unwrap_or("").rsplit(',').next()?;
+                match last.trim().strip_prefix('#') {
+                    Some(imm) => size += parse_imm(imm)?,
+                    None => size += pending_imm?,
+                }
+            }
+            "movw" | "mov.w" | "mov" if !args.starts_with("sp") && !args.starts_with("r7") => {
+                pending_imm = args.rsplit('#').next().and_then(parse_imm);
+            }
+            "movt" => {}
+            m if m.starts_with('b') || m == "cbz" || m == "cbnz" => break,
+            _ if args.starts_with("sp,") && !mnemonic.starts_with("add") => return None,
+            _ => {}
+        }
+    }
+    Some(size)
+}
+
+fn parse_imm(s: &str) -> Option<u64> {
+    // objdump appends comments (`#48\t@ 0x30`): the number is the first word.
+    let s = s
+        .split_whitespace()
+        .next()?
+        .trim_end_matches(|c: char| !c.is_ascii_alphanumeric());
+    match s.strip_prefix("0x") {
+        Some(hex) => u64::from_str_radix(hex, 16).ok(),
+        None => s.parse().ok(),
+    }
+}
+
+/// The address an instruction's comment names: `@ (d0 <Reset+0x50>)` or `@ 4ac <...>`.
+fn comment_address(args: &str) -> Option<u64> {
+    let (_, comment) = args.split_once('@')?;
+    let hex = comment
+        .trim()
+        .trim_start_matches('(')
+        .split_whitespace()
+        .next()?;
+    u64::from_str_radix(hex, 16).ok()
+}
+
+/// Registers an instruction writes (those the look-back needs: general registers).
+fn writes(insn: &Insn) -> Vec<String> {
+    let m = insn.mnemonic.split('.').next().unwrap_or("");
+    let ops: Vec<String> = insn
+        .args
+        .split('@')
+        .next()
+        .unwrap_or("")
+        .split(',')
+        .map(|o| o.trim().to_owned())
+        .collect();
+    let first = || ops.first().cloned().into_iter().collect::<Vec<_>>();
+    let list = || {
+        let args = insn.args.split_once('{').map_or("", |(_, l)| l);
+        let args = args.split('}').next().unwrap_or("");
+        args.split(',')
+            .map(|r| r.trim().to_owned())
+            .collect::<Vec<_>>()
+    };
+    let base_written = insn.args.contains('!') || insn.args.contains("],");
+    let base = || {
+        insn.args
+            .split_once('[')
+            .and_then(|(_, b)| b.split([',', ']']).next())
+            .map(|b| b.trim().to_owned())
+    };
+    let mut out = match m {
+        _ if m.starts_with("str") || m.starts_with("stm") || m.starts_with("vst") => vec![],
+        "cmp" | "cmn" | "tst" | "teq" | "cbz" | "cbnz" | "push" | "vpush" | "dmb" | "dsb"
+        | "isb" | "nop" | "bkpt" | "svc" | "msr" | "cpsid" | "cpsie" | "wfi" | "wfe" | "sev"
+        | "vcmp" | "vcmpe" | "vmsr" => vec![],
+        _ if m.starts_with("it")
+            || (m.starts_with('b') && !m.starts_with("bic") && !m.starts_with("bf")) =>
+        {
+            // A call clobbers the argument registers; a branch writes nothing.
+            if m == "bl" || m == "blx" {
+                ["r0", "r1", "r2", "r3", "ip", "lr"]
+                    .map(String::from)
+                    .to_vec()
+            } else {
+                vec![]
+            }
+        }
+        "pop" | "ldm" | "ldmia" | "ldmdb" => list(),
+        "ldrd" | "ldrexd" | "umull" | "smull" | "umlal" | "smlal" | "vmov" if ops.len() >= 3 => {
+            ops.iter().take(2).cloned().collect()
+        }
+        _ => first(),
+    };
+    if base_written && let Some(b) = base() {
+        out.push(b);
+    }
+    out
+}
+
+/// Whether a mnemonic carries a condition (inside an IT block): its write may not happen.
+fn conditional(mnemonic: &str) -> bool {
+    const CONDITIONS: [&str; 14] = [
+        "eq", "ne", "cs", "cc", "mi", "pl", "vs", "vc", "hi", "ls", "ge", "lt", "gt", "le",
+    ];
+    let m = mnemonic.split('.').next().unwrap_or("");
+    // `bls`, `bne`, ... are branches; `movs`/`adds` set flags and end in `s`, not a condition.
+    !m.starts_with('b')
+        && CONDITIONS
+            .iter()
+            .any(|c| m.len() > c.len() + 1 && m.ends_with(c) && m != "vmls" && m != "smulls")
+}
+
+/// What a call through a register reaches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Resolved {
+    Direct(u64),
+    Site(Site),
+}
+
+/// Whether control never falls through to the next instruction.
+fn ends_flow(insn: &Insn) -> bool {
+    let m = insn.mnemonic.split('.').next().unwrap_or("");
+    let returns = insn.args.contains("pc}") || insn.args.starts_with("pc,");
+    matches!(m, "b" | "bx" | "tbb" | "tbh" | "udf")
+        || (returns && (m == "pop" || m.starts_with("ldm")))
+}
+
+/// What a call through `reg` at `code[i]` reaches: the loads that set the register, found by
+/// walking back along every path into the call (fall-through and branches) until each one
+/// meets its load. A path that starts at the function's entry (an argument), meets a spill,
+/// an arithmetic result or a conditional write, is unknown.
+fn resolve(
+    code: &[Insn],
+    i: usize,
+    reg: &str,
+    branches_to: &BTreeMap<u64, Vec<usize>>,
+    word: &dyn Fn(u64) -> Option<u64>,
+    used_literals: &mut BTreeSet<u64>,
+) -> BTreeSet<Resolved> {
+    let unknown = Resolved::Site(Site::Unknown(code.get(i).map_or(0, |c| c.addr)));
+    let mut out = BTreeSet::new();
+    let mut seen = BTreeSet::new();
+    let mut work = vec![(i, reg.to_owned())];
+    while let Some((j, reg)) = work.pop() {
+        if !seen.insert((j, reg.clone())) {
+            continue;
+        }
+        if seen.len() > 512 {
+            out.insert(unknown);
+            break;
+        }
+        let Some(here) = code.get(j) else { continue };
+        let mut preds: Vec<usize> = branches_to.get(&here.addr).cloned().unwrap_or_default();
+        if let Some(p) = j.checked_sub(1)
+            && code.get(p).is_some_and(|p| !ends_flow(p))
+        {
+            preds.push(p);
+        }
+        if preds.is_empty() {
+            out.insert(unknown);
+        }
+        for p in preds {
+            let Some(insn) = code.get(p) else { continue };
+            let written = writes(insn);
+            let Some(pos) = written.iter().position(|w| *w == reg) else {
+                work.push((p, reg.clone()));
+                continue;
+            };
+            let m = insn.mnemonic.split('.').next().unwrap_or("");
+            let src = insn.args.split_once('[').map(|(_, s)| s);
+            let found = if conditional(&insn.mnemonic) {
+                None
+            } else if m == "ldr" && src.is_some_and(|s| s.starts_with("pc")) {
+                comment_address(&insn.args)
+                    .and_then(word)
+                    .filter(|t| t & 1 == 1)
+                    .map(|t| {
+                        used_literals.insert(insn.addr);
+                        Resolved::Direct(t & !1)
+                    })
+            } else if m == "ldr" || m == "ldrd" {
+                src.and_then(|src| {
+                    let (base, rest) = src.split_once(']').unwrap_or((src, ""));
+                    if base.trim() == "sp" || base.trim_start().starts_with("sp,") {
+                        return None; // a spill
+                    }
+                    // `[rN, #k]`, or `[rN], #k` post-indexed (slot 0).
+                    let offset = if rest.starts_with(',') {
+                        0
+                    } else {
+                        match base.split_once('#') {
+                            Some((_, k)) => parse_imm(k)?,
+                            None => 0,
+                        }
+                    };
+                    Some(Resolved::Site(Site::Slot(offset + 4 * pos as u64)))
+                })
+            } else if m == "mov" {
+                if let Some(from) = insn.args.split(',').nth(1) {
+                    work.push((p, from.trim().to_owned()));
+                    continue;
+                }
+                None
+            } else {
+                None
+            };
+            out.insert(found.unwrap_or(unknown));
+        }
+    }
+    out
+}
+
+/// Reads the ELF: functions, frames, tables of function pointers and the disassembly.
+fn program(elf_path: &Path) -> Result<Program, String> {
+    let data = std::fs::read(elf_path).map_err(|e| e.to_string())?;
+    let elf = object::File::parse(&*data).map_err(|e| e.to_string())?;
+    let sizes = stack_sizes(&elf)?;
+    let mut funcs: BTreeMap<u64, Function> = BTreeMap::new();
+    for sym in elf.symbols() {
+        if sym.kind() == SymbolKind::Text && sym.size() > 0 {
+            let addr = sym.address() & !1;
+            funcs.entry(addr).or_insert_with(|| Function {
+                name: demangle(sym.name().unwrap_or("?")),
+                frame: sizes.get(&addr).copied(),
+                ..Function::default()
+            });
+        }
+    }
+
+    // Every relocated word of an allocated section (the vector table aside: only the
+    // hardware calls through it).
+    let mut relocated: BTreeMap<u64, u64> = BTreeMap::new();
+    let mut text_words: BTreeMap<u64, u64> = BTreeMap::new();
+    for section in elf.sections() {
+        let allocated = matches!(
+            section.flags(),
+            SectionFlags::Elf { sh_flags, .. } if sh_flags.0 & object::elf::SHF_ALLOC.0 != 0
+        );
+        if !allocated || section.name() == Ok(".vector_table") {
+            continue;
+        }
+        let is_text = section.name() == Ok(".text");
+        let bytes = section.data().map_err(|e| e.to_string())?;
+        for (offset, reloc) in section.relocations() {
+            if reloc.kind() != RelocationKind::Absolute || reloc.size() != 32 {
+                continue;
+            }
+            // In a linked file the offset is an address; the word there is the final value.
+            let at = offset.checked_sub(section.address()).unwrap_or(offset);
+            let value = usize::try_from(at)
+                .ok()
+                .and_then(|at| bytes.get(at..at.checked_add(4)?))
+                .and_then(|w| <[u8; 4]>::try_from(w).ok())
+                .map(|w| u64::from(u32::from_le_bytes(w)));
+            if let Some(value) = value {
+                if is_text {
+                    text_words.insert(offset, value);
+                } else {
+                    relocated.insert(offset, value);
+                }
+            }
+        }
+    }
+    if relocated.is_empty() && text_words.is_empty() {
+        return Err("no relocations in the ELF: was it linked with --emit-relocs?".to_owned());
+    }
+    let starts: BTreeSet<u64> = funcs.keys().copied().collect();
+    let is_function = |v: u64| v & 1 == 1 && starts.contains(&(v & !1));
+    let table_words = relocated
+        .iter()
+        .filter(|(_, v)| is_function(**v))
+        .map(|(at, v)| (*at, *v & !1))
+        .collect();
+    let referenced: BTreeSet<u64> = relocated
+        .values()
+        .chain(text_words.values())
+        .copied()
+        .collect();
+    let zero = elf
+        .sections()
+        .filter(|s| s.name() != Ok(".text"))
+        .flat_map(|s| {
+            let base = s.address();
+            let bytes = s.data().unwrap_or_default();
+            referenced
+                .iter()
+                .filter(move |r| (base..base + bytes.len() as u64).contains(r))
+                .filter(move |r| {
+                    let at = (*r - base) as usize;
+                    bytes.get(at..at + 4) == Some(&[0u8; 4][..])
+                })
+                .copied()
+                .collect::<Vec<_>>()
+        })
+        .collect();
+
+    let out = Command::new("arm-none-eabi-objdump")
+        .args(["-d", "--no-show-raw-insn"])
+        .arg(elf_path)
+        .output()
+        .map_err(|e| format!("cannot run arm-none-eabi-objdump: {e}"))?;
+    if !out.status.success() {
+        return Err("arm-none-eabi-objdump failed".to_owned());
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let owner = |addr: u64| starts.range(..=addr).next_back().copied();
+    let mut bodies: BTreeMap<u64, Vec<Insn>> = BTreeMap::new();
+    for line in text.lines() {
+        let Some((addr, rest)) = line.trim_start().split_once(":\t") else {
+            continue;
+        };
+        let Ok(addr) = u64::from_str_radix(addr.trim(), 16) else {
+            continue;
+        };
+        let mut parts = rest.trim().splitn(2, char::is_whitespace);
+        let mnemonic = parts.next().unwrap_or("").to_owned();
+        let args = parts.next().unwrap_or("").trim().to_owned();
+        if let Some(f) = owner(addr) {
+            bodies.entry(f).or_default().push(Insn {
+                addr,
+                mnemonic,
+                args,
+            });
+        }
+    }
+
+    let word = |addr: u64| text_words.get(&addr).copied();
+    let mut literal_loads: BTreeMap<u64, u64> = BTreeMap::new();
+    let mut used_literals = BTreeSet::new();
+    for (start, code) in &bodies {
+        let end = funcs
+            .range(start + 1..)
+            .next()
+            .map_or(u64::MAX, |(a, _)| *a);
+        let target_of = |insn: &Insn| {
+            let args = insn.args.split('@').next().unwrap_or("");
+            let last = args.rsplit(',').next().unwrap_or("").trim();
+            let hex = last.split_whitespace().next().unwrap_or("");
+            u64::from_str_radix(hex, 16).ok().map(|t| t & !1)
+        };
+        let is_branch = |m: &str| {
+            let m = m.split('.').next().unwrap_or("");
+            m == "cbz"
+                || m == "cbnz"
+                || (m.starts_with('b') && m.len() <= 3 && m != "bic" && m != "bl")
+        };
+        let mut branches_to: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
+        for (i, c) in code.iter().enumerate() {
+            if is_branch(&c.mnemonic)
+                && let Some(t) = target_of(c)
+            {
+                branches_to.entry(t).or_default().push(i);
+            }
+        }
+        let f = funcs.get_mut(start).ok_or("function vanished")?;
+        if f.frame.is_none() {
+            f.frame = prologue(code);
+            f.from_prologue = f.frame.is_some();
+        }
+        for (i, insn) in code.iter().enumerate() {
+            let m = insn.mnemonic.split('.').next().unwrap_or("");
+            if m == "ldr"
+                && insn.args.contains("[pc")
+                && let Some(v) = comment_address(&insn.args).and_then(word)
+                && is_function(v)
+            {
+                literal_loads.insert(insn.addr, v & !1);
+            }
+            let reg = insn.args.split_whitespace().next().unwrap_or("");
+            let through_register =
+                (m == "blx" || m == "bx") && reg != "lr" && target_of(insn).is_none();
+            let loads_pc = m.starts_with("ldr") && insn.args.starts_with("pc,");
+            let call = m == "bl" || m == "blx";
+            // A call, or a branch out of the function: a tail call.
+            let leaves = |t: &u64| call || !(*start..end).contains(t);
+            if (call || is_branch(m))
+                && let Some(t) = target_of(insn).filter(leaves)
+            {
+                f.calls.insert(t);
+                continue;
+            }
+            if through_register {
+                for r in resolve(code, i, reg, &branches_to, &word, &mut used_literals) {
+                    match r {
+                        Resolved::Direct(t) => {
+                            f.calls.insert(t);
+                        }
+                        Resolved::Site(site) => {
+                            f.sites.insert(site);
+                        }
+                    }
+                }
+            } else if loads_pc || (m == "mov" && insn.args.starts_with("pc,")) {
+                f.sites.insert(Site::Unknown(insn.addr));
+            }
+        }
+    }
+    let stored = literal_loads
+        .iter()
+        .filter(|(at, _)| !used_literals.contains(*at))
+        .map(|(_, f)| *f)
+        .collect();
+    Ok(Program {
+        funcs,
+        table_words,
+        referenced,
+        relocated,
+        zero,
+        stored,
+    })
+}
+
+/// The worst stack below each function.
+struct Analysis<'a> {
+    program: &'a Program,
+    memo: HashMap<u64, Option<u64>>,
+    /// The call path being explored.
+    path: Vec<u64>,
+    recursion: BTreeSet<String>,
+    unknown_frame: BTreeSet<String>,
+    /// Calls through registers: caller, site, number of targets.
+    indirect: BTreeMap<(String, Site), usize>,
+}
+
+impl Analysis<'_> {
+    fn name(&self, addr: u64) -> &str {
+        self.program
+            .funcs
+            .get(&addr)
+            .map_or("?", |f| f.name.as_str())
+    }
+
+    /// What a call through a pointer at `site` in `caller` may reach.
+    fn targets(&self, caller: &str, site: Site) -> BTreeSet<u64> {
+        let p = self.program;
+        let allowed = |t: &u64| {
+            let name = self.name(*t);
+            ONLY_FROM
+                .iter()
+                .all(|(callee, only, _)| !name.contains(callee) || caller.contains(only))
+        };
+        let tables = p.table_words.iter().filter(|(at, _)| match site {
+            Site::Slot(k) => at.checked_sub(k).is_some_and(|start| p.is_table(start, k)),
+            Site::Unknown(_) => true,
+        });
+        tables
+            .map(|(_, f)| *f)
+            .chain(p.stored.iter().copied())
+            .filter(allowed)
+            .collect()
+    }
+
+    /// The worst stack of a call to `addr`, and whether a bounded cycle was cut below it
+    /// (then the result depends on the path, and is not memoized).
+    fn worst(&mut self, addr: u64) -> (Option<u64>, bool) {
+        if let Some(w) = self.memo.get(&addr) {
+            return (*w, false);
+        }
+        let Some(f) = self.program.funcs.get(&addr) else {
+            // Not a function symbol (a branch into the middle of one): nothing of its own.
+            return (Some(0), false);
+        };
+        if let Some(i) = self.path.iter().position(|a| *a == addr) {
+            let bounded = self.path.get(i..).unwrap_or_default().iter().any(|a| {
+                let n = self.name(*a);
+                BOUNDED_RECURSION.iter().any(|(p, _, _)| n.contains(p))
+            });
+            if bounded {
+                // The repetitions are paid for where the bounded function multiplies.
+                return (Some(0), true);
+            }
+            let cycle: Vec<&str> = self
+                .path
+                .get(i..)
+                .unwrap_or_default()
+                .iter()
+                .map(|a| self.name(*a))
+                .collect();
+            self.recursion.insert(cycle.join("\n    -> "));
+            return (None, false);
+        }
+        if f.frame.is_none() {
+            self.unknown_frame.insert(f.name.clone());
+        }
+        let mut callees: BTreeSet<u64> = f.calls.clone();
+        for site in &f.sites {
+            let targets = self.targets(&f.name, *site);
+            self.indirect.insert((f.name.clone(), *site), targets.len());
+            callees.extend(targets);
+        }
+        self.path.push(addr);
+        let (mut deepest, mut cut) = (Some(0u64), false);
+        for c in callees {
+            let (w, c_cut) = self.worst(c);
+            cut |= c_cut;
+            deepest = deepest.zip(w).map(|(a, b)| a.max(b));
+        }
+        self.path.pop();
+        let mut w = f.frame.zip(deepest).map(|(a, b)| a + b);
+        if let Some((_, depth, _)) = BOUNDED_RECURSION
+            .iter()
+            .find(|(p, _, _)| f.name.contains(p))
+        {
+            // `depth - 1` times around the costliest cycle, then the deepest way out.
+            let cycle = self.cycle_cost(addr);
+            w = w.zip(cycle).map(|(w, c)| w + (depth - 1) * c);
+        }
+        if !cut {
+            self.memo.insert(addr, w);
+        }
+        (w, cut)
+    }
+}
+
+impl Analysis<'_> {
+    fn callees(&self, f: &Function) -> BTreeSet<u64> {
+        let mut callees = f.calls.clone();
+        for site in &f.sites {
+            callees.extend(self.targets(&f.name, *site));
+        }
+        callees
+    }
+
+    /// The costliest way from `root` back to itself: the stack one more level of its
+    /// recursion takes. `Some(0)` if it cannot come back.
+    fn cycle_cost(&self, root: u64) -> Option<u64> {
+        fn to_root(
+            a: &Analysis<'_>,
+            at: u64,
+            root: u64,
+            path: &mut Vec<u64>,
+            memo: &mut HashMap<u64, Option<u64>>,
+        ) -> Option<u64> {
+            if at == root {
+                return Some(0);
+            }
+            if let Some(m) = memo.get(&at) {
+                return *m;
+            }
+            let f = a.program.funcs.get(&at)?;
+            if path.contains(&at) {
+                return None; // another cycle: bounded, or reported, elsewhere
+            }
+            path.push(at);
+            let best = a
+                .callees(f)
+                .into_iter()
+                .filter_map(|c| to_root(a, c, root, path, memo))
+                .max();
+            path.pop();
+            let cost = best.and_then(|b| f.frame.map(|fr| fr + b));
+            memo.insert(at, cost);
+            cost
+        }
+        let f = self.program.funcs.get(&root)?;
+        let mut memo = HashMap::new();
+        let back = self
+            .callees(f)
+            .into_iter()
+            .filter_map(|c| to_root(self, c, root, &mut vec![root], &mut memo))
+            .max();
+        Some(back.map_or(0, |b| f.frame.unwrap_or(0) + b))
+    }
+
+    /// The deepest call chain under `addr`: (frame, name) per function.
+    fn deepest_path(&mut self, addr: u64) -> Vec<(Option<u64>, String)> {
+        let mut out = Vec::new();
+        let mut at = Some(addr);
+        let mut visited = BTreeSet::new();
+        while let Some(a) = at.filter(|a| visited.insert(*a)) {
+            let Some(f) = self.program.funcs.get(&a) else {
+                break;
+            };
+            out.push((f.frame, f.name.clone()));
+            at = self
+                .callees(f)
+                .into_iter()
+                .filter(|c| !visited.contains(c))
+                .max_by_key(|c| self.worst(*c).0.unwrap_or(u64::MAX));
+        }
+        out
+    }
+}
+
+fn by_name(funcs: &BTreeMap<u64, Function>, name: &str) -> Option<u64> {
+    funcs.iter().find(|(_, f)| f.name == name).map(|(a, _)| *a)
+}
+
+/// The bytes of the code and constants, to check that the analysed binary is the shipped one.
+fn code(elf: &Path) -> Result<Vec<u8>, String> {
+    let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+    let file = object::File::parse(&*data).map_err(|e| e.to_string())?;
+    let mut out = Vec::new();
+    for name in [".vector_table", ".text", ".rodata", ".data"] {
+        let section = file
+            .section_by_name(name)
+            .ok_or_else(|| format!("{}: no {name} section", elf.display()))?;
+        out.extend_from_slice(section.data().map_err(|e| e.to_string())?);
+    }
+    Ok(out)
+}
+
+fn show(w: Option<u64>) -> String {
+    w.map_or("unbounded".to_owned(), |w| format!("{w} B"))
+}
+
+/// Analyses, runs in QEMU, compares, prints.
+pub fn run() -> Result<(), String> {
+    let shipped = firmware::build(&[])?;
+    let elf = build()?;
+    if code(&elf)? != code(&shipped)? {
+        return Err("the analysed build's code differs from the shipped firmware's".to_owned());
+    }
+    let program = program(&elf)?;
+    let funcs = &program.funcs;
+    let mut a = Analysis {
+        program: &program,
+        memo: HashMap::new(),
+        path: Vec::new(),
+        recursion: BTreeSet::new(),
+        unknown_frame: BTreeSet::new(),
+        indirect: BTreeMap::new(),
+    };
+    let task = funcs
+        .iter()
+        .find(|(_, f)| f.name.contains("TaskStorage<") && f.name.ends_with("::poll"))
+        .map(|(a, _)| *a);
+    let mut entry = |label: &str, addr: Option<u64>| {
+        let w = addr.and_then(|addr| a.worst(addr).0);
+        println!("{label:<46} {:>10}", show(w));
+        w
+    };
+    println!("{:<46} {:>10}", "entry", "worst stack");
+    entry("mission task (one poll)", task);
+    let thread = entry(
+        "Reset (main, executor, every task)",
+        by_name(funcs, "Reset"),
+    );
+    let systick = entry("SysTick (time driver)", by_name(funcs, "SysTick"));
+    let hardfault = entry("HardFault", by_name(funcs, "HardFault"));
+    // SysTick preempts thread mode, HardFault preempts both; no other interrupt is enabled.
+    let total = match (thread, systick, hardfault) {
+        (Some(t), Some(s), Some(h)) => Some(t + EXCEPTION_FRAME + s + EXCEPTION_FRAME + h),
+        _ => None,
+    };
+    println!(
+        "{:<46} {:>10}",
+        "bound (thread + SysTick + HardFault)",
+        show(total)
+    );
+
+    if let Some(reset) = by_name(funcs, "Reset") {
+        println!("\ndeepest path in thread mode (frame, function):");
+        for (frame, name) in a.deepest_path(reset) {
+            println!("  {:>6}  {name}", show(frame));
+        }
+    }
+    let unknown = funcs.values().filter(|f| f.frame.is_none()).count();
+    let prologue_count = funcs.values().filter(|f| f.from_prologue).count();
+    println!(
+        "\n{} functions: frames from LLVM for {}, from the prologue for {prologue_count}, unknown for {unknown}",
+        funcs.len(),
+        funcs.len() - prologue_count - unknown,
+    );
+    println!(
+        "{} function pointers in tables, {} stored at run time; calls through pointers:",
+        program.table_words.len(),
+        program.stored.len()
+    );
+    for ((caller, site), n) in &a.indirect {
+        let site = match site {
+            Site::Slot(k) => format!("slot {k}"),
+            Site::Unknown(at) => format!("{at:#x}"),
+        };
+        println!("  {n:>3} targets  {site:<8}  {caller}");
+    }
+    for f in &program.stored {
+        println!("stored at run time: {}", a.name(*f));
+    }
+    for (pattern, depth, why) in BOUNDED_RECURSION {
+        println!("recursion through `{pattern}` bounded by {depth}: {why}");
+    }
+    for (callee, only, why) in ONLY_FROM {
+        println!("`{callee}` is called through a pointer from `{only}` only: {why}");
+    }
+    let report = |title: &str, set: &BTreeSet<String>| {
+        if !set.is_empty() {
+            println!("{title}:");
+            for n in set {
+                println!("  {n}");
+            }
+        }
+    };
+    report("unbounded recursion", &a.recursion);
+    report(
+        "reachable functions without a known frame",
+        &a.unknown_frame,
+    );
+
+    let log = firmware::run(&elf)?;
+    let measured = firmware::stack_high_water(&log)
+        .ok_or("the firmware did not report its stack high-water mark")?;
+    println!("\nmeasured in QEMU (same code, every scenario): {measured} B");
+    match total {
+        Some(bound) if bound >= measured => {
+            println!(
+                "bound {bound} B >= measured {measured} B ({:.2}x)",
+                bound as f64 / measured as f64
+            );
+            Ok(())
+        }
+        Some(bound) => Err(format!(
+            "the bound {bound} B is below the measured {measured} B: the analysis is wrong"
+        )),
+        None => Err("the stack is unbounded (see above)".to_owned()),
+    }
+}
