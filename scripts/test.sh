@@ -15,10 +15,11 @@ for component in clippy rustfmt; do
   grep -q "^$component" <<<"$installed_components" || rustup component add "$component"
 done
 
-step "system tools: QEMU, ARM binutils, defmt-print (installed only when missing)"
+step "system tools: QEMU, ARM binutils, valgrind, defmt-print (installed only when missing)"
 missing=()
 command -v qemu-system-arm >/dev/null || missing+=(qemu-system-arm)
 command -v arm-none-eabi-objdump >/dev/null || missing+=(binutils-arm-none-eabi)
+command -v valgrind >/dev/null || missing+=(valgrind)
 if ((${#missing[@]})); then
   sudo=""
   [ "$(id -u)" -eq 0 ] || sudo=sudo
@@ -62,6 +63,12 @@ cargo xtask size
 
 step "firmware stack: static worst case from the binary, at least the QEMU high-water mark"
 cargo xtask stack
+
+step "timing: response-time analysis from QEMU step costs; every measured reaction within its bound"
+cargo xtask timing
+
+step "the analysis can fail: at 250 kHz the same jobs need more than the processor"
+cargo xtask timing --clock-hz 250000 --expect-failure
 
 step "psmpa-core uses no allocator"
 # `extern crate std/alloc` is allowed only right under `#[cfg(test)]`.

@@ -16,6 +16,7 @@
 //! | Algorithm 3: data stores `D`, mutual store | [`store`] |
 //! | Algorithm 1: the control loop | [`control`] |
 //! | the SMPA baseline | [`exec::Policy::Smpa`] |
+//! | worst-case reaction latency | [`timing`] |
 //!
 //! The platform (a robot, or a simulator) implements [`platform::Sensor`] and
 //! [`platform::Actuator`]. The core only exposes futures: it never spawns a task and never
@@ -55,6 +56,7 @@ pub mod plan;
 pub mod planner;
 pub mod platform;
 pub mod store;
+pub mod timing;
 pub mod trace;
 
 pub use action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, SensorSet};

@@ -3,11 +3,19 @@
 //! embassy-executor: this module provides `__pender`.
 
 use core::mem::MaybeUninit;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use embassy_executor::{Spawner, raw};
 
 static PENDING: AtomicBool = AtomicBool::new(false);
+
+/// What a poll did, from the trace events it emitted ([`note`]): a sample of sensor `i` sets
+/// bit `i`; planning, plan and state changes set [`CONTROL`]; a poll that emits nothing is a
+/// behaviour step.
+pub const CONTROL: u32 = 1 << 8;
+
+/// Sensors whose sample steps are told apart.
+pub const SENSORS: usize = 4;
 
 /// How long polls took, in core cycles.
 #[derive(Clone, Copy, Debug, Default)]
@@ -20,6 +28,12 @@ pub struct Polls {
     pub max_at: u64,
     /// All of them together.
     pub total_cycles: u64,
+    /// The longest poll that sampled sensor `i` (and maybe others), without control work.
+    pub max_sample: [u32; SENSORS],
+    /// The longest poll that planned, selected a plan or moved the FSM.
+    pub max_control: u32,
+    /// The longest poll that did none of that: a behaviour step.
+    pub max_behaviour: u32,
 }
 
 static POLLS: critical_section::Mutex<core::cell::Cell<Polls>> =
@@ -28,7 +42,18 @@ static POLLS: critical_section::Mutex<core::cell::Cell<Polls>> =
         max_cycles: 0,
         max_at: 0,
         total_cycles: 0,
+        max_sample: [0; SENSORS],
+        max_control: 0,
+        max_behaviour: 0,
     }));
+
+/// Steps of the running poll.
+static STEPS: AtomicU32 = AtomicU32::new(0);
+
+/// Records that the running poll did `steps`.
+pub fn note(steps: u32) {
+    STEPS.fetch_or(steps, Ordering::Relaxed);
+}
 
 /// The poll statistics since the last call, which starts them again.
 pub fn take_polls() -> Polls {
@@ -37,6 +62,7 @@ pub fn take_polls() -> Polls {
 
 fn record(begin: u64, end: u64, tick: u64) {
     let cycles = u32::try_from(end.saturating_sub(begin)).unwrap_or(u32::MAX);
+    let steps = STEPS.swap(0, Ordering::Relaxed);
     critical_section::with(|cs| {
         let cell = POLLS.borrow(cs);
         let mut p = cell.get();
@@ -45,6 +71,20 @@ fn record(begin: u64, end: u64, tick: u64) {
         if cycles > p.max_cycles {
             p.max_cycles = cycles;
             p.max_at = tick;
+        }
+        // A poll that also planned or moved the FSM counts as control only: control is
+        // sporadic and bounded as blocking; sample steps are the periodic jobs.
+        if steps & CONTROL != 0 {
+            p.max_control = p.max_control.max(cycles);
+        } else {
+            for (i, max) in p.max_sample.iter_mut().enumerate() {
+                if steps & (1 << i) != 0 {
+                    *max = (*max).max(cycles);
+                }
+            }
+        }
+        if steps == 0 {
+            p.max_behaviour = p.max_behaviour.max(cycles);
         }
         cell.set(p);
     });

@@ -25,6 +25,7 @@ mod firmware {
     use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
     use defmt::{error, info};
     use defmt_semihosting as _;
+    use psmpa_core::{TraceEvent, TraceSink};
     use psmpa_sim::robot::{Arch, Robot};
     use psmpa_sim::scenario::Scenario;
 
@@ -94,6 +95,24 @@ mod firmware {
         }
     }
 
+    /// Tells the executor what each poll did, for the cost of each kind of step.
+    struct Steps;
+
+    impl TraceSink for Steps {
+        fn record(&mut self, _at: embassy_time::Instant, event: &TraceEvent) {
+            executor::note(match event {
+                TraceEvent::Sample { sensor, .. } | TraceEvent::SampleLost { sensor } => {
+                    1u32.checked_shl(sensor.index() as u32).unwrap_or(0) & 0xff
+                }
+                // Part of a sample step, or of a behaviour step.
+                TraceEvent::PreconditionViolated { .. }
+                | TraceEvent::PreconditionRestored { .. }
+                | TraceEvent::User { .. } => 0,
+                _ => executor::CONTROL,
+            });
+        }
+    }
+
     #[embassy_executor::task]
     async fn missions(robot: &'static mut Robot<'static>, scenario: &'static mut Scenario) {
         for (index, (file, json)) in SCENARIOS.iter().enumerate() {
@@ -109,7 +128,8 @@ mod firmware {
                 time_driver::restart();
                 embassy_futures::yield_now().await;
                 executor::take_polls();
-                let (s, (), ()) = psmpa_sim::run::run_robot(robot, scenario, arch, (), ()).await;
+                time_driver::take_isr_max_cycles();
+                let (s, (), _) = psmpa_sim::run::run_robot(robot, scenario, arch, (), Steps).await;
                 let polls = executor::take_polls();
                 info!(
                     "polls scenario={=str} arch={=str} count={=u32} max_cycles={=u32} max_at_ms={=u64} total_cycles={=u64}",
@@ -119,6 +139,18 @@ mod firmware {
                     polls.max_cycles,
                     polls.max_at,
                     polls.total_cycles
+                );
+                info!(
+                    "steps scenario={=str} arch={=str} sample0={=u32} sample1={=u32} sample2={=u32} sample3={=u32} control={=u32} behaviour={=u32} isr={=u32}",
+                    scenario.name.as_str(),
+                    arch.name(),
+                    polls.max_sample[0],
+                    polls.max_sample[1],
+                    polls.max_sample[2],
+                    polls.max_sample[3],
+                    polls.max_control,
+                    polls.max_behaviour,
+                    time_driver::take_isr_max_cycles()
                 );
                 let t = s.tally;
                 info!(

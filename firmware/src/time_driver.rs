@@ -14,6 +14,7 @@
 //! on the real counter, and how long polls take is measured in cycles ([`cycles`]).
 
 use core::cell::{Cell, RefCell};
+use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Waker;
 
 use cortex_m::peripheral::syst::SystClkSource;
@@ -136,12 +137,30 @@ embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDri
 
 #[exception]
 fn SysTick() {
+    let begin = critical_section::with(|cs| {
+        // The period ran out and the counter reloaded (taking the exception cleared the pending
+        // flag, so `elapsed` now counts from the reload): count the whole period.
+        let counted = DRIVER.cycles_before.borrow(cs);
+        counted.set(counted.get() + u64::from(syst().rvr.read()) + 1);
+        counted.get() + u64::from(DRIVER.elapsed())
+    });
     critical_section::with(|cs| {
         // The period ended: this is its last tick.
         let now = DRIVER.base.borrow(cs).get() + u64::from(DRIVER.period.borrow(cs).get());
         DRIVER.expire(cs, now);
         DRIVER.program(cs, now);
     });
+    let cycles = cycles().saturating_sub(begin);
+    ISR_MAX_CYCLES.fetch_max(u32::try_from(cycles).unwrap_or(u32::MAX), Ordering::Relaxed);
+}
+
+/// The longest SysTick handler so far, in cycles from its first statement to its last
+/// (exception entry and exit, 12 cycles each on a Cortex-M4, come on top).
+static ISR_MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
+
+/// The longest SysTick handler since the last call, which starts again.
+pub fn take_isr_max_cycles() -> u32 {
+    ISR_MAX_CYCLES.swap(0, Ordering::Relaxed)
 }
 
 /// Starts the clock at tick 0: SysTick from the core clock, interrupting at deadlines.

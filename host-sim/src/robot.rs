@@ -257,6 +257,51 @@ pub fn config(scenario: &Scenario, arch: Arch) -> Config {
     }
 }
 
+/// The reaction latency the runtime promises for one cyclic sensor
+/// ([`psmpa_core::timing::latency_bound`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LatencyBound {
+    /// The sensor.
+    pub sensor: SensorId,
+    /// Its sampling period, ns.
+    pub period_ns: u64,
+    /// The bound, ns.
+    pub bound_ns: u64,
+}
+
+/// The reaction-latency bound of every cyclic sensor of `robot`'s mission (after
+/// [`Robot::apply`]) under P-SMPA, given the worst response time of each sensor's sampling job:
+/// 0 in virtual time, where computing takes no time; the response-time analysis of
+/// [`psmpa_core::timing`] on a microcontroller. Latencies count from the instant a sensor is
+/// certain to register the obstacle (see [`crate::world`]), so no margin for noise is needed.
+pub fn latency_bounds(
+    robot: &Robot<'_>,
+    scenario: &Scenario,
+    response_ns: impl Fn(SensorId) -> u64,
+) -> heapless::Vec<LatencyBound, 4> {
+    let max_lost = config(scenario, Arch::PSmpa).max_lost;
+    let domain = &robot.mission.domain;
+    (0..domain.sensors().len())
+        .filter_map(SensorId::new)
+        .filter_map(|id| match domain.sensor(id)?.mode {
+            SensorMode::Cyclic { period } => {
+                let period_ns = period.as_micros().saturating_mul(1_000);
+                Some(LatencyBound {
+                    sensor: id,
+                    period_ns,
+                    bound_ns: psmpa_core::timing::latency_bound(
+                        period_ns,
+                        max_lost,
+                        response_ns(id),
+                        0,
+                    ),
+                })
+            }
+            _ => None,
+        })
+        .collect()
+}
+
 /// The planner the robot uses when no library plan applies: shortest plans, 64 nodes (the
 /// Fetch Tea domain needs a handful; 64 keep the search's stack at about 2 KiB).
 pub const PLANNER: Planner<64> = Planner::new(Strategy::BreadthFirst);

@@ -14,13 +14,14 @@
 //!   bumper on is a detection, not a collision.
 //! * **collision**: the robot touched an obstacle no active sensor had registered; it cannot
 //!   walk through and is blocked until the obstacle is removed (or avoided once sensed).
-//! * **reaction latency**: from the first instant an active sensor could register the obstacle
-//!   (noise-free) to the instant the walking stops for it (at once, if the robot was standing).
-//!   The instant is the start of the registrable interval in which the detection happened: if
-//!   the obstacle stops being registrable before any sample catches it (it enters the sonar's
+//! * **reaction latency**: from the first instant an active sensor is certain to register the
+//!   obstacle whatever the noise (see *detectable*) to the instant the walking stops for it (at
+//!   once, if the robot was standing); from the registration itself if a lucky reading came
+//!   first. The instant is the start of the certain interval in which the detection happened:
+//!   if the obstacle stops being certain before any sample catches it (it enters the sonar's
 //!   blind zone, a nearer box hides it, the sensor is switched off), the clock starts again
-//!   when it becomes registrable again. A window shorter than a sampling period says nothing
-//!   about how fast the robot reacts.
+//!   when it becomes certain again. This is what the runtime can promise
+//!   ([`psmpa_core::timing::latency_bound`]): before that instant, noise decides.
 //! * **detectable**: at least one delivered sample fell in an instant where the obstacle was
 //!   present and certain to register whatever the noise (a box in
 //!   `[min + noise, threshold − noise)`, or a touch with the bumper on). Under P-SMPA, whose
@@ -117,7 +118,7 @@ pub enum WorldEvent {
     Detected(u8, Device),
     /// The robot touched interference `index` unregistered.
     Collided(u8),
-    /// The robot stopped for interference `index` this long after it became registrable.
+    /// The robot stopped for interference `index` this long after it became certain to register.
     Reacted(u8, u64),
     /// The robot started walking.
     Walk,
@@ -218,12 +219,20 @@ struct Obstacle {
     pos_um: i64,
     phase: Phase,
     fate: Fate,
-    /// Start of the current interval in which an active sensor could register it.
-    registrable_since: Option<u32>,
+    /// Start of the current interval in which an active sensor is certain to register it.
+    certain_since: Option<u32>,
     reaction_ms: Option<u32>,
     certain_samples: u16,
     /// Some active sensor has registered it (also after a collision): a side step can aim at it.
     sensed: bool,
+}
+
+/// A box at `d` µm in range registers whatever the noise: both ends of the noise band do.
+fn certain_at(sonar: &crate::scenario::Sonar, d: i64) -> bool {
+    [d - sonar.noise_um, d + sonar.noise_um]
+        .map(|x| to_mm(x.clamp(sonar.min_um, sonar.max_um)))
+        .iter()
+        .all(|&r| sonar.registers(r))
 }
 
 impl Obstacle {
@@ -354,7 +363,8 @@ impl<L: WorldLog> State<L> {
     }
 
     /// Noise-free: could an active sensor register `o` now?
-    fn registrable(&self, o: &Obstacle, sc: &Scenario) -> bool {
+    /// Whether an active sensor's next sample registers `o` whatever the noise.
+    fn certain(&self, o: &Obstacle, sc: &Scenario) -> bool {
         if !o.blocks() {
             return false;
         }
@@ -362,7 +372,7 @@ impl<L: WorldLog> State<L> {
         let sonar = self.on[0]
             && o.kind == Kind::Box
             && (sc.sonar.min_um..=sc.sonar.max_um).contains(&d)
-            && sc.sonar.registers(to_mm(d))
+            && certain_at(&sc.sonar, d)
             && self.nearest_box() == Some(d);
         let bumper = self.on[1] && self.touching(o);
         sonar || bumper
@@ -496,10 +506,10 @@ impl<L: WorldLog> State<L> {
                 self.emit(WorldEvent::Collided(i as u8));
             }
             if o.fate == Fate::Unmet {
-                let registrable = self.registrable(&o, sc);
+                let certain = self.certain(&o, sc);
                 if let Some(o) = self.obstacles.get_mut(i) {
-                    o.registrable_since = if registrable {
-                        o.registrable_since.or(Some(ms32(now)))
+                    o.certain_since = if certain {
+                        o.certain_since.or(Some(ms32(now)))
                     } else {
                         None
                     };
@@ -540,9 +550,9 @@ impl<L: WorldLog> State<L> {
             return;
         }
         o.fate = Fate::Detected(by);
-        // With noise a reading can register a box a little before the noise-free instant.
-        let first = o.registrable_since.map_or(now, |f| u64::from(f).min(now));
-        o.registrable_since = Some(ms32(first));
+        // With noise a reading can register a box before it is certain to.
+        let first = o.certain_since.map_or(now, |f| u64::from(f).min(now));
+        o.certain_since = Some(ms32(first));
         let reacted = (!moving && o.reaction_ms.is_none()).then(|| now - first);
         if let Some(r) = reacted {
             o.reaction_ms = Some(ms32(r));
@@ -560,8 +570,7 @@ impl<L: WorldLog> State<L> {
             let Some(o) = self.obstacles.get_mut(i) else {
                 continue;
             };
-            if let (Fate::Detected(_), None, Some(first)) =
-                (o.fate, o.reaction_ms, o.registrable_since)
+            if let (Fate::Detected(_), None, Some(first)) = (o.fate, o.reaction_ms, o.certain_since)
             {
                 let r = now.saturating_sub(u64::from(first));
                 o.reaction_ms = Some(ms32(r));
@@ -585,7 +594,7 @@ impl<'s, L: WorldLog> World<'s, L> {
                 pos_um: 0,
                 phase: Phase::Pending,
                 fate: Fate::Unmet,
-                registrable_since: None,
+                certain_since: None,
                 reaction_ms: None,
                 certain_samples: 0,
                 sensed: false,
@@ -768,7 +777,7 @@ impl<'s, L: WorldLog> World<'s, L> {
             } else {
                 WorldEvent::SensorOff(device)
             });
-            // Switching a sensor on can make an obstacle registrable at once.
+            // Switching a sensor on can make an obstacle certain at once.
             s.settle(sc);
         });
     }
@@ -825,10 +834,7 @@ impl<'s, L: WorldLog> World<'s, L> {
             };
             let mm = to_mm(reading_um);
             if let Some(d) = seen {
-                // Certain to register whatever the noise: both ends of the noise band do.
-                let band = [d - sonar.noise_um, d + sonar.noise_um]
-                    .map(|x| to_mm(x.clamp(sonar.min_um, sonar.max_um)));
-                let certain = band.iter().all(|&r| sonar.registers(r));
+                let certain = certain_at(&sonar, d);
                 let registered = sonar.registers(mm);
                 // Every box at that distance is what the echo came from.
                 for i in 0..s.obstacles.len() {

@@ -164,6 +164,39 @@ fn noise_free_reactions_take_less_than_one_period_of_the_detecting_sensor() {
     assert!(checked > 40);
 }
 
+/// Every reaction P-SMPA shows, on every shipped scenario and 300 random ones (noise, dropout,
+/// obstacles that come and go), is within the bound `psmpa_core::timing` promises: with a
+/// response time of 0, as computing takes no virtual time. The bound must also be tight enough
+/// to mean something: some reaction comes within 2 periods of it.
+#[test]
+fn every_psmpa_reaction_is_within_the_latency_bound() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+    let mut scenarios: Vec<Scenario> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| load(&e.unwrap().path()).unwrap())
+        .collect();
+    scenarios.extend((0..300).map(|i| sweep::scenario(7, i)));
+    let (mut checked, mut worst_slack_ns) = (0, u64::MAX);
+    for sc in &scenarios {
+        let robot = psmpa_sim::robot::fetch_tea(sc).unwrap();
+        let bounds = psmpa_sim::robot::latency_bounds(&robot, sc, |_| 0);
+        assert_eq!(bounds.len(), 2, "sonar and bumper are cyclic");
+        // A box is perceived by both, and the slower one's bound holds for either.
+        let bound_ns = bounds.iter().map(|b| b.bound_ns).max().unwrap();
+        for o in run_summary(sc, Arch::PSmpa).unwrap().obstacles {
+            let (Fate::Detected(_), Some(r)) = (o.fate, o.reaction_ms) else {
+                continue;
+            };
+            let r_ns = r * 1_000_000;
+            assert!(r_ns <= bound_ns, "{}: {r} ms > {bound_ns} ns", sc.name);
+            worst_slack_ns = worst_slack_ns.min(bound_ns - r_ns);
+            checked += 1;
+        }
+    }
+    eprintln!("{checked} reactions, least slack {worst_slack_ns} ns");
+    assert!(checked > 500, "{checked}");
+}
+
 /// Sonar and bumper both perceive `path_clear`: a bumper sample saying "free" must not clear a
 /// violation the sonar raised (the conjunction of the two decides).
 #[test]

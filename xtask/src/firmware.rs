@@ -10,7 +10,8 @@ use psmpa_sim::sim::run_summary;
 
 /// The workspace root.
 pub fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    root.canonicalize().unwrap_or(root)
 }
 
 /// The firmware's target.
@@ -26,7 +27,7 @@ pub fn rustflags() -> String {
         .unwrap_or_else(|_| {
             PathBuf::from(std::env::var("HOME").unwrap_or_default()).join(".cargo")
         });
-    let root = root().canonicalize().unwrap_or_else(|_| root());
+    let root = root();
     [
         format!("--remap-path-prefix={}=cargo", cargo_home.display()),
         format!("--remap-path-prefix={}=psmpa", root.display()),
@@ -100,18 +101,39 @@ struct Outcome {
     trace_hash: String,
 }
 
-/// The `result key=value ...` lines of the firmware log, by (scenario, arch).
-fn parse_results(log: &str) -> BTreeMap<(String, String), Outcome> {
+/// The fields of every `TAG key=value ...` line of the firmware log.
+pub fn tagged<'l>(log: &'l str, tag: &str) -> Vec<BTreeMap<&'l str, &'l str>> {
+    let tag = format!(" {tag} ");
     log.lines()
         .filter_map(|line| {
-            let fields: BTreeMap<&str, &str> = line
-                .split_once("result ")?
-                .1
-                .split_whitespace()
-                .filter_map(|kv| kv.split_once('='))
-                .collect();
+            let (_, rest) = line.split_once(tag.as_str())?;
+            Some(
+                rest.split_whitespace()
+                    .filter_map(|kv| kv.split_once('='))
+                    .collect(),
+            )
+        })
+        .collect()
+}
+
+/// The scenario files, sorted.
+pub fn scenario_files() -> Result<Vec<PathBuf>, String> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(root().join("scenarios"))
+        .map_err(|e| format!("scenarios/: {e}"))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// The `result key=value ...` lines of the firmware log, by (scenario, arch).
+fn parse_results(log: &str) -> BTreeMap<(String, String), Outcome> {
+    tagged(log, "result")
+        .into_iter()
+        .map(|fields| {
             let get = |k: &str| fields.get(k).map(|v| (*v).to_owned()).unwrap_or_default();
-            Some((
+            (
                 (get("scenario"), get("arch")),
                 Outcome {
                     interferences: get("interferences"),
@@ -124,21 +146,15 @@ fn parse_results(log: &str) -> BTreeMap<(String, String), Outcome> {
                     bumper_on_ms: get("bumper_on_ms"),
                     trace_hash: get("trace_hash"),
                 },
-            ))
+            )
         })
         .collect()
 }
 
 /// The host simulator's outcome for every scenario file and both architectures.
 fn host_results() -> Result<BTreeMap<(String, String), Outcome>, String> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(root().join("scenarios"))
-        .map_err(|e| format!("scenarios/: {e}"))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "json"))
-        .collect();
-    files.sort();
     let mut out = BTreeMap::new();
-    for file in files {
+    for file in scenario_files()? {
         let sc = psmpa_sim::load::load(&file).map_err(|e| e.to_string())?;
         for arch in Arch::ALL {
             let s = run_summary(&sc, arch).map_err(|e| e.to_string())?;

@@ -7,10 +7,13 @@
 //!   checked against the budget and the committed snapshot `firmware/size.json`.
 //! * `stack`: a static bound on the firmware's stack from its call graph and frame sizes,
 //!   checked against the high-water mark the same binary measures in QEMU.
+//! * `timing`: response-time analysis from the step costs the firmware measures in QEMU: the
+//!   reaction-latency bound of every sensor, checked against the measured reactions.
 
 mod firmware;
 mod size;
 mod stack;
+mod timing;
 
 use std::process::ExitCode;
 
@@ -44,6 +47,19 @@ enum Task {
     /// Bounds the firmware's worst-case stack from its binary and checks the bound against
     /// the high-water mark measured in QEMU (needs the nightly toolchain).
     Stack,
+    /// Response-time analysis from step costs measured in QEMU: a latency bound per sensor,
+    /// checked against every measured reaction; the table also goes to a JSON file.
+    Timing {
+        /// Core clock the cycle counts are converted at (QEMU's mps2-an386 runs at 25 MHz).
+        #[arg(long, default_value_t = 25_000_000)]
+        clock_hz: u64,
+        /// Where to write the JSON report (default `target/timing.json`).
+        #[arg(long)]
+        json: Option<std::path::PathBuf>,
+        /// Succeed only if the analysis fails (to show that it can: a slow clock).
+        #[arg(long)]
+        expect_failure: bool,
+    },
 }
 
 fn main() -> ExitCode {
@@ -54,6 +70,11 @@ fn main() -> ExitCode {
         } => firmware::qemu_check(inject_fault).then_expect(expect_failure),
         Task::Size { bless } => size::run(bless),
         Task::Stack => stack::run(),
+        Task::Timing {
+            clock_hz,
+            json,
+            expect_failure,
+        } => timing::run(clock_hz, json).then_expect(expect_failure),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
