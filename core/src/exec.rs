@@ -615,7 +615,9 @@ impl<
     }
 
     /// Takes one sample: stores it (Algorithm 3 line 6), updates `ω` and the perception facts
-    /// of `φ`, traces it and wakes the behaviour.
+    /// of `φ`, traces it and wakes the behaviour. Besides the platform's own sampling, bounded
+    /// work: one store write (O(K) worst case), sensor fusion over the running sensors (O(NS)),
+    /// one trace event (O(1)).
     pub(crate) async fn sample(&self, sensor: SensorId) -> Result<(), Failure> {
         let spec = self
             .mission
@@ -991,7 +993,8 @@ impl<
     }
 
     /// `executePlans` for one plan: runs its FSM from the initial state along the transition
-    /// rules `T` until [`Target::Done`] or [`Target::Failed`].
+    /// rules `T` until [`Target::Done`] or [`Target::Failed`]. Between two states the work is
+    /// bounded: the transition is O(1), switching sensors off and on O(NS), the effects O(1).
     pub async fn execute(&self, fsm: &Fsm<L>) -> Result<(), Failure> {
         let mut index = 0u8;
         loop {

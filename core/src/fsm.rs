@@ -57,7 +57,7 @@ impl BehaviourState {
         !self.sensors.is_empty()
     }
 
-    /// The transition rule for `edge`.
+    /// The transition rule for `edge`. O(1): a field read, the whole of an FSM transition.
     pub const fn next(&self, edge: Edge) -> Target {
         match edge {
             Edge::Success => self.on_success,

@@ -63,7 +63,7 @@ fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
 #[test]
 fn bad_missions_are_rejected_with_one_clear_line() {
     let good = fetch_tea();
-    let cases: [(&str, &str, &[&str]); 8] = [
+    let cases: [(&str, &str, &[&str]); 9] = [
         (
             r#""pre": ["door_open", "at_door"]"#,
             r#""pre": ["door_opened", "at_door"]"#,
@@ -100,6 +100,11 @@ fn bad_missions_are_rejected_with_one_clear_line() {
             &["sensors[2].mode", "unknown sensor mode `once`"],
         ),
         (r#""task": {"#, r#""task": ["#, &["malformed JSON", "line"]),
+        (
+            r#""events": ["fetch_tea"]"#,
+            r#""events": [[[[[[[[["fetch_tea"]]]]]]]]]"#,
+            &["nested deeper than 8 levels"],
+        ),
     ];
     for (i, (from, to, expected)) in cases.iter().enumerate() {
         assert!(good.contains(from), "case {i}: `{from}` not in the mission");
