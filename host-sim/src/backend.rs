@@ -82,12 +82,16 @@ struct Clock {
     alarms: Vec<Alarm>,
 }
 
-type BoxedTask = Pin<Box<dyn Future<Output = ()>>>;
+/// The running simulation's future, pinned on `simulate`'s stack (no allocation); the
+/// lifetime is erased, and [`Cleanup`] takes the pointer back before that frame ends.
+type TaskPtr = *mut (dyn Future<Output = ()> + 'static);
 
 thread_local! {
     static CLOCK: RefCell<Clock> = RefCell::new(Clock::default());
     /// The future of the running simulation, polled by the trampoline task.
-    static CURRENT: RefCell<Option<BoxedTask>> = const { RefCell::new(None) };
+    static CURRENT: Cell<Option<TaskPtr>> = const { Cell::new(None) };
+    /// Alarms due at the current instant, reused so that advancing the clock allocates nothing.
+    static DUE: RefCell<Vec<Alarm>> = const { RefCell::new(Vec::new()) };
     static TRAMPOLINE_WAKER: RefCell<Option<Waker>> = const { RefCell::new(None) };
     static PENDING: Cell<bool> = const { Cell::new(false) };
     static RUNNING: Cell<bool> = const { Cell::new(false) };
@@ -140,13 +144,16 @@ impl Future for Trampoline {
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
         TRAMPOLINE_WAKER.with(|w| *w.borrow_mut() = Some(cx.waker().clone()));
         // Take the future out while polling it, so that it may use the thread-locals freely.
-        let Some(mut future) = CURRENT.with(|c| c.borrow_mut().take()) else {
+        let Some(future) = CURRENT.with(Cell::take) else {
             return Poll::Ready(());
         };
-        match future.as_mut().poll(cx) {
+        // SAFETY: the pointer is to the future `simulate` pinned on its stack, alive until its
+        // `Cleanup` has cleared `CURRENT`; taking it out first means nothing else aliases it.
+        let pinned = unsafe { Pin::new_unchecked(&mut *future) };
+        match pinned.poll(cx) {
             Poll::Ready(()) => Poll::Ready(()),
             Poll::Pending => {
-                CURRENT.with(|c| *c.borrow_mut() = Some(future));
+                CURRENT.with(|c| c.set(Some(future)));
                 Poll::Pending
             }
         }
@@ -177,18 +184,29 @@ fn advance(limit: u64) -> Result<bool, SimError> {
         }
         c.now = c.now.max(next);
         let now = c.now;
-        let (mut due, rest): (Vec<Alarm>, Vec<Alarm>) =
-            c.alarms.drain(..).partition(|a| a.at <= now);
-        c.alarms = rest;
-        due.sort_by_key(|a| (a.at, a.seq));
-        Ok(Some(due))
-    })?;
-    // Wake outside the borrow: a waker may schedule a new alarm.
-    match due {
-        Some(due) => {
-            for alarm in due {
-                alarm.waker.wake();
+        DUE.with(|d| {
+            let mut due = d.borrow_mut();
+            let mut i = 0;
+            while i < c.alarms.len() {
+                if c.alarms[i].at <= now {
+                    due.push(c.alarms.remove(i));
+                } else {
+                    i += 1;
+                }
             }
+            // (deadline, arrival) is unique: the unstable sort gives the stable order.
+            due.sort_unstable_by_key(|a| (a.at, a.seq));
+        });
+        Ok(Some(()))
+    })?;
+    // Wake outside the clock's borrow: a woken task may schedule a new alarm when polled.
+    match due {
+        Some(()) => {
+            DUE.with(|d| {
+                for alarm in d.borrow_mut().drain(..) {
+                    alarm.waker.wake();
+                }
+            });
             Ok(true)
         }
         None => Ok(false),
@@ -201,7 +219,7 @@ struct Cleanup(&'static Executor);
 
 impl Drop for Cleanup {
     fn drop(&mut self) {
-        drop(CURRENT.with(|c| c.borrow_mut().take()));
+        CURRENT.with(|c| c.set(None));
         if let Some(waker) = TRAMPOLINE_WAKER.with(|w| w.borrow_mut().take()) {
             waker.wake();
         }
@@ -218,7 +236,13 @@ pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Ou
         return Err(SimError::Nested);
     }
     let (executor, storage) = EXECUTOR.with(|e| *e);
-    CLOCK.with(|c| *c.borrow_mut() = Clock::default());
+    CLOCK.with(|c| {
+        // Keep the alarm list's capacity: a simulation after the first allocates nothing.
+        let mut c = c.borrow_mut();
+        c.now = 0;
+        c.seq = 0;
+        c.alarms.clear();
+    });
     PENDING.with(|p| p.set(false));
 
     let mut output: Option<F::Output> = None;
@@ -229,13 +253,17 @@ pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Ou
         // before `simulate` returns, and `output` is only read after that.
         unsafe { *slot = Some(value) };
     };
-    let boxed: Pin<Box<dyn Future<Output = ()> + '_>> = Box::pin(wrapped);
-    // SAFETY: lifetime erasure only. The boxed future borrows from the caller's frame; it is
-    // stored in a thread-local that `Cleanup` empties (on return and on unwind) before this
-    // function's borrows end, and the trampoline never moves it anywhere else.
-    let boxed: BoxedTask =
-        unsafe { std::mem::transmute::<Pin<Box<dyn Future<Output = ()> + '_>>, BoxedTask>(boxed) };
-    CURRENT.with(|c| *c.borrow_mut() = Some(boxed));
+    let mut pinned = std::pin::pin!(wrapped);
+    // SAFETY: the future stays pinned in this frame; the pointer is only dereferenced by the
+    // trampoline, which never moves it.
+    let raw: *mut (dyn Future<Output = ()> + '_) = unsafe { pinned.as_mut().get_unchecked_mut() };
+    // SAFETY: lifetime erasure only. `cleanup`, declared after `pinned` and so dropped before
+    // it (on return and on unwind), clears the thread-local before the future and its borrows
+    // of the caller's frame end.
+    let raw: TaskPtr = unsafe {
+        std::mem::transmute::<*mut (dyn Future<Output = ()> + '_), TaskPtr>(raw)
+    };
+    CURRENT.with(|c| c.set(Some(raw)));
     let cleanup = Cleanup(executor);
 
     let token = storage.spawn(|| Trampoline).map_err(|_| SimError::Nested)?;
@@ -246,7 +274,7 @@ pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Ou
     let mut clock_jumps = 0u64;
     let result = loop {
         poll_ready(executor);
-        if CURRENT.with(|c| c.borrow().is_none()) {
+        if CURRENT.with(|c| c.get().is_none()) {
             break Ok(());
         }
         match advance(limit) {
