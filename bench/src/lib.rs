@@ -3,6 +3,13 @@
 
 use psmpa_sim::scenario::Scenario;
 
+pub mod alloc;
+pub mod bonsai_plan;
+pub mod hand;
+pub mod psmpa_plan;
+pub mod statig_plan;
+pub mod workload;
+
 /// A scenario file of `scenarios/`, by name.
 pub fn scenario(name: &str) -> Scenario {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -7,9 +7,11 @@
 //!   checked against the budget and the committed snapshot `firmware/size.json`.
 //! * `stack`: a static bound on the firmware's stack from its call graph and frame sizes,
 //!   checked against the high-water mark the same binary measures in QEMU.
+//! * `bench`: every benchmark in one run, written as the README's table.
 //! * `timing`: response-time analysis from the step costs the firmware measures in QEMU: the
 //!   reaction-latency bound of every sensor, checked against the measured reactions.
 
+mod bench;
 mod firmware;
 mod size;
 mod stack;
@@ -47,6 +49,13 @@ enum Task {
     /// Bounds the firmware's worst-case stack from its binary and checks the bound against
     /// the high-water mark measured in QEMU (needs the nightly toolchain).
     Stack,
+    /// Every benchmark in one run (psmpa and its peers, stores, simulator, a 10,000-scenario
+    /// sweep); writes bench/RESULTS.md and the README's table.
+    Bench {
+        /// Only rewrite the table from the last run's results.
+        #[arg(long)]
+        no_run: bool,
+    },
     /// Response-time analysis from step costs measured in QEMU: a latency bound per sensor,
     /// checked against every measured reaction; the table also goes to a JSON file.
     Timing {
@@ -70,6 +79,7 @@ fn main() -> ExitCode {
         } => firmware::qemu_check(inject_fault).then_expect(expect_failure),
         Task::Size { bless } => size::run(bless),
         Task::Stack => stack::run(),
+        Task::Bench { no_run } => bench::run(no_run),
         Task::Timing {
             clock_hz,
             json,

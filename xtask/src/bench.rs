@@ -1,0 +1,298 @@
+//! `cargo xtask bench`: every benchmark in one run, and the markdown table the README shows.
+//!
+//! Runs the criterion benches of `bench/` (the plan workload in psmpa and its peers, the data
+//! stores, the simulator), the `behaviortree` bench (its own package: it needs a different
+//! embassy-time tick rate), and a timed 10,000-scenario sweep; reads criterion's medians from
+//! `target/criterion`, writes `bench/RESULTS.md`, and puts the same table into `README.md`
+//! between its `bench:start` and `bench:end` markers.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+use serde::Deserialize;
+
+use crate::firmware;
+
+/// Criterion options: shorter than its defaults, enough for stable medians here.
+const CRITERION: &[&str] = &["--warm-up-time", "1", "--measurement-time", "4", "--noplot"];
+
+#[derive(Deserialize)]
+struct Estimate {
+    point_estimate: f64,
+}
+
+#[derive(Deserialize)]
+struct Estimates {
+    median: Estimate,
+}
+
+#[derive(Deserialize)]
+struct Benchmark {
+    group_id: String,
+    function_id: String,
+    throughput: Option<Throughput>,
+}
+
+#[derive(Deserialize)]
+enum Throughput {
+    Elements(u64),
+    #[allow(dead_code)]
+    Bytes(u64),
+}
+
+/// One measured function: median ns per iteration and elements per iteration.
+#[derive(Debug, Clone, Copy)]
+struct Measured {
+    ns: f64,
+    elements: u64,
+}
+
+/// Every benchmark under a criterion directory: (group, function) → measurement.
+fn read_criterion(dir: &Path) -> Result<BTreeMap<(String, String), Measured>, String> {
+    let mut out = BTreeMap::new();
+    let Ok(groups) = std::fs::read_dir(dir) else {
+        return Err(format!("{}: no criterion results", dir.display()));
+    };
+    for group in groups.flatten() {
+        let Ok(functions) = std::fs::read_dir(group.path()) else {
+            continue;
+        };
+        for function in functions.flatten() {
+            let new = function.path().join("new");
+            let (Ok(b), Ok(e)) = (
+                std::fs::read_to_string(new.join("benchmark.json")),
+                std::fs::read_to_string(new.join("estimates.json")),
+            ) else {
+                continue;
+            };
+            let b: Benchmark = serde_json::from_str(&b).map_err(|e| e.to_string())?;
+            let e: Estimates = serde_json::from_str(&e).map_err(|e| e.to_string())?;
+            let elements = match b.throughput {
+                Some(Throughput::Elements(n)) => n,
+                _ => 1,
+            };
+            out.insert(
+                (b.group_id, b.function_id),
+                Measured {
+                    ns: e.median.point_estimate,
+                    elements,
+                },
+            );
+        }
+    }
+    Ok(out)
+}
+
+/// Runs `cargo bench` with `args`, echoing its output; returns its stdout.
+fn cargo_bench(args: &[&str]) -> Result<String, String> {
+    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    cmd.current_dir(firmware::root())
+        .arg("bench")
+        .args(args)
+        .arg("--")
+        .args(CRITERION)
+        .stderr(Stdio::inherit());
+    let out = cmd
+        .output()
+        .map_err(|e| format!("cannot run cargo bench: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    print!("{text}");
+    if out.status.success() {
+        Ok(text)
+    } else {
+        Err(format!("cargo bench {} failed", args.join(" ")))
+    }
+}
+
+/// `allocations per plan: NAME: N` lines.
+fn allocations(text: &str) -> BTreeMap<String, u64> {
+    text.lines()
+        .filter_map(|l| {
+            let rest = l.strip_prefix("allocations per plan: ")?;
+            let (name, n) = rest.rsplit_once([':', ' '])?;
+            let name = name.trim().trim_end_matches(':').trim();
+            Some((name.to_owned(), n.trim().parse().ok()?))
+        })
+        .collect()
+}
+
+/// Wall time of a 10,000-scenario sweep of both architectures, median of 3, seconds.
+fn sweep_seconds() -> Result<f64, String> {
+    let root = firmware::root();
+    let status = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+        .current_dir(&root)
+        .args(["build", "--quiet", "--release", "-p", "psmpa-sim"])
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err("psmpa-sim does not build".to_owned());
+    }
+    let mut times = Vec::new();
+    for _ in 0..3 {
+        let started = Instant::now();
+        let out = Command::new(root.join("target/release/psmpa-sim"))
+            .args(["sweep", "--runs", "10000", "--seed", "1"])
+            .stdin(Stdio::null())
+            .stderr(Stdio::null())
+            .output()
+            .map_err(|e| format!("cannot run psmpa-sim: {e}"))?;
+        if !out.status.success() {
+            return Err("the sweep failed".to_owned());
+        }
+        times.push(started.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    Ok(times[1])
+}
+
+fn fmt_ns(ns: f64) -> String {
+    if ns >= 1000.0 {
+        format!("{:.2} µs", ns / 1000.0)
+    } else {
+        format!("{ns:.1} ns")
+    }
+}
+
+/// What criterion does not keep: allocation counts and the sweep's time.
+#[derive(serde::Serialize, Deserialize)]
+struct Extra {
+    allocations: BTreeMap<String, u64>,
+    sweep_s: f64,
+}
+
+/// Runs everything (or, with `no_run`, reuses the last run's results), writes the table.
+pub fn run(no_run: bool) -> Result<(), String> {
+    let root = firmware::root();
+    let extra_path = root.join("target/bench-extra.json");
+    let extra = if no_run {
+        let text = std::fs::read_to_string(&extra_path).map_err(|e| {
+            format!(
+                "{}: {e} (run `cargo xtask bench` first)",
+                extra_path.display()
+            )
+        })?;
+        serde_json::from_str(&text).map_err(|e| e.to_string())?
+    } else {
+        let extra = measure(&root)?;
+        let text = serde_json::to_string_pretty(&extra).map_err(|e| e.to_string())?;
+        std::fs::write(&extra_path, text).map_err(|e| e.to_string())?;
+        extra
+    };
+    report(&root, &extra)
+}
+
+/// Runs the benches and the sweep.
+fn measure(root: &Path) -> Result<Extra, String> {
+    let text = cargo_bench(&[
+        "-p",
+        "psmpa-bench",
+        "--bench",
+        "plan",
+        "--bench",
+        "store",
+        "--bench",
+        "simulator",
+    ])?;
+    let mut allocs = allocations(&text);
+    let bt_manifest = root.join("bench/behaviortree/Cargo.toml");
+    let bt_text = cargo_bench(&[
+        "--manifest-path",
+        &bt_manifest.to_string_lossy(),
+        "--bench",
+        "steps",
+    ])?;
+    allocs.extend(allocations(&bt_text));
+    Ok(Extra {
+        allocations: allocs,
+        sweep_s: sweep_seconds()?,
+    })
+}
+
+/// Every action step of the plan workload (asserted by every plan bench).
+const PLAN_STEPS: f64 = 30.0;
+
+/// Writes the table from criterion's results and `extra`.
+fn report(root: &Path, extra: &Extra) -> Result<(), String> {
+    let (allocs, sweep) = (&extra.allocations, extra.sweep_s);
+    let mut results = read_criterion(&root.join("target/criterion"))?;
+    results.extend(read_criterion(
+        &root.join("bench/behaviortree/target/criterion"),
+    )?);
+
+    let get = |group: &str, name: &str| {
+        results
+            .get(&(group.to_owned(), name.to_owned()))
+            .copied()
+            .ok_or_else(|| format!("no result for {group}/{name}"))
+    };
+    let mut md = String::new();
+    md.push_str(&format!(
+        "Measured by `cargo xtask bench` in one run (criterion medians, one core of this project's \
+         2-core machine, {}).\n\n",
+        std::env::consts::ARCH
+    ));
+    md.push_str("**The plan workload**: 3 actions in sequence, 10 steps each, a sensor condition checked and one store read and one write per step (`bench/src/workload.rs`).\n\n");
+    md.push_str("| implementation | per plan | per action step | vs hand-written | heap allocations per plan |\n|---|---|---|---|---|\n");
+    let floor = get("plan", "hand-written FSM")?;
+    let floor_step = floor.ns / PLAN_STEPS;
+    let mut plan_rows: Vec<(String, Measured)> = results
+        .iter()
+        .filter(|((g, _), _)| g == "plan")
+        .map(|((_, f), m)| (f.clone(), *m))
+        .collect();
+    plan_rows.sort_by(|a, b| a.1.ns.total_cmp(&b.1.ns));
+    for (name, m) in &plan_rows {
+        let step = m.ns / PLAN_STEPS;
+        md.push_str(&format!(
+            "| {name} | {} | {} | {:.1}x | {} |\n",
+            fmt_ns(m.ns),
+            fmt_ns(step),
+            step / floor_step,
+            allocs.get(name).map_or("?".to_owned(), |a| a.to_string())
+        ));
+    }
+    md.push_str("\n**Data stores**: one get and one put of the same key, 8 keys.\n\n| store | per get + put | vs fixed array |\n|---|---|---|\n");
+    let array = get("store", "fixed array")?;
+    let mut store_rows: Vec<(String, Measured)> = results
+        .iter()
+        .filter(|((g, _), _)| g == "store")
+        .map(|((_, f), m)| (f.clone(), *m))
+        .collect();
+    store_rows.sort_by(|a, b| a.1.ns.total_cmp(&b.1.ns));
+    for (name, m) in &store_rows {
+        md.push_str(&format!(
+            "| {name} | {} | {:.2}x |\n",
+            fmt_ns(m.ns / m.elements as f64),
+            m.ns / array.ns
+        ));
+    }
+    md.push_str("\n**Simulator**: one whole run of a paper scenario; real-time factor = simulated seconds per wall-clock second.\n\n| scenario / architecture | wall time per run | real-time factor |\n|---|---|---|\n");
+    for ((_, f), m) in results.iter().filter(|((g, _), _)| g == "simulator") {
+        md.push_str(&format!(
+            "| {f} | {} | {:.0}x |\n",
+            fmt_ns(m.ns),
+            m.elements as f64 / (m.ns / 1e9)
+        ));
+    }
+    md.push_str(&format!(
+        "\n**Sweep**: `psmpa-sim sweep --runs 10000` (both architectures, so 20,000 simulations on both cores): {sweep:.2} s wall time (median of 3).\n"
+    ));
+
+    std::fs::write(
+        root.join("bench/RESULTS.md"),
+        format!("# Benchmark results\n\n{md}"),
+    )
+    .map_err(|e| e.to_string())?;
+    let readme_path = root.join("README.md");
+    let readme = std::fs::read_to_string(&readme_path).map_err(|e| e.to_string())?;
+    let (start, end) = ("<!-- bench:start -->\n", "<!-- bench:end -->");
+    let (Some(a), Some(b)) = (readme.find(start), readme.find(end)) else {
+        return Err("README.md lacks the bench:start / bench:end markers".to_owned());
+    };
+    let updated = format!("{}{start}{md}{}", &readme[..a], &readme[b..]);
+    std::fs::write(&readme_path, updated).map_err(|e| e.to_string())?;
+    println!("\n{md}\nwritten to bench/RESULTS.md and README.md");
+    Ok(())
+}
