@@ -260,9 +260,8 @@ pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Ou
     // SAFETY: lifetime erasure only. `cleanup`, declared after `pinned` and so dropped before
     // it (on return and on unwind), clears the thread-local before the future and its borrows
     // of the caller's frame end.
-    let raw: TaskPtr = unsafe {
-        std::mem::transmute::<*mut (dyn Future<Output = ()> + '_), TaskPtr>(raw)
-    };
+    let raw: TaskPtr =
+        unsafe { std::mem::transmute::<*mut (dyn Future<Output = ()> + '_), TaskPtr>(raw) };
     CURRENT.with(|c| c.set(Some(raw)));
     let cleanup = Cleanup(executor);
 
