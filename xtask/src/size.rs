@@ -39,6 +39,65 @@ fn sections(elf: &Path) -> Result<(u64, u64), String> {
     ))
 }
 
+/// Flash bytes by crate, from the size of every function and constant symbol in the flash
+/// sections, named by the first path segment of its demangled name (for `<T as Trait>::f`, the
+/// crate of `T`). Code inlined into another function counts for that function's crate, so the
+/// core's control loop, inlined into the executor's poll of the mission task, counts partly
+/// for `embassy_executor`. Bytes in no symbol (padding, the vector table) are `(other)`.
+fn flash_by_crate(elf: &Path, flash: u64) -> Result<Vec<(String, u64)>, String> {
+    use object::{ObjectSymbol, SectionIndex};
+    let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+    let file = object::File::parse(&*data).map_err(|e| format!("{}: {e}", elf.display()))?;
+    let flash_sections: Vec<SectionIndex> = file
+        .sections()
+        .filter(|s| {
+            s.name()
+                .is_ok_and(|n| [".vector_table", ".text", ".rodata"].contains(&n))
+        })
+        .map(|s| s.index())
+        .collect();
+    let mut by_crate = std::collections::BTreeMap::<String, u64>::new();
+    for sym in file.symbols() {
+        let in_flash = sym
+            .section_index()
+            .is_some_and(|i| flash_sections.contains(&i));
+        if !in_flash || sym.size() == 0 {
+            continue;
+        }
+        let name = rustc_demangle::demangle(sym.name().unwrap_or("")).to_string();
+        *by_crate.entry(crate_of(&name)).or_default() += sym.size();
+    }
+    let named: u64 = by_crate.values().sum();
+    *by_crate
+        .entry("(in no symbol: vector table, literals, padding)".into())
+        .or_default() += flash.saturating_sub(named);
+    let mut rows: Vec<(String, u64)> = by_crate.into_iter().collect();
+    rows.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    Ok(rows)
+}
+
+/// The crate a demangled symbol belongs to: the first segment of its path, for `<T as
+/// Trait>::f` the crate of `T`, or of `Trait` when `T` is a primitive (`[char]`). The `[hash]`
+/// v0 mangling adds is dropped. Compiler-made constants (`.Lanon...`) and C names are
+/// `(unnamed)`.
+fn crate_of(name: &str) -> String {
+    let first_segment = |path: &str| -> Option<String> {
+        let path = path.trim_start_matches(['<', '&', '[', '*']);
+        let path = path
+            .trim_start_matches("mut ")
+            .trim_start_matches("const ")
+            .trim_start_matches("dyn ");
+        let (krate, _) = path.split_once("::")?;
+        let krate = krate.split('[').next().unwrap_or(krate);
+        let ident =
+            !krate.is_empty() && krate.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        ident.then(|| krate.to_string())
+    };
+    first_segment(name)
+        .or_else(|| name.split_once(" as ").and_then(|(_, t)| first_segment(t)))
+        .unwrap_or_else(|| "(unnamed)".into())
+}
+
 /// Measures, compares, and with `bless` writes the snapshot.
 pub fn run(bless: bool) -> Result<(), String> {
     let elf = firmware::build(&[])?;
@@ -86,6 +145,12 @@ pub fn run(bless: bool) -> Result<(), String> {
         "16 KiB",
     );
 
+    println!();
+    println!("flash by crate (by symbol name; inlined code counts where it was inlined):");
+    for (krate, bytes) in flash_by_crate(&elf, flash)? {
+        println!("  {krate:<48} {bytes:>6} B");
+    }
+
     if bless {
         let text = serde_json::to_string_pretty(&now).map_err(|e| e.to_string())? + "\n";
         std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -125,5 +190,30 @@ pub fn run(bless: bool) -> Result<(), String> {
         Ok(())
     } else {
         Err(failures.join("\n"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::crate_of;
+
+    #[test]
+    fn symbols_are_attributed_to_the_crate_of_their_path() {
+        assert_eq!(crate_of("psmpa_core::exec::run"), "psmpa_core");
+        assert_eq!(
+            crate_of("<&mut serde_json_core::de::Deserializer as serde::de::Deserializer>::f"),
+            "serde_json_core"
+        );
+        assert_eq!(
+            crate_of("<psmpa_core::store::DataStore<K> as Foo>::bar"),
+            "psmpa_core"
+        );
+        assert_eq!(crate_of("core[5585419f9effd512]::fmt::write"), "core");
+        assert_eq!(
+            crate_of("<[char] as core::str::pattern::Pattern>::f"),
+            "core"
+        );
+        assert_eq!(crate_of(".Lanon.88b94e.185"), "(unnamed)");
+        assert_eq!(crate_of("SysTick"), "(unnamed)");
     }
 }
