@@ -362,7 +362,6 @@ impl<L: WorldLog> State<L> {
         o.blocks() && o.pos_um <= self.pos_um
     }
 
-    /// Noise-free: could an active sensor register `o` now?
     /// Whether an active sensor's next sample registers `o` whatever the noise.
     fn certain(&self, o: &Obstacle, sc: &Scenario) -> bool {
         if !o.blocks() {
