@@ -50,6 +50,12 @@ pub fn parse(file: &Path, bytes: &[u8]) -> Result<Scenario, LoadError> {
 
 /// Where and why a file that `serde-json-core` rejected is wrong, according to `serde_json`.
 fn diagnose(bytes: &[u8]) -> Option<String> {
+    // serde_json takes an array for a struct (fields by position), serde-json-core does not.
+    if let Ok(value) = serde_json::from_slice::<serde_json::Value>(bytes) {
+        if let Some(path) = array_for_object(&value) {
+            return Some(format!("{path}: invalid type: array, expected an object"));
+        }
+    }
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let result: Result<ScenarioFile, _> = serde_path_to_error::deserialize(&mut de);
     let err = match result {
@@ -57,12 +63,42 @@ fn diagnose(bytes: &[u8]) -> Option<String> {
         Err(err) => {
             let path = err.path().to_string();
             let inner = err.into_inner();
-            if path == "." || inner.is_syntax() || inner.is_eof() {
+            let valid_json = serde_json::from_slice::<serde_json::Value>(bytes).is_ok();
+            if path == "." || inner.is_eof() || (inner.is_syntax() && !valid_json) {
                 inner.to_string()
+            } else if inner.is_syntax() {
+                // A well-formed value of the wrong type where serde_json wanted an enum's name.
+                let expected = if path.ends_with(".kind") {
+                    "expected \"box\" or \"ball\""
+                } else {
+                    "wrong type of value"
+                };
+                format!(
+                    "{path}: {expected} at line {} column {}",
+                    inner.line(),
+                    inner.column()
+                )
             } else {
                 format!("{path}: {inner}")
             }
         }
     };
     Some(err.replace('\n', " "))
+}
+
+/// The first place, as a field path, where the file has an array and a scenario an object.
+fn array_for_object(file: &serde_json::Value) -> Option<String> {
+    use serde_json::Value;
+    if file.is_array() {
+        return Some("the top level".into());
+    }
+    let objects = ["robot", "sonar", "bumper", "smpa", "doors", "fault"];
+    for key in objects {
+        if file.get(key).is_some_and(Value::is_array) {
+            return Some(key.into());
+        }
+    }
+    let items = file.get("interferences").and_then(Value::as_array)?;
+    let index = items.iter().position(Value::is_array)?;
+    Some(format!("interferences[{index}]"))
 }

@@ -85,8 +85,9 @@ enum Command {
     },
     /// Runs randomized scenarios and prints summary statistics.
     Sweep {
-        /// Number of scenarios.
-        #[arg(long, default_value_t = 1000)]
+        /// Number of scenarios (at most 1,000,000: the results are kept for the median).
+        #[arg(long, default_value_t = 1000,
+              value_parser = clap::value_parser!(u64).range(1..=psmpa_sim::cli::sweep::MAX_RUNS))]
         runs: u64,
         /// Seed of the scenario generator.
         #[arg(long, default_value_t = 1)]

@@ -126,6 +126,27 @@ fn unknown_kind() {
 }
 
 #[test]
+fn a_wrong_type_where_a_name_or_an_object_belongs_names_the_field() {
+    let path = file(
+        "kind-number.json",
+        r#"{"name": "x", "interferences": [{"kind": 1, "at_s": 1.0}]}"#,
+    );
+    assert_bad_input(&path, &["interferences[0].kind", "\"box\" or \"ball\""]);
+    let path = file(
+        "robot-array.json",
+        &format!(r#"{{"name": "x", "robot": [0.1, 1.0], {GOOD_TAIL}"#),
+    );
+    assert_bad_input(&path, &["robot: invalid type: array, expected an object"]);
+    let path = file(
+        "item-array.json",
+        r#"{"name": "x", "interferences": [{"kind": "box"}, ["box", 1.0]]}"#,
+    );
+    assert_bad_input(&path, &["interferences[1]: invalid type: array"]);
+    let path = file("positional.json", r#"["x", 42, 1.5, 600, [], []]"#);
+    assert_bad_input(&path, &["the top level: invalid type: array"]);
+}
+
+#[test]
 fn empty_name() {
     let path = file("empty-name.json", &format!(r#"{{"name": "", {GOOD_TAIL}"#));
     assert_bad_input(&path, &["name", "empty"]);
@@ -294,4 +315,18 @@ fn unwritable_output_is_bad_input() {
     let stderr = String::from_utf8(out.stderr).unwrap();
     assert_eq!(stderr.lines().count(), 1);
     assert!(stderr.contains("/nonexistent-dir/t.csv"));
+}
+
+#[test]
+fn a_sweep_too_large_to_hold_is_refused() {
+    for runs in ["0", "1000001", "18446744073709551615"] {
+        let out = bin()
+            .args(["sweep", "--runs", runs, "--json"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8(out.stderr).unwrap();
+        assert_eq!(out.status.code(), Some(2), "{runs}: {stderr}");
+        assert!(stderr.contains("--runs"), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
 }

@@ -157,6 +157,10 @@ pub struct SweepStats {
     pub time_ratio_total: Option<f64>,
 }
 
+/// The most scenarios one sweep runs: every run's summary is kept until the statistics are
+/// made (about 200 bytes a scenario), so the bound keeps a sweep within a few hundred MB.
+pub const MAX_RUNS: u64 = 1_000_000;
+
 /// Which architectures a sweep runs.
 pub fn arches(only: Option<Arch>) -> Vec<Arch> {
     only.map_or_else(|| Arch::ALL.to_vec(), |a| vec![a])
