@@ -201,6 +201,9 @@ pub enum JsonError {
     Type,
     /// A string uses an escape sequence (names must be plain).
     Escape,
+    /// A number that is not a whole number in range (negative, a fraction, an exponent, or
+    /// more than 2⁶⁴ − 1).
+    Number,
 }
 
 /// Why a mission could not be loaded: what and where.
@@ -219,6 +222,9 @@ impl fmt::Display for LoadError<'_> {
         match self.problem {
             Problem::Json(JsonError::Syntax) => f.write_str("malformed JSON"),
             Problem::Json(JsonError::Type) => f.write_str("a value of the wrong type"),
+            Problem::Json(JsonError::Number) => {
+                f.write_str("not a whole number of milliseconds (no sign, fraction or exponent)")
+            }
             Problem::Json(JsonError::Escape) => {
                 f.write_str("escape sequences are not allowed in names")
             }
@@ -736,7 +742,14 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
                 field(b, Some("trigger"));
                 let trigger = b.event(trigger_name).map_err(|p| fail::<M::Error>(b, p))?;
                 let added = b.add_plan(name, trigger, set(0).unwrap_or_default());
-                checked(b, added, "body")
+                // Name the part at fault: the name, the whole plan (one too many), or the body.
+                let at = match added {
+                    Err(Problem::Duplicate(_)) => Some("name"),
+                    Err(Problem::Capacity { what: "plans", .. }) => None,
+                    _ => Some("body"),
+                };
+                field(b, at);
+                added.map_err(|p| fail::<M::Error>(b, p))
             }
             Section::Task => {
                 let event_name = required(b, f.event, "event")?;
@@ -791,6 +804,9 @@ impl<'a> Visitor<'a> for Top<'_, 'a> {
             match (pass, section) {
                 (Pass::Names, "name") => {
                     let name = map.next_value_seed(Str)?;
+                    if name.trim().is_empty() {
+                        return Err(fail(b, Problem::EmptyName));
+                    }
                     b.set_name(name);
                 }
                 (Pass::Names, "facts") => {
@@ -929,6 +945,7 @@ pub fn load_into<
                 at: b.at,
                 problem: Problem::Json(match e {
                     serde_json_core::de::Error::InvalidType => JsonError::Type,
+                    serde_json_core::de::Error::InvalidNumber => JsonError::Number,
                     serde_json_core::de::Error::InvalidEscapeSequence
                     | serde_json_core::de::Error::EscapedStringIsTooLong => JsonError::Escape,
                     _ => JsonError::Syntax,

@@ -497,7 +497,7 @@ pub enum Problem {
         /// Largest allowed.
         max: f64,
     },
-    /// The name is empty.
+    /// The name is empty or only spaces.
     Empty,
     /// `threshold_m` must lie in `(min_m, max_m]`.
     ThresholdOutsideRange,
@@ -763,7 +763,7 @@ impl Scenario {
         let p = file.smpa.unwrap_or_default();
         let pick = |v: Option<f64>, default: Option<f64>| v.or(default).unwrap_or(0.0);
 
-        if file.name.is_empty() {
+        if file.name.trim().is_empty() {
             return Err(invalid(Field::top("name"), Problem::Empty));
         }
         let name = file.name.clone();

@@ -63,7 +63,7 @@ fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
 #[test]
 fn bad_missions_are_rejected_with_one_clear_line() {
     let good = fetch_tea();
-    let cases: [(&str, &str, &[&str]); 9] = [
+    let cases: [(&str, &str, &[&str]); 13] = [
         (
             r#""pre": ["door_open", "at_door"]"#,
             r#""pre": ["door_opened", "at_door"]"#,
@@ -100,6 +100,30 @@ fn bad_missions_are_rejected_with_one_clear_line() {
             &["sensors[2].mode", "unknown sensor mode `once`"],
         ),
         (r#""task": {"#, r#""task": ["#, &["malformed JSON", "line"]),
+        (
+            r#""name": "fetch-tea""#,
+            r#""name": "  ""#,
+            &["name", "the name is empty"],
+        ),
+        (
+            r#""period_ms": 100"#,
+            r#""period_ms": -5"#,
+            &["sensors[0].period_ms", "not a whole number"],
+        ),
+        (
+            r#""period_ms": 100"#,
+            r#""period_ms": 1e30"#,
+            &["sensors[0].period_ms", "not a whole number"],
+        ),
+        // "go to door" deletes at_back_door and "go to back door" deletes at_door: never both.
+        (
+            r#""goal": ["in_kitchen"]"#,
+            r#""goal": ["at_door", "at_back_door"]"#,
+            &[
+                "task.goal",
+                "no sequence of actions reaches {at_door, at_back_door}",
+            ],
+        ),
         (
             r#""events": ["fetch_tea"]"#,
             r#""events": [[[[[[[[["fetch_tea"]]]]]]]]]"#,

@@ -330,3 +330,33 @@ fn a_sweep_too_large_to_hold_is_refused() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+#[test]
+fn a_plot_stays_well_formed_xml_whatever_the_scenario_name() {
+    let path = file(
+        "odd-name.json",
+        r#"{"name": "<a&b>\"c'\u0001", "interferences": [{"kind": "box", "at_s": 1.0}]}"#,
+    );
+    let svg = std::env::temp_dir().join(format!("psmpa-odd-{}.svg", std::process::id()));
+    let out = bin()
+        .arg("run")
+        .arg(&path)
+        .args(["--arch", "psmpa", "--plot"])
+        .arg(&svg)
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        !text
+            .chars()
+            .any(|c| c.is_control() && !"\t\n\r".contains(c)),
+        "a control character XML forbids"
+    );
+    assert!(text.contains("&lt;a&amp;b&gt;"), "the name, escaped");
+}

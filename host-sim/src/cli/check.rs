@@ -4,8 +4,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use psmpa_core::mission::{self, AnyBehaviour, LoadError, Problem, Registry};
-use psmpa_core::planner::{Planner, Strategy};
+use psmpa_core::action::ActuatorAction;
+use psmpa_core::mission::{self, AnyBehaviour, JsonError, LoadError, Problem, Registry};
+use psmpa_core::planner::{Planner, PlanningError, Strategy};
 use psmpa_core::{Fsm, Mission, PlanId, SensorSet, Target};
 
 use crate::robot::NaoRegistry;
@@ -16,14 +17,28 @@ type Large<'a> = Mission<'a, 32, 64, 32, 16>;
 
 /// A mission that failed to load, as one line naming the file and what is wrong.
 pub fn error_line(file: &Path, bytes: &[u8], e: &LoadError<'_>) -> String {
-    let mut line = format!("{}: {e}", file.display());
-    if matches!(e.problem, Problem::Json(_)) {
-        // serde-json-core reports no position: ask serde_json where the text breaks.
-        if let Err(json) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
-            let _ = write!(line, " (line {}, column {})", json.line(), json.column());
-        }
+    if !matches!(e.problem, Problem::Json(_)) {
+        return format!("{}: {e}", file.display());
     }
-    line
+    // serde-json-core reports no position: ask serde_json where the text breaks.
+    match serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
+        Err(json) => format!(
+            "{}: {e} (line {}, column {})",
+            file.display(),
+            json.line(),
+            json.column()
+        ),
+        // Well-formed after all: serde-json-core stopped inside a number it cannot read as a
+        // whole number (`1e30`, `1.5`), the only values a mission holds besides names.
+        Ok(_) if e.problem == Problem::Json(JsonError::Syntax) => {
+            let e = LoadError {
+                problem: Problem::Json(JsonError::Number),
+                ..*e
+            };
+            format!("{}: {e}", file.display())
+        }
+        Ok(_) => format!("{}: {e}", file.display()),
+    }
 }
 
 fn names<const NS: usize, const NA: usize>(
@@ -166,13 +181,56 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
             );
         }
         Err(e) => {
+            let why = match e {
+                PlanningError::Unsolvable { expanded } => {
+                    format!("no plan exists ({expanded} states searched)")
+                }
+                PlanningError::Budget { limit, .. } => {
+                    format!("none found within the budget of {limit} nodes")
+                }
+                PlanningError::TooLong { limit } => {
+                    format!("the shortest plan is longer than {limit} actions")
+                }
+                _ => format!("{e:?}"),
+            };
             let _ = writeln!(
                 out,
-                "\nplanner, from the initial state with every percept holding: no plan ({e:?})"
+                "\nplanner, from the initial state with every percept holding: {why}"
             );
         }
     }
     (out, dot)
+}
+
+/// Why the task's goal can never hold, if it cannot: no sequence of actions reaches it from
+/// the initial state even when every fact a sensor can perceive holds whenever it is needed
+/// (perceivable facts are never deleted). That relaxation only helps the planner, so no plan
+/// in it means no plan at all, whatever the sensors report.
+pub fn unreachable_goal<const NS: usize, const NA: usize, const NP: usize, const L: usize>(
+    m: &Mission<'_, NS, NA, NP, L>,
+) -> Option<String> {
+    let d = &m.domain;
+    let perceivable = d.perception_of(SensorSet::from_bits(u32::MAX));
+    let relaxed: Vec<ActuatorAction<'_>> = d
+        .actions()
+        .iter()
+        .map(|a| ActuatorAction {
+            del: a.del.difference(perceivable),
+            ..*a
+        })
+        .collect();
+    let result = Planner::<4096>::new(Strategy::BreadthFirst).plan::<64>(
+        &relaxed,
+        m.task.init.union(perceivable),
+        m.task.goal,
+    );
+    match result {
+        Err(PlanningError::Unsolvable { expanded }) => Some(format!(
+            "task.goal: no sequence of actions reaches {} from task.init, even with every percept holding ({expanded} states searched)",
+            names(d, m.task.goal)
+        )),
+        _ => None,
+    }
 }
 
 /// Loads `bytes` for this robot (or for any platform) and describes it.
@@ -191,11 +249,17 @@ pub fn check(
             let loaded: mission::Loaded<'_, R::Sensor, R::Action, 32, 64, 32, 16> =
                 mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
             let m: Large<'_> = loaded.mission;
-            Ok(describe(&m))
+            match unreachable_goal(&m) {
+                Some(why) => Err(format!("{}: {why}", file.display())),
+                None => Ok(describe(&m)),
+            }
         } else {
             let loaded: mission::Loaded<'_, R::Sensor, R::Action, 4, 8, 4, 6> =
                 mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
-            Ok(describe(&loaded.mission))
+            match unreachable_goal(&loaded.mission) {
+                Some(why) => Err(format!("{}: {why}", file.display())),
+                None => Ok(describe(&loaded.mission)),
+            }
         }
     }
     if any_platform {

@@ -187,7 +187,7 @@ pub fn plot(path: &Path, scenario: &Scenario, runs: &[Recorded]) -> Result<(), S
                 .caption(
                     format!(
                         "{} under {title}: {} readings",
-                        scenario.name.as_str(),
+                        printable(scenario.name.as_str()),
                         device.name()
                     ),
                     ("sans-serif", 16),
@@ -438,4 +438,12 @@ pub fn timeline(scenario: &Scenario, rec: &Recorded) -> serde_json::Value {
         events.push(json!({"ph": "X", "pid": 1, "tid": 7, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
     }
     json!({"traceEvents": events, "displayTimeUnit": "ms"})
+}
+
+/// `text` with control characters replaced: XML 1.0 allows none but tab and line breaks, even
+/// escaped, and a scenario name may hold any (`"\u0001"`).
+fn printable(text: &str) -> String {
+    text.chars()
+        .map(|c| if c.is_control() { '\u{fffd}' } else { c })
+        .collect()
 }

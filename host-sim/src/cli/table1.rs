@@ -103,8 +103,14 @@ pub struct Ours {
     pub collisions: u32,
     /// Time cost, s.
     pub time_s: f64,
-    /// Trace hash.
+    /// Trace hash; in JSON a 16-digit hex string, as `run --json` prints it (a JSON number
+    /// above 2⁵³ loses digits in many readers).
+    #[serde(serialize_with = "hex")]
     pub trace_hash: u64,
+}
+
+fn hex<S: serde::Serializer>(hash: &u64, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(&format_args!("{hash:016x}"))
 }
 
 /// One row: the paper's numbers and ours.
