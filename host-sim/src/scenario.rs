@@ -486,6 +486,13 @@ pub enum Problem {
     NotPositive(f64),
     /// Rounds to zero milliseconds: must be at least 0.001 s.
     BelowOneMillisecond(f64),
+    /// Above zero but below the unit the world counts in (`least`: "1 ms", "0.000001 m").
+    BelowUnit {
+        /// The value.
+        value: f64,
+        /// The smallest allowed, with its unit.
+        least: &'static str,
+    },
     /// Must be a whole number of milliseconds.
     NotWhole(f64),
     /// Outside `[min, max]`.
@@ -509,6 +516,7 @@ impl fmt::Display for Problem {
             Self::Negative(v) => write!(f, "must not be negative, got {v}"),
             Self::NotPositive(v) => write!(f, "must be greater than 0, got {v}"),
             Self::BelowOneMillisecond(v) => write!(f, "must be at least 0.001 s, got {v}"),
+            Self::BelowUnit { value, least } => write!(f, "must be at least {least}, got {value}"),
             Self::NotWhole(v) => write!(f, "must be a whole number of milliseconds, got {v}"),
             Self::OutOfRange { value, min, max } => {
                 write!(f, "must lie between {min} and {max}, got {value}")
@@ -584,8 +592,17 @@ fn millis(field: Field, value: f64) -> Result<u64, ScenarioError> {
     if value < 0.0 {
         return Err(invalid(field, Problem::Negative(value)));
     }
-    if value < 1.0 {
+    if value == 0.0 {
         return Err(invalid(field, Problem::NotPositive(value)));
+    }
+    if value < 1.0 {
+        return Err(invalid(
+            field,
+            Problem::BelowUnit {
+                value,
+                least: "1 ms",
+            },
+        ));
     }
     if value > MAX_MS {
         return Err(invalid(
@@ -644,7 +661,15 @@ fn positive_seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
 fn positive_metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
     let um = metres(field, value)?;
     if um == 0 {
-        return Err(invalid(field, Problem::NotPositive(value)));
+        let problem = if value > 0.0 {
+            Problem::BelowUnit {
+                value,
+                least: "0.000001 m",
+            }
+        } else {
+            Problem::NotPositive(value)
+        };
+        return Err(invalid(field, problem));
     }
     Ok(um)
 }
@@ -948,6 +973,18 @@ mod tests {
         );
         let e = err(r#"{"name":"","interferences":[]}"#);
         assert_eq!(e.to_string(), "name: must not be empty");
+        let e = err(r#"{"name":"   ","interferences":[]}"#);
+        assert_eq!(e.to_string(), "name: must not be empty");
+        let e = err(r#"{"name":"x","sonar":{"max_m":1e-9},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "sonar.max_m: must be at least 0.000001 m, got 0.000000001"
+        );
+        let e = err(r#"{"name":"x","bumper":{"period_ms":0.5},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "bumper.period_ms: must be at least 1 ms, got 0.5"
+        );
         let e = err(r#"{"name":"x","sonar":{"period_ms":0},"interferences":[]}"#);
         assert_eq!(
             e.to_string(),
