@@ -50,6 +50,13 @@ pub fn parse(file: &Path, bytes: &[u8]) -> Result<Scenario, LoadError> {
 
 /// Where and why a file that `serde-json-core` rejected is wrong, according to `serde_json`.
 fn diagnose(bytes: &[u8]) -> Option<String> {
+    match bytes.iter().find(|b| !b.is_ascii_whitespace()) {
+        None => return Some("the file is empty: a scenario is a JSON object `{ ... }`".into()),
+        Some(&b) if b != b'{' => {
+            return Some("the top level: expected a JSON object `{ ... }`".into());
+        }
+        Some(_) => {}
+    }
     // serde_json takes an array for a struct (fields by position), serde-json-core does not.
     if let Ok(value) = serde_json::from_slice::<serde_json::Value>(bytes) {
         if let Some(path) = array_for_object(&value) {
@@ -89,9 +96,6 @@ fn diagnose(bytes: &[u8]) -> Option<String> {
 /// The first place, as a field path, where the file has an array and a scenario an object.
 fn array_for_object(file: &serde_json::Value) -> Option<String> {
     use serde_json::Value;
-    if file.is_array() {
-        return Some("the top level".into());
-    }
     let objects = ["robot", "sonar", "bumper", "smpa", "doors", "fault"];
     for key in objects {
         if file.get(key).is_some_and(Value::is_array) {

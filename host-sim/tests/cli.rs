@@ -143,7 +143,9 @@ fn a_wrong_type_where_a_name_or_an_object_belongs_names_the_field() {
     );
     assert_bad_input(&path, &["interferences[1]: invalid type: array"]);
     let path = file("positional.json", r#"["x", 42, 1.5, 600, [], []]"#);
-    assert_bad_input(&path, &["the top level: invalid type: array"]);
+    assert_bad_input(&path, &["the top level: expected a JSON object"]);
+    let path = file("brackets.json", &"[".repeat(1 << 20));
+    assert_bad_input(&path, &["the top level: expected a JSON object"]);
 }
 
 #[test]
