@@ -804,7 +804,8 @@ impl<'a> Visitor<'a> for Top<'_, 'a> {
             match (pass, section) {
                 (Pass::Names, "name") => {
                     let name = map.next_value_seed(Str)?;
-                    if name.trim().is_empty() {
+                    // ASCII spaces only: Unicode's whitespace table costs flash.
+                    if name.bytes().all(|b| b.is_ascii_whitespace()) {
                         return Err(fail(b, Problem::EmptyName));
                     }
                     b.set_name(name);
