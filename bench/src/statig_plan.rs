@@ -106,7 +106,7 @@ pub fn run_plan() -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::workload::{EXPECTED_STEPS, THRESHOLD_MM};
+    use crate::workload::{EXPECTED_STEPS, assert_fails_when_blocked};
 
     #[test]
     fn runs_every_step() {
@@ -115,19 +115,6 @@ mod tests {
 
     #[test]
     fn fails_when_the_path_is_blocked() {
-        // Clear for 14 readings, then an obstacle: action 1 fails at its 5th step, after 14
-        // steps were run.
-        let mut sonar = Sonar::new();
-        let mut readings = 0;
-        let steps = run_plan_with(|| {
-            readings += 1;
-            if readings <= 14 {
-                sonar.sample()
-            } else {
-                THRESHOLD_MM
-            }
-        });
-        assert_eq!(steps, 14);
-        assert_eq!(readings, 15);
+        assert_fails_when_blocked(|sensor| run_plan_with(sensor));
     }
 }

@@ -43,3 +43,22 @@ impl Sonar {
 pub fn path_clear(mm: i32) -> bool {
     mm > THRESHOLD_MM
 }
+
+/// Checks a plan runner (`run` runs the plan with the given sensor and returns its action
+/// steps) against a path that is clear for 14 readings and then blocked: action 1 fails at
+/// its 5th step, after 14 steps were run, and no reading is taken after the failure.
+#[cfg(test)]
+pub(crate) fn assert_fails_when_blocked(run: impl FnOnce(&mut dyn FnMut() -> i32) -> u32) {
+    let mut sonar = Sonar::new();
+    let mut readings = 0;
+    let steps = run(&mut || {
+        readings += 1;
+        if readings <= 14 {
+            sonar.sample()
+        } else {
+            THRESHOLD_MM
+        }
+    });
+    assert_eq!(steps, 14);
+    assert_eq!(readings, 15);
+}

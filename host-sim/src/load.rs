@@ -58,10 +58,9 @@ fn diagnose(bytes: &[u8]) -> Option<String> {
         Some(_) => {}
     }
     // serde_json takes an array for a struct (fields by position), serde-json-core does not.
-    if let Ok(value) = serde_json::from_slice::<serde_json::Value>(bytes) {
-        if let Some(path) = array_for_object(&value) {
-            return Some(format!("{path}: invalid type: array, expected an object"));
-        }
+    let value = serde_json::from_slice::<serde_json::Value>(bytes).ok();
+    if let Some(path) = value.as_ref().and_then(array_for_object) {
+        return Some(format!("{path}: invalid type: array, expected an object"));
     }
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let result: Result<ScenarioFile, _> = serde_path_to_error::deserialize(&mut de);
@@ -70,7 +69,7 @@ fn diagnose(bytes: &[u8]) -> Option<String> {
         Err(err) => {
             let path = err.path().to_string();
             let inner = err.into_inner();
-            let valid_json = serde_json::from_slice::<serde_json::Value>(bytes).is_ok();
+            let valid_json = value.is_some();
             if path == "." || inner.is_eof() || (inner.is_syntax() && !valid_json) {
                 inner.to_string()
             } else if inner.is_syntax() {

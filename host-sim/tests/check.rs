@@ -1,26 +1,17 @@
 //! `psmpa-sim check`: valid missions are described, bad ones rejected with status 2 and one
 //! clear line.
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_psmpa-sim"))
-}
+use common::{assert_success, bin, file};
+
+use std::path::PathBuf;
 
 fn fetch_tea() -> String {
     std::fs::read_to_string(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/fetch-tea.json"),
     )
     .unwrap()
-}
-
-fn file(name: &str, content: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("psmpa-check-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
-    std::fs::write(&path, content).unwrap();
-    path
 }
 
 #[test]
@@ -33,12 +24,7 @@ fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
         .arg(&dot)
         .output()
         .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(
         text.contains("δ'0 = go to door ∥ {sonar, bumper}"),
@@ -187,12 +173,7 @@ fn an_unreachable_goal_and_an_unbound_behaviour_name_their_cause() {
         .arg(file("many-any.json", &many))
         .output()
         .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let out = bin()
         .arg("check")
         .arg(file("many.json", &many))

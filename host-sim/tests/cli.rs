@@ -1,23 +1,14 @@
 //! The command-line contract of `SIMULATION.md`, checked on the real binary.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod common;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_psmpa-sim"))
-}
+use common::{assert_success, bin, file};
+
+use std::path::PathBuf;
+use std::process::Output;
 
 fn scenarios() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
-}
-
-/// A scratch file with `content`, unique to the test.
-fn file(name: &str, content: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("psmpa-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
-    std::fs::write(&path, content).unwrap();
-    path
 }
 
 fn run(path: &std::path::Path, arch: &str, json: bool) -> Output {
@@ -347,12 +338,7 @@ fn a_plot_stays_well_formed_xml_whatever_the_scenario_name() {
         .arg(&svg)
         .output()
         .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(
         !text

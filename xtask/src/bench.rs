@@ -87,9 +87,8 @@ fn read_criterion(dir: &Path) -> Result<BTreeMap<(String, String), Measured>, St
 
 /// Runs `cargo bench` with `args`, echoing its output; returns its stdout.
 fn cargo_bench(args: &[&str]) -> Result<String, String> {
-    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    cmd.current_dir(firmware::root())
-        .arg("bench")
+    let mut cmd = firmware::cargo();
+    cmd.arg("bench")
         .args(args)
         .arg("--")
         .args(CRITERION)
@@ -120,19 +119,11 @@ fn allocations(text: &str) -> BTreeMap<String, u64> {
 
 /// Wall time of a 10,000-scenario sweep of both architectures, median of 3, seconds.
 fn sweep_seconds() -> Result<f64, String> {
-    let root = firmware::root();
-    let status = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
-        .current_dir(&root)
-        .args(["build", "--quiet", "--release", "-p", "psmpa-sim"])
-        .status()
-        .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !status.success() {
-        return Err("psmpa-sim does not build".to_owned());
-    }
+    let sim = firmware::build_host_sim()?;
     let mut times = Vec::new();
     for _ in 0..3 {
         let started = Instant::now();
-        let out = Command::new(root.join("target/release/psmpa-sim"))
+        let out = Command::new(&sim)
             .args(["sweep", "--runs", "10000", "--seed", "1"])
             .stdin(Stdio::null())
             .stderr(Stdio::null())

@@ -14,6 +14,25 @@ pub fn root() -> PathBuf {
     root.canonicalize().unwrap_or(root)
 }
 
+/// `cargo` as this task was started with (`$CARGO`), run from the workspace root.
+pub fn cargo() -> Command {
+    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    cmd.current_dir(root());
+    cmd
+}
+
+/// Builds the simulator's command line in release mode and returns its path.
+pub fn build_host_sim() -> Result<PathBuf, String> {
+    let status = cargo()
+        .args(["build", "--quiet", "--release", "-p", "psmpa-sim"])
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err("psmpa-sim does not build".to_owned());
+    }
+    Ok(root().join("target/release/psmpa-sim"))
+}
+
 /// The firmware's target.
 pub const TARGET: &str = "thumbv7em-none-eabihf";
 /// The firmware's cargo profile.
@@ -37,19 +56,18 @@ pub fn rustflags() -> String {
 
 /// Builds the firmware and returns its ELF.
 pub fn build(features: &[&str]) -> Result<PathBuf, String> {
-    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    cmd.current_dir(root())
-        .args([
-            "build",
-            "--quiet",
-            "-p",
-            "psmpa-firmware",
-            "--target",
-            TARGET,
-            "--profile",
-            PROFILE,
-        ])
-        .env("CARGO_ENCODED_RUSTFLAGS", rustflags());
+    let mut cmd = cargo();
+    cmd.args([
+        "build",
+        "--quiet",
+        "-p",
+        "psmpa-firmware",
+        "--target",
+        TARGET,
+        "--profile",
+        PROFILE,
+    ])
+    .env("CARGO_ENCODED_RUSTFLAGS", rustflags());
     // The injected fault builds elsewhere, so the good firmware is not rebuilt afterwards.
     let target_dir = if features.is_empty() {
         root().join("target")

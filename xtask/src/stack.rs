@@ -162,8 +162,7 @@ fn build() -> Result<PathBuf, String> {
         "-Csymbol-mangling-version=legacy",
     ]
     .join("\x1f");
-    let status = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
-        .current_dir(firmware::root())
+    let status = firmware::cargo()
         .args(["build", "--quiet", "-p", "psmpa-firmware", "--target"])
         .args([firmware::TARGET, "--profile", firmware::PROFILE])
         .env("CARGO_ENCODED_RUSTFLAGS", flags)

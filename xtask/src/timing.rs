@@ -110,15 +110,7 @@ const HOST_STEPS: &[(&str, &str)] = &[
 /// [`HOST_STEPS`], the calls and the instructions they took (inclusive).
 fn host_costs(scenarios: &[&str]) -> Result<Vec<HostCost>, String> {
     let root = firmware::root();
-    let status =
-        std::process::Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
-            .current_dir(&root)
-            .args(["build", "--quiet", "--release", "-p", "psmpa-sim"])
-            .status()
-            .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !status.success() {
-        return Err("psmpa-sim does not build".to_owned());
-    }
+    let sim = firmware::build_host_sim()?;
     let mut totals: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
     for name in scenarios {
         let out_file = root.join(format!("target/callgrind.{name}.out"));
@@ -130,7 +122,8 @@ fn host_costs(scenarios: &[&str]) -> Result<Vec<HostCost>, String> {
                 "--compress-pos=no",
             ])
             .arg(format!("--callgrind-out-file={}", out_file.display()))
-            .args(["target/release/psmpa-sim", "run", "--arch", "psmpa"])
+            .arg(&sim)
+            .args(["run", "--arch", "psmpa"])
             .arg(format!("scenarios/{name}.json"))
             .output()
             .map_err(|e| format!("cannot run valgrind ({e}): scripts/test.sh installs it"))?;

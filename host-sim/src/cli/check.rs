@@ -233,6 +233,17 @@ pub fn unreachable_goal<const NS: usize, const NA: usize, const NP: usize, const
     }
 }
 
+/// The description of a loaded mission, or the one line saying its goal is unreachable.
+fn reachable_then_describe<const NS: usize, const NA: usize, const NP: usize, const L: usize>(
+    file: &Path,
+    m: &Mission<'_, NS, NA, NP, L>,
+) -> Result<(String, String), String> {
+    match unreachable_goal(m) {
+        Some(why) => Err(format!("{}: {why}", file.display())),
+        None => Ok(describe(m)),
+    }
+}
+
 /// Loads `bytes` for this robot (or for any platform) and describes it.
 pub fn check(
     file: &Path,
@@ -249,17 +260,11 @@ pub fn check(
             let loaded: mission::Loaded<'_, R::Sensor, R::Action, 32, 64, 32, 16> =
                 mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
             let m: Large<'_> = loaded.mission;
-            match unreachable_goal(&m) {
-                Some(why) => Err(format!("{}: {why}", file.display())),
-                None => Ok(describe(&m)),
-            }
+            reachable_then_describe(file, &m)
         } else {
             let loaded: mission::Loaded<'_, R::Sensor, R::Action, 4, 8, 4, 6> =
                 mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
-            match unreachable_goal(&loaded.mission) {
-                Some(why) => Err(format!("{}: {why}", file.display())),
-                None => Ok(describe(&loaded.mission)),
-            }
+            reachable_then_describe(file, &loaded.mission)
         }
     }
     if any_platform {
