@@ -89,10 +89,7 @@ impl Sensor for Platform {
         } else {
             FactSet::EMPTY
         };
-        Ok(Some(Reading {
-            value: Value::Mm(mm.unsigned_abs()),
-            holds,
-        }))
+        Ok(Some(Reading::new(Value::Mm(mm), holds)))
     }
 }
 
@@ -116,7 +113,7 @@ impl Actuator for Platform {
             let Value::Mm(mm) = reading.value else {
                 return Outcome::Failure;
             };
-            let progress = Value::Int(mm.wrapping_add(step) as i32);
+            let progress = Value::Int(mm.wrapping_add(step as i32));
             if io.put(PROGRESS, progress).is_err() {
                 return Outcome::Failure;
             }
@@ -138,7 +135,12 @@ pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
     };
     let runtime: BenchRuntime<'_> = Runtime::new(mission, platform, platform, (), config);
     let before = platform.steps.get();
-    match psmpa_sim::backend::simulate(runtime.run(), Duration::from_secs(60)) {
+    let done = psmpa_sim::backend::simulate_split(
+        runtime.sensing(),
+        runtime.run(),
+        Duration::from_secs(60),
+    );
+    match done {
         Ok(done) if done.output.is_ok() => platform.steps.get() - before,
         _ => 0,
     }

@@ -15,14 +15,15 @@ use heapless::Vec;
 
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
-use crate::exec::{Failure, Runtime};
+use crate::exec::{Failure, Mode, Runtime};
 use crate::facts::FactSet;
 use crate::fmt::{info, warning};
 use crate::fsm::{Fsm, FsmError};
 use crate::plan::{FailureMemory, Plan, PlanId, PlanSet};
-use crate::planner::{Found, Planner, PlanningError};
+use crate::planner::{Found, Planner, PlanningError, Search};
 use crate::platform::{Actuator, Sensor};
 use crate::trace::{TraceEvent, TraceSink};
+use embassy_futures::yield_now;
 
 /// How a mission that reached its goal went.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -102,11 +103,12 @@ impl<
     const K: usize,
 > Runtime<'_, 'a, M, S, A, T, NS, NA, NP, L, K>
 {
-    /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor whose
-    /// `pre(s)` holds is switched on, sampled once and switched off again.
+    /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor in service
+    /// whose `pre(s)` holds is switched on, sampled once and switched off again, all at once.
     pub async fn establish_initial_model(&self) -> Result<FactSet, ControlError> {
         let init = self.mission.task.init;
         self.set_beliefs(init);
+        let faulty = self.faulty_sensors();
         let eligible: SensorSet = self
             .mission
             .domain
@@ -115,18 +117,14 @@ impl<
             .enumerate()
             .filter(|(_, s)| s.mode != SensorMode::OnDemand && s.pre.is_subset(init))
             .filter_map(|(i, _)| SensorId::new(i))
+            .filter(|s| !faulty.contains(*s))
             .collect();
-        // Fused as if they ran together, although each is on only for its one sample.
-        self.set_running(eligible);
-        for sensor in eligible.iter() {
-            let one = SensorSet::EMPTY.with(sensor);
-            let to_error = |failure| ControlError::InitialModel { failure };
-            self.switch_on(one).await.map_err(to_error)?;
-            let sampled = self.sample(sensor).await;
-            self.switch_off(one).await;
-            sampled.map_err(to_error)?;
-        }
-        self.set_running(SensorSet::EMPTY);
+        let epoch = self.command(eligible, Mode::Once, None);
+        let sampled = self.ready(epoch, eligible).await;
+        let stopped = self.stop().await;
+        sampled
+            .and(stopped)
+            .map_err(|failure| ControlError::InitialModel { failure })?;
         let beliefs = self.beliefs();
         self.trace(TraceEvent::ModelEstablished { beliefs });
         Ok(beliefs)
@@ -137,16 +135,21 @@ impl<
     /// plan applies, every applicable plan failed, or the failure or plan limit of the
     /// [`Config`](crate::exec::Config) is reached.
     pub async fn run(&self) -> Result<Report, ControlError> {
-        self.control(None).await
+        self.control::<1>(None).await
     }
 
     /// Algorithm 1 where `generatePlans` falls back on `planner` when no library plan applies,
-    /// and plans again from the current beliefs after a failure.
+    /// and plans again from the current beliefs after a failure. The search runs in `space`
+    /// (keep it in a `static` on a microcontroller), in slices of
+    /// [`Config::plan_slice`](crate::exec::Config::plan_slice) nodes with a yield between two,
+    /// so that on a cooperative executor it holds the deciding side's turn for one slice at a
+    /// time.
     pub async fn run_planning<const N: usize>(
         &self,
         planner: &Planner<N>,
+        space: &mut Search<N>,
     ) -> Result<Report, ControlError> {
-        self.control(Some(planner)).await
+        self.control(Some((planner, space))).await
     }
 
     /// The actions with the preconditions the planner must satisfy from the beliefs: facts
@@ -173,12 +176,11 @@ impl<
             .collect()
     }
 
-    /// `generatePlans: M -> P`: the first applicable library plan, else a generated one.
-    fn generate(
+    /// `generatePlans: M -> P` from the library: the first applicable plan, else why none
+    /// applies.
+    fn select(
         &self,
-        planner: Option<&dyn Generate<L>>,
         memory: &FailureMemory,
-        generated_failed: Option<FactSet>,
         beliefs: FactSet,
     ) -> Result<(PlanId, Vec<ActionId, L>), ControlError> {
         let task = self.mission.task;
@@ -191,7 +193,7 @@ impl<
                 .unwrap_or_default();
             return Ok((plan, body));
         }
-        let no_plan = if excluded.is_empty() {
+        Err(if excluded.is_empty() {
             ControlError::NoApplicablePlan {
                 event: task.event,
                 beliefs,
@@ -202,24 +204,40 @@ impl<
                 failed: excluded,
                 beliefs,
             }
-        };
-        // The same search from the same beliefs would give the plan that just failed.
-        let Some(planner) = planner.filter(|_| generated_failed != Some(beliefs)) else {
-            return Err(no_plan);
-        };
+        })
+    }
+
+    /// `generatePlans: M -> P` by the planner, from `beliefs` to the task's goal, one slice of
+    /// the search per poll.
+    async fn generate<const N: usize>(
+        &self,
+        planner: &Planner<N>,
+        search: &mut Search<N>,
+        beliefs: FactSet,
+    ) -> Result<Vec<ActionId, L>, ControlError> {
+        let goal = self.mission.task.goal;
         let actions = self.planning_actions();
-        let found = planner
-            .generate(&actions, beliefs, task.goal)
-            .map_err(|error| ControlError::Planning { error })?;
+        search.start(planner, &actions, beliefs, goal);
+        let slice = u32::from(self.config.plan_slice.max(1));
+        let found: Found<L> = loop {
+            if let Some(result) = search.step(&actions, slice) {
+                break result.map_err(|error| ControlError::Planning { error })?;
+            }
+            // Let sensing, and everything else ready, run between two slices.
+            yield_now().await;
+        };
         self.trace(TraceEvent::PlanGenerated {
             length: u8::try_from(found.body.len()).unwrap_or(u8::MAX),
             expanded: found.expanded,
         });
         info!("generated a plan of {} actions", found.body.len());
-        Ok((PlanId::GENERATED, found.body))
+        Ok(found.body)
     }
 
-    async fn control(&self, planner: Option<&dyn Generate<L>>) -> Result<Report, ControlError> {
+    async fn control<const N: usize>(
+        &self,
+        mut planner: Option<(&Planner<N>, &mut Search<N>)>,
+    ) -> Result<Report, ControlError> {
         let task = self.mission.task;
         self.establish_initial_model().await?;
         let mut memory = FailureMemory::new();
@@ -238,7 +256,17 @@ impl<
                     plans: report.plans_started,
                 });
             }
-            let (plan, body) = self.generate(planner, &memory, generated_failed, beliefs)?;
+            let (plan, body) = match self.select(&memory, beliefs) {
+                Ok(selected) => selected,
+                // The same search from the same beliefs would give the plan that just failed.
+                Err(no_plan) => match planner.as_mut() {
+                    Some((planner, space)) if generated_failed != Some(beliefs) => {
+                        let body = self.generate(planner, space, beliefs).await?;
+                        (PlanId::GENERATED, body)
+                    }
+                    _ => return Err(no_plan),
+                },
+            };
             let named = Plan {
                 name: self
                     .mission
@@ -277,26 +305,5 @@ impl<
                 }
             }
         }
-    }
-}
-
-/// Object-safe access to a [`Planner`] of any capacity, so the control loop is compiled once.
-trait Generate<const L: usize> {
-    fn generate(
-        &self,
-        actions: &[ActuatorAction<'_>],
-        init: FactSet,
-        goal: FactSet,
-    ) -> Result<Found<L>, PlanningError>;
-}
-
-impl<const N: usize, const L: usize> Generate<L> for Planner<N> {
-    fn generate(
-        &self,
-        actions: &[ActuatorAction<'_>],
-        init: FactSet,
-        goal: FactSet,
-    ) -> Result<Found<L>, PlanningError> {
-        self.plan(actions, init, goal)
     }
 }

@@ -1,20 +1,33 @@
-//! Executing compiled plans: Algorithm 2 at run time, under one of two scheduling policies.
+//! Executing compiled plans: Algorithm 2 at run time, on two sides that run concurrently.
 //!
-//! * [`Policy::PSmpa`]: a parallel state `δ'_i` switches its sensors on, samples them once,
-//!   then runs the actuator behaviour and the sensors side by side. Every sample updates the
-//!   beliefs; when a percept makes `pre(a_i)` false the behaviour is told at once
-//!   ([`ActionIo::violation`]), and if it stays false longer than
-//!   [`Config::max_violation`] the runtime stops the behaviour and takes the failure edge. The
-//!   sensors are switched off when the action ends (least commitment).
+//! * **Sensing** ([`Runtime::sensing`], the paper's sensory controller): one sampler per
+//!   sensor, each on its own schedule; a sample is read, stored, fused into the beliefs and
+//!   checked against the running action's precondition, and whoever waits is woken. See
+//!   [`crate::sense`].
+//! * **Deciding** ([`Runtime::run`], the deliberative controller): the control loop
+//!   (Algorithm 1), the FSM of the selected plan and the actuator behaviours. It switches
+//!   sensors on and off by telling the sensing side which sensors the running state needs
+//!   (least commitment), and learns what they perceive from the beliefs and the data stores.
+//!
+//! The two sides share only the stores and an embassy-sync mutex over a little state, so a
+//! platform may run them on one executor, or sensing on a higher-priority one (an
+//! `InterruptExecutor` on a microcontroller); a long behaviour or planner poll then cannot
+//! delay a sample. Under either policy:
+//!
+//! * [`Policy::PSmpa`]: a parallel state `δ'_i` has its sensors switched on and sampled once,
+//!   then runs the actuator behaviour while they keep sampling. When a percept makes `pre(a_i)`
+//!   false the behaviour is told at once ([`ActionIo::violation`]); if it stays false longer
+//!   than [`Config::max_violation`] the runtime stops the behaviour and takes the failure
+//!   edge. The sensors are switched off when the action ends.
 //! * [`Policy::Smpa`]: the baseline. The same state alternates a sense phase (sensors on,
 //!   actuators held) and an act phase (behaviour polled, sensors off). Only the policy differs:
 //!   the actions, sensors, behaviours and precondition checks are the same code.
 //!
-//! Cost per step: one sample is one store write, one belief update and a precondition check,
-//! all O(1); choosing the next sensor to sample is O(NS).
+//! Cost: starting or ending a state is O(NS) plus the sensors' own switching; a sample's cost
+//! on the sensing side is in [`crate::sense`].
 
 use core::cell::{Cell, RefCell};
-use core::future::{pending, poll_fn};
+use core::future::poll_fn;
 use core::pin::pin;
 use core::task::{Context, Poll};
 
@@ -22,17 +35,16 @@ use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_sync::waitqueue::MultiWakerRegistration;
-use embassy_time::{Duration, Instant, Timer, with_timeout};
-use heapless::Vec;
+use embassy_time::{Duration, Instant, Timer};
 
-use crate::action::{ActionId, ActuatorAction, SensorId, SensorMode, SensorSet};
+use crate::action::{ActionId, ActuatorAction, SensorId, SensorSet};
 use crate::facts::FactSet;
 use crate::fmt::debug;
 use crate::fsm::{BehaviourState, Edge, Fsm, Target};
 use crate::mission::Mission;
 use crate::model::WorldModel;
 use crate::platform::{Actuator, Outcome, Sensor, SensorFault};
-use crate::store::{DataStore, Entry, Key, MutualStore, SAMPLE_KEY, StoreAccess, StoreFull, Value};
+use crate::store::{DataStore, Entry, Key, MutualStore, StoreFull, Value};
 use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};
 
 /// How sensing and acting are scheduled.
@@ -67,6 +79,9 @@ pub struct Config {
     pub max_plans: u16,
     /// Lost samples in a row after which a sensor counts as [`SensorFault::Silent`].
     pub max_lost: u8,
+    /// Search nodes the planner takes in one poll of the deciding side before it yields
+    /// (at least 1): on one executor, a sample waits for at most one slice of a search.
+    pub plan_slice: u16,
 }
 
 impl Default for Config {
@@ -77,6 +92,7 @@ impl Default for Config {
             max_failures: 8,
             max_plans: 64,
             max_lost: 10,
+            plan_slice: 16,
         }
     }
 }
@@ -111,8 +127,8 @@ pub enum Failure {
         /// The facts that did not hold.
         missing: FactSet,
     },
-    /// A sensor the state needs cannot run: `pre(s)` does not hold, or the FSM names a state
-    /// or sensor that does not exist.
+    /// A sensor the state needs cannot run: it failed earlier and is out of service
+    /// ([`Runtime::faulty_sensors`]), `pre(s)` does not hold, or the domain has no such sensor.
     SensorUnavailable {
         /// The sensor.
         sensor: SensorId,
@@ -124,7 +140,7 @@ pub enum Failure {
         /// What went wrong.
         fault: SensorFault,
     },
-    /// A sensor's store had no room for its sample.
+    /// A sensor's store had no room for a value of its sample.
     StoreFull {
         /// The key that found no room.
         key: Key,
@@ -134,6 +150,9 @@ pub enum Failure {
         /// The state index.
         state: u8,
     },
+    /// The sensing side did not answer within the sensors' own timeouts: nothing polls
+    /// [`Runtime::sensing`]. Run it beside the deciding side.
+    SensingStalled,
 }
 
 /// A running action's precondition is false.
@@ -142,9 +161,9 @@ pub enum Failure {
 pub struct Violation {
     /// The facts of `pre(a)` that do not hold.
     pub missing: FactSet,
-    /// The first sample that showed it.
+    /// When the first sample that showed it was taken.
     pub since: Instant,
-    /// The latest sample that showed it.
+    /// When the latest sample that showed it was taken.
     pub last_seen: Instant,
 }
 
@@ -183,9 +202,14 @@ impl ActionIo<'_> {
         self.store.sample(sensor)
     }
 
-    /// `get(d_mutual, key)`: own value first, then the linked sensors'.
-    pub fn get(&self, key: Key) -> Option<Entry> {
-        self.store.get(key)
+    /// `get(d_mutual, k')`: what sensor `sensor`, running beside the action, put under `key`.
+    pub fn get(&self, sensor: SensorId, key: Key) -> Option<Entry> {
+        self.store.get(sensor, key)
+    }
+
+    /// The action's own value for `key`.
+    pub fn own(&self, key: Key) -> Option<Entry> {
+        self.store.own(key)
     }
 
     /// Writes into the action's own store, stamped now.
@@ -226,105 +250,64 @@ impl ActionIo<'_> {
     }
 }
 
-/// State the control path shares with running behaviours. Only `Cell`s, so reads and writes
-/// cannot fail; the waker list is the one `RefCell`, never borrowed across a call out.
-struct Shared<const NS: usize> {
-    beliefs: Cell<FactSet>,
-    percepts: [Cell<Option<Entry>>; NS],
+/// What the deciding side asks of the sensing side: the sensors to run and how.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Command {
+    /// Moves on with every command; a sampler serves one epoch at a time.
+    pub(crate) epoch: u32,
+    pub(crate) sensors: SensorSet,
+    pub(crate) mode: Mode,
+    /// The running action and its precondition, checked after every sample.
+    pub(crate) watch: Option<(ActionId, FactSet)>,
+    /// Cyclic sensors are due at this instant first.
+    pub(crate) start: Instant,
+}
+
+/// How the commanded sensors sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Mode {
+    /// Beside an action: cyclic sensors every period, one-shot ones once at the start,
+    /// on-demand ones on request.
+    Parallel,
+    /// An SMPA sense phase: as `Parallel`, with one-shot sensors only in the first phase.
+    Phase { first: bool },
+    /// The initial model: every commanded sensor samples once.
+    Once,
+}
+
+/// State the two sides share. Only `Cell`s, so reads and writes cannot fail; the waker lists
+/// are the `RefCell`s, never borrowed across a call out.
+pub(crate) struct Shared<const NS: usize> {
+    pub(crate) beliefs: Cell<FactSet>,
+    pub(crate) percepts: [Cell<Option<Entry>>; NS],
     /// What each sensor's latest sample says of its `per(s)`.
-    holds: [Cell<FactSet>; NS],
-    /// The sensors switched on for the current state (or the initial model).
-    running: Cell<SensorSet>,
+    pub(crate) holds: [Cell<FactSet>; NS],
+    /// The sensors switched on.
+    pub(crate) running: Cell<SensorSet>,
     /// The running sensors that have sampled since they were switched on.
-    fresh: Cell<SensorSet>,
+    pub(crate) fresh: Cell<SensorSet>,
     /// Samples lost in a row, per sensor.
-    lost: [Cell<u8>; NS],
+    pub(crate) lost: [Cell<u8>; NS],
+    /// When each sensor's latest read started.
+    pub(crate) last_read: [Cell<Option<Instant>>; NS],
     /// Facts some sample has decided (true or false) since the start.
-    sensed: Cell<FactSet>,
-    /// Sensors that failed: out of service for the rest of the mission.
-    faulty: Cell<SensorSet>,
-    violation: Cell<Option<Violation>>,
-    requests: Cell<SensorSet>,
-    version: Cell<u32>,
-    waiters: RefCell<MultiWakerRegistration<4>>,
-}
-
-/// When each sensor of a running state is due.
-struct Slot {
-    sensor: SensorId,
-    mode: SensorMode,
-    due: Option<Instant>,
-}
-
-struct Schedule<const NS: usize> {
-    slots: Vec<Slot, NS>,
-}
-
-impl<const NS: usize> Schedule<NS> {
-    /// Cyclic sensors are due at `start`, one-shot ones too when `one_shots`; on-demand sensors
-    /// wait for a request.
-    fn new<const NA: usize>(
-        domain: &crate::domain::Domain<'_, NS, NA>,
-        sensors: SensorSet,
-        start: Instant,
-        one_shots: bool,
-    ) -> Self {
-        let mut slots = Vec::new();
-        for sensor in sensors.iter() {
-            let Some(spec) = domain.sensor(sensor) else {
-                continue;
-            };
-            let due = match spec.mode {
-                SensorMode::Cyclic { .. } => Some(start),
-                SensorMode::OneShot if one_shots => Some(start),
-                SensorMode::OneShot | SensorMode::OnDemand => None,
-            };
-            // At most NS sensors exist, so this cannot overflow.
-            let _ = slots.push(Slot {
-                sensor,
-                mode: spec.mode,
-                due,
-            });
-        }
-        Self { slots }
-    }
-
-    fn next_due(&self) -> Option<Instant> {
-        self.slots.iter().filter_map(|s| s.due).min()
-    }
-
-    fn on_demand(&self) -> SensorSet {
-        self.slots
-            .iter()
-            .filter(|s| s.mode == SensorMode::OnDemand)
-            .map(|s| s.sensor)
-            .collect()
-    }
-}
-
-impl Slot {
-    fn reschedule(&mut self, now: Instant) {
-        self.due = match (self.mode, self.due) {
-            (SensorMode::Cyclic { period }, Some(due)) => {
-                // Keep the sampling phase; skip samples missed while the executor was busy.
-                let period = period.max(Duration::from_ticks(1));
-                let next = due.saturating_add(period);
-                Some(if next <= now {
-                    now.saturating_add(period)
-                } else {
-                    next
-                })
-            }
-            _ => None,
-        };
-    }
-}
-
-async fn sleep_until(at: Option<Instant>) {
-    match at {
-        Some(at) => Timer::at(at).await,
-        None => pending().await,
-    }
+    pub(crate) sensed: Cell<FactSet>,
+    /// Sensors that failed: out of service until [`Runtime::clear_faults`].
+    pub(crate) faulty: Cell<SensorSet>,
+    pub(crate) violation: Cell<Option<Violation>>,
+    pub(crate) requests: Cell<SensorSet>,
+    pub(crate) version: Cell<u32>,
+    pub(crate) command: Cell<Command>,
+    /// Sensors of the current command that are on and have taken the samples due at its start.
+    pub(crate) ready: Cell<SensorSet>,
+    /// Sensors whose sampler is between switching on and having switched off.
+    pub(crate) active: Cell<SensorSet>,
+    /// The first failure under the command of that epoch.
+    pub(crate) failure: Cell<Option<(u32, Failure)>>,
+    /// Behaviours, the precondition watch and the control loop.
+    pub(crate) deciding: RefCell<MultiWakerRegistration<4>>,
+    /// The samplers.
+    pub(crate) sensing: RefCell<MultiWakerRegistration<4>>,
 }
 
 fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
@@ -335,12 +318,25 @@ fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
     }
 }
 
+pub(crate) async fn sleep_until(at: Option<Instant>) {
+    match at {
+        Some(at) => Timer::at(at).await,
+        None => core::future::pending().await,
+    }
+}
+
 /// The P-SMPA runtime of one robot: the mission, the platform, the data stores of every
 /// behaviour, the beliefs and the trace.
 ///
 /// Capacities: `NS` sensors, `NA` actions, `NP` plans of at most `L` actions, `K` keys per
 /// data store. Everything lives inside this value; put it in a `static` (with a
 /// `StaticCell`) or on the stack of the task that runs it.
+///
+/// It runs as two futures: [`sensing`](Self::sensing), which never ends, and the control
+/// loop, [`run`](Self::run) or [`run_planning`](Self::run_planning). Run both: on one
+/// executor (`select(rt.sensing(), rt.run())` polls sensing first), or sensing in a task of
+/// a higher-priority executor. With `M = CriticalSectionRawMutex` and a `Sync` platform the
+/// runtime is `Sync`, so a `&'static Runtime` can be shared by tasks at two priorities.
 pub struct Runtime<
     'r,
     'a,
@@ -355,12 +351,12 @@ pub struct Runtime<
     const K: usize,
 > {
     pub(crate) mission: &'r Mission<'a, NS, NA, NP, L>,
-    sensors: &'r S,
+    pub(crate) sensors: &'r S,
     actuators: &'r A,
     pub(crate) config: Config,
-    sensor_stores: [DataStore<M, K>; NS],
+    pub(crate) sensor_stores: [DataStore<M, K>; NS],
     action_stores: [DataStore<M, K>; NA],
-    shared: Mutex<M, Shared<NS>>,
+    pub(crate) shared: Mutex<M, Shared<NS>>,
     tracer: Mutex<M, RefCell<Tracer<T>>>,
     trace_lost: Mutex<M, Cell<u32>>,
 }
@@ -402,12 +398,24 @@ impl<
                 running: Cell::new(SensorSet::EMPTY),
                 fresh: Cell::new(SensorSet::EMPTY),
                 lost: [const { Cell::new(0) }; NS],
+                last_read: [const { Cell::new(None) }; NS],
                 sensed: Cell::new(FactSet::EMPTY),
                 faulty: Cell::new(SensorSet::EMPTY),
                 violation: Cell::new(None),
                 requests: Cell::new(SensorSet::EMPTY),
                 version: Cell::new(0),
-                waiters: RefCell::new(MultiWakerRegistration::new()),
+                command: Cell::new(Command {
+                    epoch: 0,
+                    sensors: SensorSet::EMPTY,
+                    mode: Mode::Parallel,
+                    watch: None,
+                    start: Instant::from_ticks(0),
+                }),
+                ready: Cell::new(SensorSet::EMPTY),
+                active: Cell::new(SensorSet::EMPTY),
+                failure: Cell::new(None),
+                deciding: RefCell::new(MultiWakerRegistration::new()),
+                sensing: RefCell::new(MultiWakerRegistration::new()),
             }),
             tracer: Mutex::new(RefCell::new(Tracer::new(sink))),
             trace_lost: Mutex::new(Cell::new(0)),
@@ -496,313 +504,167 @@ impl<
         }
     }
 
-    /// Something behaviours may wait for changed: bump the version and wake the waiters.
-    fn notify(&self) {
+    /// Something the deciding side may wait for changed: bump the version and wake it.
+    pub(crate) fn notify(&self) {
         self.shared.lock(|s| {
             s.version.set(s.version.get().wrapping_add(1));
-            if let Ok(mut w) = s.waiters.try_borrow_mut() {
+            if let Ok(mut w) = s.deciding.try_borrow_mut() {
                 w.wake();
             }
         });
     }
 
-    fn register(&self, cx: &mut Context<'_>) {
+    /// Something a sampler may wait for changed (a command, a request): wake the sensing side.
+    pub(crate) fn wake_sensing(&self) {
         self.shared.lock(|s| {
-            if let Ok(mut w) = s.waiters.try_borrow_mut() {
+            if let Ok(mut w) = s.sensing.try_borrow_mut() {
+                w.wake();
+            }
+        });
+    }
+
+    fn register_deciding(&self, cx: &mut Context<'_>) {
+        self.shared.lock(|s| {
+            if let Ok(mut w) = s.deciding.try_borrow_mut() {
                 w.register(cx.waker());
             }
         });
     }
 
-    /// Waits until a behaviour requests one of `sensors`.
-    async fn requested(&self, sensors: SensorSet) {
-        if sensors.is_empty() {
-            return pending().await;
-        }
-        poll_fn(|cx| {
-            let pending_requests = self
-                .shared
-                .lock(|s| s.requests.get().bits() & sensors.bits());
-            if pending_requests != 0 {
-                Poll::Ready(())
-            } else {
-                self.register(cx);
-                Poll::Pending
-            }
-        })
-        .await;
-    }
-
-    fn take_requests(&self, sensors: SensorSet) -> SensorSet {
+    pub(crate) fn register_sensing(&self, cx: &mut Context<'_>) {
         self.shared.lock(|s| {
-            let all = s.requests.get();
-            s.requests
-                .set(SensorSet::from_bits(all.bits() & !sensors.bits()));
-            SensorSet::from_bits(all.bits() & sensors.bits())
-        })
+            if let Ok(mut w) = s.sensing.try_borrow_mut() {
+                w.register(cx.waker());
+            }
+        });
     }
 
-    fn sensor_timeout(&self, sensor: SensorId) -> Duration {
-        self.mission
-            .domain
-            .sensor(sensor)
-            .map_or(crate::action::SensorAction::DEFAULT_TIMEOUT, |s| s.timeout)
-    }
-
-    /// A sensor failed: it is out of service for the rest of the mission (a state that needs
-    /// it fails at once, the planner does not count on it), until [`clear_faults`](Self::clear_faults).
-    fn sensor_failed(&self, sensor: SensorId, fault: SensorFault) -> Failure {
-        self.shared
-            .lock(|s| s.faulty.set(s.faulty.get().with(sensor)));
-        self.trace(TraceEvent::SensorFailed { sensor, fault });
-        Failure::SensorFault { sensor, fault }
-    }
-
-    /// The sensors that failed and are out of service.
+    /// The sensors that failed and are out of service: a state that needs one fails at once
+    /// with [`Failure::SensorUnavailable`], and the planner does not count on them.
     pub fn faulty_sensors(&self) -> SensorSet {
         self.shared.lock(|s| s.faulty.get())
     }
 
     /// Puts every failed sensor back into service (after a repair or a reset of the device).
     pub fn clear_faults(&self) {
-        self.shared.lock(|s| s.faulty.set(SensorSet::EMPTY));
-    }
-
-    /// Declares which sensors run from now on (for sensor fusion); none has sampled yet.
-    pub(crate) fn set_running(&self, sensors: SensorSet) {
         self.shared.lock(|s| {
-            s.running.set(sensors);
-            s.fresh.set(SensorSet::EMPTY);
+            s.faulty.set(SensorSet::EMPTY);
+            for lost in &s.lost {
+                lost.set(0);
+            }
         });
     }
 
-    /// Switches `sensors` on in id order; on a fault, switches back off those already on.
-    pub(crate) async fn switch_on(&self, sensors: SensorSet) -> Result<(), Failure> {
-        for sensor in sensors.iter() {
-            let fault =
-                match with_timeout(self.sensor_timeout(sensor), self.sensors.switch_on(sensor))
-                    .await
-                {
-                    Ok(Ok(())) => {
-                        self.trace(TraceEvent::SensorOn { sensor });
-                        continue;
-                    }
-                    Ok(Err(fault)) => fault,
-                    Err(_) => SensorFault::Timeout,
-                };
-            let on: SensorSet = sensors.iter().take_while(|s| *s != sensor).collect();
-            self.switch_off(on).await;
-            return Err(self.sensor_failed(sensor, fault));
-        }
-        Ok(())
-    }
-
-    /// Switches `sensors` off in id order. A sensor that does not answer is traced and counted
-    /// off: the runtime will not use it again until it is switched on.
-    pub(crate) async fn switch_off(&self, sensors: SensorSet) {
-        for sensor in sensors.iter() {
-            if with_timeout(self.sensor_timeout(sensor), self.sensors.switch_off(sensor))
-                .await
-                .is_err()
-            {
-                self.trace(TraceEvent::SensorFailed {
-                    sensor,
-                    fault: SensorFault::Timeout,
-                });
-            }
-            self.trace(TraceEvent::SensorOff { sensor });
-        }
-    }
-
-    /// Takes one sample: stores it (Algorithm 3 line 6), updates `ω` and the perception facts
-    /// of `φ`, traces it and wakes the behaviour. Besides the platform's own sampling, bounded
-    /// work: one store write (O(K) worst case), sensor fusion over the running sensors (O(NS)),
-    /// one trace event (O(1)).
-    pub(crate) async fn sample(&self, sensor: SensorId) -> Result<(), Failure> {
-        let spec = self
-            .mission
-            .domain
-            .sensor(sensor)
-            .ok_or(Failure::SensorUnavailable { sensor })?;
-        let reading = match with_timeout(spec.timeout, self.sensors.sample(sensor)).await {
-            Ok(Ok(Some(reading))) => reading,
-            Ok(Ok(None)) => {
-                self.trace(TraceEvent::SampleLost { sensor });
-                let lost = self.shared.lock(|s| {
-                    s.lost.get(sensor.index()).map_or(u8::MAX, |n| {
-                        n.set(n.get().saturating_add(1));
-                        n.get()
-                    })
-                });
-                if lost >= self.config.max_lost {
-                    return Err(self.sensor_failed(sensor, SensorFault::Silent));
-                }
-                return Ok(());
-            }
-            Ok(Err(fault)) => return Err(self.sensor_failed(sensor, fault)),
-            Err(_) => return Err(self.sensor_failed(sensor, SensorFault::Timeout)),
-        };
-        self.shared.lock(|s| {
-            if let Some(n) = s.lost.get(sensor.index()) {
-                n.set(0);
-            }
-        });
-        let now = Instant::now();
-        let holds = reading.holds.intersection(spec.per);
-        let entry = Entry {
-            value: reading.value,
-            at: now,
-        };
-        self.sensor_stores
-            .get(sensor.index())
-            .ok_or(Failure::SensorUnavailable { sensor })?
-            .put(SAMPLE_KEY, reading.value, now)
-            .map_err(|e| Failure::StoreFull { key: e.key })?;
-        let domain = &self.mission.domain;
-        self.shared.lock(|s| {
-            if let Some(h) = s.holds.get(sensor.index()) {
-                h.set(holds);
-            }
-            let fresh = s.fresh.get().with(sensor);
-            s.fresh.set(fresh);
-            // Sensor fusion by conjunction: a fact of per(s) holds only if no running sensor that
-            // perceives it and has sampled says otherwise (the sonar sees a box while the bumper
-            // feels nothing: the path is not clear).
-            let sampled = SensorSet::from_bits(s.running.get().bits() & fresh.bits()).with(sensor);
-            let decided = sampled.iter().fold(spec.per, |acc, t| {
-                let per_t = domain.sensor(t).map_or(FactSet::EMPTY, |t| t.per);
-                let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, Cell::get);
-                acc.difference(per_t.difference(holds_t))
+    /// Tells the sensing side to run `sensors` from now on; returns the command's epoch.
+    pub(crate) fn command(
+        &self,
+        sensors: SensorSet,
+        mode: Mode,
+        watch: Option<(ActionId, FactSet)>,
+    ) -> u32 {
+        let start = Instant::now();
+        let epoch = self.shared.lock(|s| {
+            let epoch = s.command.get().epoch.wrapping_add(1);
+            s.command.set(Command {
+                epoch,
+                sensors,
+                mode,
+                watch,
+                start,
             });
-            s.beliefs
-                .set(s.beliefs.get().difference(spec.per).union(decided));
-            s.sensed.set(s.sensed.get().union(spec.per));
-            if let Some(p) = s.percepts.get(sensor.index()) {
-                p.set(Some(entry));
-            }
+            s.ready.set(SensorSet::EMPTY);
+            s.failure.set(None);
+            epoch
         });
-        self.trace(TraceEvent::Sample {
-            sensor,
-            value: reading.value,
-            holds,
-        });
-        self.notify();
-        Ok(())
+        self.wake_sensing();
+        epoch
     }
 
-    /// When the latest sample was taken that says one of `missing` does not hold: the newest
-    /// evidence of a violation. Samples of other sensors that only repeat the fused verdict are
-    /// not evidence.
-    fn evidence(&self, missing: FactSet) -> Option<Instant> {
-        let domain = &self.mission.domain;
-        self.shared.lock(|s| {
-            let sampled = SensorSet::from_bits(s.running.get().bits() & s.fresh.get().bits());
-            sampled
-                .iter()
-                .filter(|t| {
-                    let per_t = domain.sensor(*t).map_or(FactSet::EMPTY, |t| t.per);
-                    let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, Cell::get);
-                    per_t.difference(holds_t).intersects(missing)
-                })
-                .filter_map(|t| s.percepts.get(t.index()).and_then(Cell::get))
-                .map(|e| e.at)
-                .max()
-        })
-    }
-
-    /// Compares `pre(a)` with the beliefs after new samples; tells the behaviour about a change
-    /// and fails once the precondition has been false for `max_violation`.
-    fn monitor_precondition(&self, action: ActionId, pre: FactSet) -> Result<(), Failure> {
-        let now = Instant::now();
-        let missing = pre.difference(self.beliefs());
-        let before = self.shared.lock(|s| s.violation.get());
-        match (missing.is_empty(), before) {
-            (true, None) => return Ok(()),
-            (true, Some(_)) => {
-                self.shared.lock(|s| s.violation.set(None));
-                self.trace(TraceEvent::PreconditionRestored { action });
-            }
-            (false, None) => {
-                let seen = self.evidence(missing).unwrap_or(now);
-                self.shared.lock(|s| {
-                    s.violation.set(Some(Violation {
-                        missing,
-                        since: seen,
-                        last_seen: seen,
-                    }))
-                });
-                self.trace(TraceEvent::PreconditionViolated { action, missing });
-            }
-            (false, Some(v)) => {
-                let last_seen = self.evidence(missing).unwrap_or(v.last_seen);
-                let changed = v.missing != missing || last_seen != v.last_seen;
-                self.shared.lock(|s| {
-                    s.violation.set(Some(Violation {
-                        missing,
-                        last_seen,
-                        ..v
-                    }))
-                });
-                if v.missing != missing {
-                    self.trace(TraceEvent::PreconditionViolated { action, missing });
-                }
-                if now.saturating_duration_since(v.since) >= self.config.max_violation {
-                    return Err(Failure::PreconditionViolated { action, missing });
-                }
-                if !changed {
-                    return Ok(());
-                }
-            }
-        }
-        self.notify();
-        Ok(())
-    }
-
-    fn violation_deadline(&self) -> Option<Instant> {
+    /// The failure reported under command `epoch`, if any.
+    fn failure_of(&self, epoch: u32) -> Option<Failure> {
         self.shared
-            .lock(|s| s.violation.get())
-            .map(|v| v.since.saturating_add(self.config.max_violation))
+            .lock(|s| s.failure.get())
+            .filter(|(e, _)| *e == epoch)
+            .map(|(_, f)| f)
     }
 
-    /// Samples every sensor of `schedule` that is due at `now` or was requested.
-    async fn sample_due(
-        &self,
-        schedule: &mut Schedule<NS>,
-        now: Instant,
-        requested: SensorSet,
-    ) -> Result<(), Failure> {
-        for slot in schedule.slots.iter_mut() {
-            if slot.due.is_some_and(|d| d <= now) || requested.contains(slot.sensor) {
-                self.sample(slot.sensor).await?;
-                slot.reschedule(now);
+    /// How long the sensing side may take to answer for `sensors`: `steps` calls of the
+    /// slowest one's timeout, and a tick.
+    fn answer_within(&self, sensors: SensorSet, steps: u32) -> Duration {
+        let slowest = sensors
+            .iter()
+            .filter_map(|s| self.mission.domain.sensor(s))
+            .map(|s| s.timeout)
+            .max()
+            .unwrap_or(Duration::from_ticks(0));
+        let ticks = slowest.as_ticks().saturating_mul(u64::from(steps));
+        Duration::from_ticks(ticks.saturating_add(1))
+    }
+
+    /// Waits until `sensors` are on and have taken the samples due at the command's start, or
+    /// one of them failed.
+    pub(crate) async fn ready(&self, epoch: u32, sensors: SensorSet) -> Result<(), Failure> {
+        // Switching on and the first sample are each bounded by the sensor's timeout.
+        let limit = Instant::now().saturating_add(self.answer_within(sensors, 2));
+        let answered = poll_fn(|cx| {
+            if let Some(failure) = self.failure_of(epoch) {
+                return Poll::Ready(Err(failure));
             }
+            let ready = self.shared.lock(|s| s.ready.get());
+            if sensors.bits() & !ready.bits() == 0 {
+                return Poll::Ready(Ok(()));
+            }
+            self.register_deciding(cx);
+            Poll::Pending
+        });
+        match select(answered, Timer::at(limit)).await {
+            Either::First(result) => result,
+            Either::Second(()) => Err(Failure::SensingStalled),
         }
-        Ok(())
     }
 
-    /// The sensor side of a parallel state: samples on schedule and on request, monitors the
-    /// precondition, until `until` (SMPA sense phase) or until a failure.
-    async fn sense(
-        &self,
-        action: ActionId,
-        pre: FactSet,
-        schedule: &mut Schedule<NS>,
-        until: Option<Instant>,
-    ) -> Result<(), Failure> {
-        let on_demand = schedule.on_demand();
-        loop {
-            let wake = [schedule.next_due(), self.violation_deadline(), until]
-                .into_iter()
-                .flatten()
-                .min();
-            select(sleep_until(wake), self.requested(on_demand)).await;
-            let now = Instant::now();
-            if until.is_some_and(|u| now >= u) {
-                return Ok(());
+    /// Tells the sensing side to switch every sensor off, and waits until it has.
+    pub(crate) async fn stop(&self) -> Result<(), Failure> {
+        let active = self.shared.lock(|s| s.active.get());
+        self.command(SensorSet::EMPTY, Mode::Parallel, None);
+        if active.is_empty() {
+            return Ok(());
+        }
+        let limit = Instant::now().saturating_add(self.answer_within(active, 1));
+        let off = poll_fn(|cx| {
+            if self.shared.lock(|s| s.active.get()).is_empty() {
+                return Poll::Ready(());
             }
-            let requested = self.take_requests(on_demand);
-            self.sample_due(schedule, now, requested).await?;
-            self.monitor_precondition(action, pre)?;
+            self.register_deciding(cx);
+            Poll::Pending
+        });
+        match select(off, Timer::at(limit)).await {
+            Either::First(()) => Ok(()),
+            Either::Second(()) => Err(Failure::SensingStalled),
+        }
+    }
+
+    /// Watches the running action under command `epoch`: returns the first failure the
+    /// sensing side reports, or the violation of `pre(a)` once it has lasted
+    /// [`Config::max_violation`]. Never returns while all is well.
+    async fn watch(&self, epoch: u32, action: ActionId) -> Failure {
+        loop {
+            let version = self.shared.lock(|s| s.version.get());
+            if let Some(failure) = self.failure_of(epoch) {
+                return failure;
+            }
+            let violation = self.shared.lock(|s| s.violation.get());
+            let deadline = violation.map(|v| v.since.saturating_add(self.config.max_violation));
+            if let (Some(v), Some(deadline)) = (violation, deadline) {
+                if Instant::now() >= deadline {
+                    return Failure::PreconditionViolated {
+                        action,
+                        missing: v.missing,
+                    };
+                }
+            }
+            let changed = poll_fn(|cx| Monitor::poll_changed(self, cx, version));
+            select(changed, sleep_until(deadline)).await;
         }
     }
 
@@ -814,34 +676,25 @@ impl<
         sensors: SensorSet,
         io: &ActionIo<'_>,
     ) -> Result<Outcome, Failure> {
-        self.switch_on(sensors).await?;
-        self.set_running(sensors);
+        let epoch = self.command(sensors, Mode::Parallel, Some((action, spec.pre)));
         let result = async {
-            let start = Instant::now();
-            let mut schedule = Schedule::new(&self.mission.domain, sensors, start, true);
-            // Fresh percepts before the behaviour starts.
-            self.sample_due(&mut schedule, start, SensorSet::EMPTY)
-                .await?;
-            self.monitor_precondition(action, spec.pre)?;
-            let mut behaviour = pin!(self.actuators.run(action, io));
-            match select(
-                behaviour.as_mut(),
-                self.sense(action, spec.pre, &mut schedule, None),
-            )
-            .await
-            {
-                Either::First(outcome) => Ok(outcome),
-                // `sense` without an end returns only on failure.
-                Either::Second(Ok(())) => Ok(behaviour.await),
-                Either::Second(Err(failure)) => {
+            // Fresh percepts before the behaviour starts, checked against its precondition.
+            self.ready(epoch, sensors).await?;
+            self.check_precondition();
+            // The watch first: a failure reported at this instant stops the behaviour before
+            // it takes another step.
+            let behaviour = self.actuators.run(action, io);
+            match select(self.watch(epoch, action), behaviour).await {
+                Either::First(failure) => {
                     self.actuators.halt(action);
                     Err(failure)
                 }
+                Either::Second(outcome) => Ok(outcome),
             }
         }
         .await;
-        self.switch_off(sensors).await;
-        result
+        let stopped = self.stop().await;
+        result.and_then(|outcome| stopped.map(|()| outcome))
     }
 
     /// One SMPA sense phase: sensors on, actuators idle, samples until `until`, sensors off.
@@ -853,20 +706,18 @@ impl<
         until: Instant,
         first: bool,
     ) -> Result<(), Failure> {
-        self.switch_on(sensors).await?;
-        self.set_running(sensors);
+        let epoch = self.command(sensors, Mode::Phase { first }, Some((action, spec.pre)));
         let result = async {
-            let start = Instant::now();
-            let mut schedule = Schedule::new(&self.mission.domain, sensors, start, first);
-            self.sample_due(&mut schedule, start, SensorSet::EMPTY)
-                .await?;
-            self.monitor_precondition(action, spec.pre)?;
-            self.sense(action, spec.pre, &mut schedule, Some(until))
-                .await
+            self.ready(epoch, sensors).await?;
+            self.check_precondition();
+            match select(self.watch(epoch, action), Timer::at(until)).await {
+                Either::First(failure) => Err(failure),
+                Either::Second(()) => Ok(()),
+            }
         }
         .await;
-        self.switch_off(sensors).await;
-        result
+        let stopped = self.stop().await;
+        result.and(stopped)
     }
 
     /// SMPA: sense phase, act phase, sense phase, ... until the behaviour ends.
@@ -925,7 +776,6 @@ impl<
             s.violation.set(None);
             s.requests.set(SensorSet::EMPTY);
         });
-        self.set_running(SensorSet::EMPTY);
         let (outcome, result) = match result {
             Ok(outcome) => (Some(outcome), outcome_result(action, outcome)),
             Err(failure) => (None, Err(failure)),
@@ -950,6 +800,11 @@ impl<
         let spec = domain
             .action(action)
             .ok_or(Failure::ActionFailed { action })?;
+        // A sensor out of service cannot watch the action: fail before moving anything.
+        let faulty = self.faulty_sensors();
+        if let Some(sensor) = sensors.iter().find(|s| faulty.contains(*s)) {
+            return Err(Failure::SensorUnavailable { sensor });
+        }
         // Facts of pre(a) that no running sensor decides must already hold.
         let beliefs = self.beliefs();
         let missing = spec
@@ -1046,14 +901,14 @@ impl<
         if now != since {
             return Poll::Ready(now);
         }
-        self.register(cx);
+        self.register_deciding(cx);
         Poll::Pending
     }
 
     fn request(&self, sensor: SensorId) {
         self.shared
             .lock(|s| s.requests.set(s.requests.get().with(sensor)));
-        self.notify();
+        self.wake_sensing();
     }
 
     fn user(&self, code: u16, value: i32) {

@@ -12,16 +12,19 @@
 //! | planning domain `Δ` | [`domain`] |
 //! | `p = <t(p), c(p), bd(p)>`, library `P`, BDI selection | [`plan`] |
 //! | world model `M = <ω, φ, Π>`, task `Π = <Δ, τ0, τG>` | [`model`], [`mission`] |
-//! | Algorithm 2: plan → FSM `f(Λ, T)` with parallel states | [`fsm`], run by [`exec`] |
+//! | Algorithm 2: plan → FSM `f(Λ, T)` with parallel states | [`fsm`], run by [`exec`] and [`sense`] |
 //! | Algorithm 3: data stores `D`, mutual store | [`store`] |
 //! | Algorithm 1: the control loop | [`control`] |
 //! | the SMPA baseline | [`exec::Policy::Smpa`] |
 //! | worst-case reaction latency | [`timing`] |
 //!
 //! The platform (a robot, or a simulator) implements [`platform::Sensor`] and
-//! [`platform::Actuator`]. The core only exposes futures: it never spawns a task and never
-//! reads a clock other than `embassy-time`, so the same code runs on a microcontroller under
-//! the embassy executor and on a host in virtual time. Capacities are const generics; a full
+//! [`platform::Actuator`]. The core only exposes futures: the sensing side
+//! ([`Runtime::sensing`]: every sensor samples on its own schedule) and the deciding side
+//! ([`Runtime::run`]: the control loop, the FSM, the behaviours). The platform places them, on
+//! one executor or sensing at a higher priority. The core never spawns a task and never reads a
+//! clock other than `embassy-time`, so the same code runs on a microcontroller under the
+//! embassy executor and on a host in virtual time. Capacities are const generics; a full
 //! store or table is an `Err`; nothing allocates, nothing panics.
 #![no_std]
 #![deny(missing_docs)]
@@ -55,6 +58,7 @@ pub mod model;
 pub mod plan;
 pub mod planner;
 pub mod platform;
+pub mod sense;
 pub mod store;
 pub mod timing;
 pub mod trace;
@@ -68,6 +72,6 @@ pub use fsm::{BehaviourState, Fsm, FsmError, Target};
 pub use mission::{Bindings, LoadError, Loaded, Mission, Registry};
 pub use model::{Task, WorldModel};
 pub use plan::{Plan, PlanError, PlanId, PlanLibrary};
-pub use platform::{Actuator, Outcome, Reading, Sensor, SensorFault};
+pub use platform::{Actuator, MAX_PAIRS, Outcome, PairRejected, Reading, Sensor, SensorFault};
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
 pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};

@@ -219,86 +219,191 @@ impl<const N: usize> Planner<N> {
     }
 
     /// Searches a plan from `init` to a state where `goal` holds, with actions indexed by their
-    /// [`ActionId`]. The plan is at most `L` actions long.
+    /// [`ActionId`], to the end. The plan is at most `L` actions long. The search space is on
+    /// this call's stack; [`Search`] runs the same search in slices, in space the caller keeps.
     pub fn plan<const L: usize>(
         &self,
         actions: &[ActuatorAction<'_>],
         init: FactSet,
         goal: FactSet,
     ) -> Result<Found<L>, PlanningError> {
-        let limit = self.limit();
-        let mut arena: Vec<Node, N> = Vec::new();
-        let mut visited = Visited::<N> { slots: [0; N] };
-        let mut open: BinaryHeap<(u32, u32, u16), Min, N> = BinaryHeap::new();
-        let mut expanded = 0u32;
-        let budget = PlanningError::Budget { expanded: 0, limit };
-        let heuristic = match self.strategy {
-            Strategy::BreadthFirst => None,
-            Strategy::AStar(h) | Strategy::Greedy(h) => Some(h),
-        };
-        let score = |g: u16, h: u32| match self.strategy {
-            Strategy::Greedy(_) => h,
-            _ => u32::from(g).saturating_add(h),
-        };
+        let mut search = Search::<N>::new();
+        search.start(self, actions, init, goal);
+        loop {
+            if let Some(result) = search.step(actions, u32::MAX) {
+                return result;
+            }
+        }
+    }
+}
 
+/// The space of one search, run in slices: `N` nodes of 16 bytes, a visited table of `N`
+/// slots and an open list of `N` entries, about `34 · N` bytes wherever the caller keeps it
+/// (a `static` on a microcontroller). [`start`](Self::start) sets a search up in place,
+/// [`step`](Self::step) runs it a slice at a time: between two slices the caller may yield, so
+/// that a search never holds a cooperative executor for longer than one slice.
+pub struct Search<const N: usize> {
+    strategy: Strategy,
+    limit: u32,
+    goal: FactSet,
+    arena: Vec<Node, N>,
+    visited: Visited<N>,
+    open: BinaryHeap<(u32, u32, u16), Min, N>,
+    /// Breadth-first: the next node to expand.
+    head: usize,
+    expanded: u32,
+    /// Decided before any expansion: the plan ends at this node, or there is none.
+    early: Option<Result<usize, PlanningError>>,
+}
+
+impl<const N: usize> Default for Search<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> Search<N> {
+    /// An empty search space; usable in a `static`.
+    pub const fn new() -> Self {
+        Self {
+            strategy: Strategy::BreadthFirst,
+            limit: 0,
+            goal: FactSet::EMPTY,
+            arena: Vec::new(),
+            visited: Visited { slots: [0; N] },
+            open: BinaryHeap::new(),
+            head: 0,
+            expanded: 0,
+            early: Some(Err(PlanningError::Unsolvable { expanded: 0 })),
+        }
+    }
+
+    /// Sets up `planner`'s search from `init` to a state where `goal` holds over `actions`, in
+    /// place. O(N) to clear the space, O(NA · |facts|) for a heuristic's first estimate.
+    pub fn start<const P: usize>(
+        &mut self,
+        planner: &Planner<P>,
+        actions: &[ActuatorAction<'_>],
+        init: FactSet,
+        goal: FactSet,
+    ) {
+        self.strategy = planner.strategy;
+        self.limit = planner
+            .budget
+            .min(Planner::<N>::new(planner.strategy).limit());
+        self.goal = goal;
+        self.arena.clear();
+        self.visited.slots.fill(0);
+        self.open.clear();
+        self.head = 0;
+        self.expanded = 0;
+        self.early = None;
         let root = Node {
             state: init,
             parent: NONE,
             action: 0,
             g: 0,
         };
-        if limit == 0 || arena.push(root).is_err() {
-            return Err(budget);
+        if self.limit == 0 || self.arena.push(root).is_err() {
+            self.early = Some(Err(PlanningError::Budget {
+                expanded: 0,
+                limit: self.limit,
+            }));
+            return;
         }
-        let (slot, _) = visited.find(&arena, init);
-        visited.set(slot, 0);
+        let (slot, _) = self.visited.find(&self.arena, init);
+        self.visited.set(slot, 0);
         if goal.is_subset(init) {
-            return self.extract(&arena, 0, expanded);
+            self.early = Some(Ok(0));
+            return;
         }
-        if let Some(h) = heuristic {
+        if let Some(h) = self.heuristic() {
             let h0 = estimate(h, actions, init, goal);
             if h0 == INFINITE {
-                return Err(PlanningError::Unsolvable { expanded });
+                self.early = Some(Err(PlanningError::Unsolvable { expanded: 0 }));
+                return;
             }
-            let _ = open.push((score(0, h0), h0, 0));
+            let _ = self.open.push((self.score(0, h0), h0, 0));
         }
-        let mut head = 0usize;
+    }
+
+    fn heuristic(&self) -> Option<Heuristic> {
+        match self.strategy {
+            Strategy::BreadthFirst => None,
+            Strategy::AStar(h) | Strategy::Greedy(h) => Some(h),
+        }
+    }
+
+    fn score(&self, g: u16, h: u32) -> u32 {
+        match self.strategy {
+            Strategy::Greedy(_) => h,
+            _ => u32::from(g).saturating_add(h),
+        }
+    }
+
+    /// Nodes expanded so far.
+    pub fn expanded(&self) -> u32 {
+        self.expanded
+    }
+
+    /// Takes at most `slice` nodes from the open list and expands them, with the same
+    /// `actions` the search started with; `None` while the search goes on, else the plan (at
+    /// most `L` actions) or why there is none. Each node costs O(NA) set operations plus, for
+    /// heuristic search, O(NA · |facts|) per generated node.
+    pub fn step<const L: usize>(
+        &mut self,
+        actions: &[ActuatorAction<'_>],
+        slice: u32,
+    ) -> Option<Result<Found<L>, PlanningError>> {
+        if let Some(early) = self.early {
+            return Some(early.and_then(|node| extract(&self.arena, node, self.expanded)));
+        }
+        let (goal, limit, heuristic) = (self.goal, self.limit, self.heuristic());
+        let mut taken = 0u32;
         loop {
+            if taken >= slice {
+                return None;
+            }
+            taken = taken.saturating_add(1);
+            let expanded = self.expanded;
             // Next node: FIFO order for breadth-first, lowest (f, h, index) otherwise.
             let index = match heuristic {
                 None => {
-                    if head >= arena.len() {
-                        return Err(PlanningError::Unsolvable { expanded });
+                    if self.head >= self.arena.len() {
+                        return Some(Err(PlanningError::Unsolvable { expanded }));
                     }
-                    head = head.saturating_add(1);
-                    head.saturating_sub(1)
+                    self.head = self.head.saturating_add(1);
+                    self.head.saturating_sub(1)
                 }
-                Some(_) => match open.pop() {
+                Some(_) => match self.open.pop() {
                     Some((_, _, i)) => usize::from(i),
-                    None => return Err(PlanningError::Unsolvable { expanded }),
+                    None => return Some(Err(PlanningError::Unsolvable { expanded })),
                 },
             };
-            let Some(node) = arena.get(index).copied() else {
-                return Err(PlanningError::Unsolvable { expanded });
+            let Some(node) = self.arena.get(index).copied() else {
+                return Some(Err(PlanningError::Unsolvable { expanded }));
             };
             // A cheaper path to this state was found after it was queued: skip the stale entry.
-            if heuristic.is_some() && visited.find(&arena, node.state).1 != Some(index as u16) {
+            if heuristic.is_some()
+                && self.visited.find(&self.arena, node.state).1 != Some(index as u16)
+            {
                 continue;
             }
             if heuristic.is_some() && goal.is_subset(node.state) {
-                return self.extract(&arena, index, expanded);
+                return Some(extract(&self.arena, index, expanded));
             }
-            expanded = expanded.saturating_add(1);
+            self.expanded = expanded.saturating_add(1);
+            let expanded = self.expanded;
             for (a, action) in actions.iter().enumerate() {
                 if !action.pre.is_subset(node.state) {
                     continue;
                 }
                 let state = node.state.apply(action.add, action.del);
                 let g = node.g.saturating_add(1);
-                let (slot, known) = visited.find(&arena, state);
+                let (slot, known) = self.visited.find(&self.arena, state);
                 if let Some(k) = known {
                     // Seen at least as cheaply: nothing new.
-                    if arena.get(usize::from(k)).is_some_and(|n| n.g <= g) {
+                    if self.arena.get(usize::from(k)).is_some_and(|n| n.g <= g) {
                         continue;
                     }
                 }
@@ -312,61 +417,63 @@ impl<const N: usize> Planner<N> {
                     }
                     None => 0,
                 };
-                if arena.len() as u32 >= limit.saturating_add(1) {
-                    return Err(PlanningError::Budget { expanded, limit });
+                if self.arena.len() as u32 >= limit.saturating_add(1) {
+                    return Some(Err(PlanningError::Budget { expanded, limit }));
                 }
-                let child = arena.len() as u16;
-                let pushed = arena.push(Node {
+                let child = self.arena.len() as u16;
+                let pushed = self.arena.push(Node {
                     state,
                     parent: index as u16,
                     action: a as u8,
                     g,
                 });
                 if pushed.is_err() {
-                    return Err(PlanningError::Budget { expanded, limit });
+                    return Some(Err(PlanningError::Budget { expanded, limit }));
                 }
-                visited.set(slot, child);
+                self.visited.set(slot, child);
                 if heuristic.is_none() && goal.is_subset(state) {
                     // Breadth-first: the first goal generated is at the least depth.
-                    return self.extract(&arena, usize::from(child), expanded);
+                    return Some(extract(&self.arena, usize::from(child), expanded));
                 }
-                if heuristic.is_some() && open.push((score(g, h), h, child)).is_err() {
-                    return Err(PlanningError::Budget { expanded, limit });
+                let score = self.score(g, h);
+                if heuristic.is_some() && self.open.push((score, h, child)).is_err() {
+                    return Some(Err(PlanningError::Budget { expanded, limit }));
                 }
             }
         }
     }
+}
 
-    fn extract<const L: usize>(
-        &self,
-        arena: &[Node],
-        goal: usize,
-        expanded: u32,
-    ) -> Result<Found<L>, PlanningError> {
-        let too_long = PlanningError::TooLong { limit: L as u32 };
-        let mut body: Vec<ActionId, L> = Vec::new();
-        let mut at = goal;
-        while let Some(node) = arena.get(at) {
-            if node.parent == NONE {
-                break;
-            }
-            body.push(ActionId::new(usize::from(node.action)).ok_or(too_long)?)
-                .map_err(|_| too_long)?;
-            at = usize::from(node.parent);
+/// The plan that ends at node `goal`: the actions on the path from the root, in order.
+fn extract<const L: usize>(
+    arena: &[Node],
+    goal: usize,
+    expanded: u32,
+) -> Result<Found<L>, PlanningError> {
+    let too_long = PlanningError::TooLong { limit: L as u32 };
+    let mut body: Vec<ActionId, L> = Vec::new();
+    let mut at = goal;
+    while let Some(node) = arena.get(at) {
+        if node.parent == NONE {
+            break;
         }
-        body.reverse();
-        Ok(Found {
-            body,
-            expanded,
-            generated: arena.len() as u32,
-        })
+        body.push(ActionId::new(usize::from(node.action)).ok_or(too_long)?)
+            .map_err(|_| too_long)?;
+        at = usize::from(node.parent);
     }
+    body.reverse();
+    Ok(Found {
+        body,
+        expanded,
+        generated: arena.len() as u32,
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::domain::Domain;
+    use std::boxed::Box;
     use std::format;
     use std::string::String;
     use std::vec::Vec as StdVec;
@@ -718,6 +825,60 @@ mod tests {
                 .plan::<4>(d.actions(), init, goal)
                 .map(|f| f.body.len()),
             Err(PlanningError::TooLong { limit: 4 })
+        );
+    }
+
+    /// A search run in slices of one node finds what one call finds, over as many calls as it
+    /// takes nodes: a cooperative executor gets its turn back after every node.
+    #[test]
+    fn a_search_in_slices_finds_the_same_plan_one_node_at_a_time() {
+        let w = blocks(4);
+        let d = w.domain();
+        let init = set(
+            &d,
+            &[
+                "handempty",
+                "ontable A",
+                "on B A",
+                "on C B",
+                "on D C",
+                "clear D",
+            ],
+        );
+        let goal = set(&d, &["ontable D", "on C D", "on B C", "on A B"]);
+        for strategy in STRATEGIES {
+            let planner = Planner::<4096>::new(strategy);
+            let whole = planner.plan::<32>(d.actions(), init, goal).unwrap();
+            let mut search: Box<Search<4096>> = Box::default();
+            search.start(&planner, d.actions(), init, goal);
+            let mut calls = 1;
+            let sliced = loop {
+                if let Some(result) = search.step::<32>(d.actions(), 1) {
+                    break result.unwrap();
+                }
+                calls += 1;
+            };
+            assert_eq!(sliced, whole, "{strategy:?}");
+            // Every node taken was one call; the problem is not trivial.
+            assert!(calls >= whole.expanded, "{strategy:?}: {calls} calls");
+            assert!(
+                whole.expanded >= 10,
+                "{strategy:?}: {} nodes",
+                whole.expanded
+            );
+        }
+        // A search decided before any node (the goal holds already) answers at the first call.
+        let mut done = Search::<16>::new();
+        done.start(
+            &Planner::<16>::new(Strategy::BreadthFirst),
+            d.actions(),
+            goal,
+            goal,
+        );
+        assert_eq!(
+            done.step::<32>(d.actions(), 1)
+                .map(|r| r.map(|f| f.body.len())),
+            Some(Ok(0))
         );
     }
 

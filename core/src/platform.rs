@@ -9,17 +9,70 @@
 use crate::action::{ActionId, SensorId};
 use crate::exec::ActionIo;
 use crate::facts::FactSet;
-use crate::store::Value;
+use crate::store::{Key, SAMPLE_KEY, Value};
 
-/// One sample of a sensor: the measured value and the perception facts it makes true.
+/// Most `(key, value)` pairs one [`Reading`] carries besides its main value.
+pub const MAX_PAIRS: usize = 4;
+
+/// One sample of a sensor: the measured value, the perception facts it makes true, and any
+/// further `(k', v')` pairs the sensor puts into its own store (Algorithm 3 line 6: a sonar's
+/// echo time, an IMU's three axes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Reading {
-    /// The measurement, stored in the sensor's data store.
+    /// The measurement, stored under [`SAMPLE_KEY`] in the sensor's data store.
     pub value: Value,
     /// The facts of `per(s)` that hold according to this sample; the facts of `per(s)` not in
     /// `holds` are false. Facts outside `per(s)` are ignored.
     pub holds: FactSet,
+    pairs: [Option<(Key, Value)>; MAX_PAIRS],
+}
+
+/// [`Reading::put`] found no room, or was given [`SAMPLE_KEY`]: the pair is handed back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PairRejected {
+    /// The key.
+    pub key: Key,
+    /// The value that was not kept.
+    pub value: Value,
+}
+
+impl Reading {
+    /// A reading of `value` under which the facts `holds` of `per(s)` are true.
+    pub const fn new(value: Value, holds: FactSet) -> Self {
+        Self {
+            value,
+            holds,
+            pairs: [None; MAX_PAIRS],
+        }
+    }
+
+    /// Adds a `(key, value)` pair for the sensor's store, or replaces the value of a key already
+    /// added. At most [`MAX_PAIRS`] keys; [`SAMPLE_KEY`] belongs to [`value`](Self::value).
+    pub fn put(&mut self, key: Key, value: Value) -> Result<(), PairRejected> {
+        let rejected = PairRejected { key, value };
+        if key == SAMPLE_KEY {
+            return Err(rejected);
+        }
+        let slot = self
+            .pairs
+            .iter_mut()
+            .find(|p| p.is_none_or(|(k, _)| k == key))
+            .ok_or(rejected)?;
+        *slot = Some((key, value));
+        Ok(())
+    }
+
+    /// The reading with the pair `(key, value)` added ([`put`](Self::put)).
+    pub fn with(mut self, key: Key, value: Value) -> Result<Self, PairRejected> {
+        self.put(key, value).map(|()| self)
+    }
+
+    /// The pairs besides the main value, in the order they were added.
+    pub fn pairs(&self) -> impl Iterator<Item = (Key, Value)> + '_ {
+        self.pairs.iter().flatten().copied()
+    }
 }
 
 /// Why a sensor could not deliver a sample.
@@ -51,7 +104,21 @@ pub enum Outcome {
     Interrupted,
 }
 
-/// The sensors of a platform (the sensing side of the sensory controller).
+/// The sensors of a platform (the sensing side: the paper's sensory controller).
+///
+/// Every running sensor has a sampler of its own in [`Runtime::sensing`](crate::exec::Runtime::sensing):
+/// its methods are called for one sensor at a time, but calls for *different* sensors overlap.
+///
+/// * A call may await I/O for as long as the device needs (an ultrasonic echo up to 38 ms, a
+///   time-of-flight conversion, a bus transaction): the await costs the other sensors nothing.
+///   Their samplers keep their own instants, and nothing on the deciding side waits for it.
+/// * A call must not *block* (spin on a register, `block_for`): that stalls the executor and
+///   with it every sensor on it. Wait for an interrupt, a DMA completion or a timer instead.
+/// * A call can be cancelled at an await point (dropped): when it outlives the sensor's
+///   timeout, or when the state that needs the sensor ends. Leave the device in a state the
+///   next call can start from.
+/// * A sample describes the world at the instant it started: the runtime stamps its values
+///   with that instant, and delivers them when the call returns.
 #[allow(async_fn_in_trait)] // Runs on single-threaded executors: no `Send` bound wanted.
 pub trait Sensor {
     /// Powers the sensor up. Called when a state that needs it starts (least commitment).

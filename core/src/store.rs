@@ -2,9 +2,11 @@
 //!
 //! Every behaviour (sensor-based or actuator-based action) owns a [`DataStore`] `d_i(k, v)`:
 //! a fixed-capacity map from small integer [`Key`]s to typed [`Value`]s stamped with the
-//! [`Instant`] they were written. While a sensor `s_j` runs beside an action `a_i`
+//! [`Instant`] they describe. A sample puts its value under [`SAMPLE_KEY`] and any further
+//! `(k', v')` pairs the sensor gives ([`Reading::put`](crate::platform::Reading::put)) into
+//! its sensor's store (line 6). While a sensor `s_j` runs beside an action `a_i`
 //! (`per(s_j) ⊆ pre(a_i)`), the [`MutualStore`] `d_mutual(s_j, a_i)` joins their stores: the
-//! action reads what the sensor put, with no I/O in between (lines 5-8).
+//! action reads any key of any of its sensors, by sensor, with no I/O in between (lines 7-8).
 //!
 //! Stores are generic over an `embassy_sync` [`RawMutex`] so the same code is sound between
 //! interrupt priorities on a microcontroller and between test threads on a host. A full store
@@ -36,12 +38,16 @@ pub const SAMPLE_KEY: Key = Key(0);
 pub enum Value {
     /// A yes/no reading (the camera sees the door handle).
     Bool(bool),
-    /// A signed integer.
+    /// A signed integer in the sensor's own unit (an encoder count, a temperature in m°C, an
+    /// acceleration in mm/s²).
     Int(i32),
-    /// A distance in millimetres (a sonar range; 0 when the sonar is off).
-    Mm(u32),
+    /// A signed distance in millimetres: a range, a position, an offset from a line.
+    Mm(i32),
     /// A discrete level (bumper: 0 off, 1 no contact, 2 contact).
     Level(u8),
+    /// A ranging sensor answered and nothing lay within its range (no echo came back). Not a
+    /// distance: a behaviour must not mistake it for "very far" or for 0.
+    NoEcho,
 }
 
 /// A stored value and the time it was written.
@@ -223,27 +229,24 @@ impl<'s> MutualStore<'s> {
         self.linked
     }
 
-    /// `a_i.get(d_mutual, k')` (line 8): the action's own value for `key`, else the first linked
-    /// sensor's, in sensor id order. O(linked sensors) store lookups.
-    pub fn get(&self, key: Key) -> Option<Entry> {
-        self.own.get(key).or_else(|| {
-            self.linked
-                .iter()
-                .find_map(|s| self.sensors.store(s).and_then(|st| st.get(key)))
-        })
-    }
-
-    /// The value `key` of one linked sensor; `None` for a sensor that is not linked.
-    pub fn get_from(&self, sensor: SensorId, key: Key) -> Option<Entry> {
+    /// `a_i.get(d_mutual(s_j, a_i), k')` (line 8): what linked sensor `s_j` put under `key`;
+    /// `None` for a sensor that is not running beside the action. Two sensors may use the same
+    /// key for different things, so a read always names the sensor. One store lookup.
+    pub fn get(&self, sensor: SensorId, key: Key) -> Option<Entry> {
         if !self.linked.contains(sensor) {
             return None;
         }
         self.sensors.store(sensor)?.get(key)
     }
 
-    /// The latest sample of a linked sensor.
+    /// The latest sample of a linked sensor: its value under [`SAMPLE_KEY`].
     pub fn sample(&self, sensor: SensorId) -> Option<Entry> {
-        self.get_from(sensor, SAMPLE_KEY)
+        self.get(sensor, SAMPLE_KEY)
+    }
+
+    /// The action's own value for `key` (`d_{a_i}`, line 2).
+    pub fn own(&self, key: Key) -> Option<Entry> {
+        self.own.get(key)
     }
 
     /// Writes into the action's own store.
@@ -321,14 +324,22 @@ mod tests {
         let s2 = SensorId::new(2).unwrap();
         sensors[0].put(SAMPLE_KEY, Value::Mm(450), t(5)).unwrap();
         sensors[1].put(SAMPLE_KEY, Value::Level(2), t(6)).unwrap();
+        sensors[2].put(SAMPLE_KEY, Value::NoEcho, t(7)).unwrap();
+        // The same key in two sensors' stores means two things: reads name the sensor.
+        sensors[1].put(Key(3), Value::Int(-40), t(6)).unwrap();
         sensors[2].put(Key(3), Value::Bool(true), t(7)).unwrap();
         let mutual = MutualStore::link(&own, &sensors, SensorSet::EMPTY.with(s1).with(s2));
         // s0 is not beside this action: its store is not reachable.
         assert_eq!(mutual.sample(s0), None);
+        assert_eq!(mutual.get(s0, SAMPLE_KEY), None);
         assert_eq!(mutual.sample(s1).unwrap().value, Value::Level(2));
-        assert_eq!(mutual.get(SAMPLE_KEY).unwrap().value, Value::Level(2));
-        assert_eq!(mutual.get(Key(3)).unwrap().at, t(7));
-        mutual.put(SAMPLE_KEY, Value::Int(-1), t(8)).unwrap();
-        assert_eq!(mutual.get(SAMPLE_KEY).unwrap().value, Value::Int(-1));
+        assert_eq!(mutual.sample(s2).unwrap().value, Value::NoEcho);
+        assert_eq!(mutual.get(s1, Key(3)).unwrap().value, Value::Int(-40));
+        assert_eq!(mutual.get(s2, Key(3)).unwrap().at, t(7));
+        // The action's own store is separate from every sensor's.
+        assert_eq!(mutual.own(Key(3)), None);
+        mutual.put(Key(3), Value::Mm(-12), t(8)).unwrap();
+        assert_eq!(mutual.own(Key(3)).unwrap().value, Value::Mm(-12));
+        assert_eq!(mutual.get(s2, Key(3)).unwrap().value, Value::Bool(true));
     }
 }

@@ -1,32 +1,94 @@
 //! Response-time analysis of the runtime: how late a sample can be, and how long after an
 //! obstacle appears the acting can react to it.
 //!
-//! The model is the one the runtime runs: a single embassy task polls the parallel state,
-//! cooperatively. Each cyclic sensor is a periodic job `i` (period `Tᵢ`, worst cost `Cᵢ`: the
-//! sample step and the behaviour step it wakes). A job cannot start while another poll runs,
-//! so it is blocked by at most the longest poll `B`, and every other job released meanwhile
-//! may run first. The worst response time is the least fixed point of
+//! The model is the one the runtime runs ([`crate::exec`], [`crate::sense`]). Each cyclic
+//! sensor `i` is a periodic job: released every `Tᵢ`, it costs `Cᵢ` of processor time on the
+//! sensing side (starting the read, then delivering it: store, fuse, check, wake) and waits
+//! `Lᵢ` for its read between the two (an echo, a conversion: no processor time; other work
+//! runs meanwhile). The deciding side then reacts in one behaviour step of cost `C_b`. The
+//! worst response time, from release to the behaviour having reacted, is the least fixed point
+//! of
 //!
-//! `Rᵢ = B + Cᵢ + Σⱼ≠ᵢ ⌈Rᵢ / Tⱼ⌉ · Cⱼ`
+//! `Rᵢ = nᵢ·b + a + Lᵢ + Cᵢ + C_b + Σⱼ≠ᵢ ⌈Rᵢ / Tⱼ⌉ · Cⱼ`
 //!
-//! (non-preemptive, no priorities: the conservative reading of a FIFO run queue). A job
-//! whose response time exceeds its period would delay its own next release: the set is then
-//! unschedulable, and so it is when the utilisation `Σ Cⱼ / Tⱼ` reaches 1.
+//! where `nᵢ` is the number of processor segments of a sample (1 without a read latency, 2
+//! with one) and the blocking comes from where the two sides run ([`Blocking`]):
+//!
+//! * one executor, sensing polled first ([`Blocking::one_executor`]): each segment may wait
+//!   for the deciding poll in progress, `b = B`; the behaviour step is the next deciding poll,
+//!   `a = 0`;
+//! * sensing on an executor that preempts deciding ([`Blocking::preemptive`]): a sample never
+//!   waits for deciding, `b = 0`; the behaviour step waits for the deciding poll in progress,
+//!   `a = B`.
+//!
+//! Every other sampling job released meanwhile may run first (sensing jobs share a priority).
+//! The set is unschedulable when the utilisation `Σ Cⱼ / Tⱼ` reaches 1, and overloaded when a
+//! job's processor time and blocking, `Rᵢ − Lᵢ`, exceed its period. A read longer than the
+//! period is not an overload: the sampler skips the instants it overran, so samples start at
+//! most [`Response::gap_ns`] apart.
 //!
 //! The reaction latency to an obstacle seen by sensor `i` adds the wait for the sample that
 //! sees it: [`latency_bound`].
 //!
-//! Integer nanoseconds throughout; every function is O(jobs) per iteration and iterates at
-//! most `Tᵢ / min Cⱼ` times.
+//! Integer nanoseconds throughout; every function is O(jobs) per iteration, and the iteration
+//! ends when the utilisation is below 1.
 
-/// A periodic job: a cyclic sensor's sampling step and the behaviour step it wakes.
+/// A periodic job: a cyclic sensor's sample and the behaviour step it wakes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Job {
     /// Release period, ns.
     pub period_ns: u64,
-    /// Worst cost of one release, ns.
+    /// Worst processor time of one release on the sensing side, ns.
     pub cost_ns: u64,
+    /// Worst time a read waits for its device, ns (no processor time).
+    pub latency_ns: u64,
+}
+
+/// What a released sample, and the behaviour step it wakes, can be kept waiting by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Blocking {
+    /// Before each processor segment of a sample, ns.
+    pub per_segment_ns: u64,
+    /// Before the behaviour step that reacts, ns.
+    pub before_reaction_ns: u64,
+}
+
+impl Blocking {
+    /// No blocking at all (virtual time, where computing takes none).
+    pub const NONE: Self = Self {
+        per_segment_ns: 0,
+        before_reaction_ns: 0,
+    };
+
+    /// Sensing and deciding on one executor, sensing polled first; `longest_deciding_ns` is the
+    /// longest poll of the deciding side.
+    pub const fn one_executor(longest_deciding_ns: u64) -> Self {
+        Self {
+            per_segment_ns: longest_deciding_ns,
+            before_reaction_ns: 0,
+        }
+    }
+
+    /// Sensing on an executor that preempts the deciding side.
+    pub const fn preemptive(longest_deciding_ns: u64) -> Self {
+        Self {
+            per_segment_ns: 0,
+            before_reaction_ns: longest_deciding_ns,
+        }
+    }
+}
+
+/// The worst case of one sampling job.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Response {
+    /// From a release to the behaviour step it wakes having run, ns.
+    pub response_ns: u64,
+    /// The longest time between the starts of two samples, ns: the period, or a multiple of it
+    /// when a sample can outlast the period.
+    pub gap_ns: u64,
 }
 
 /// Why a job set has no bound.
@@ -38,11 +100,11 @@ pub enum TimingError {
         /// `Σ C/T` in parts per million, rounded up.
         utilisation_ppm: u64,
     },
-    /// Job `job` may still run when it is released again.
+    /// Job `job`'s processor time and blocking exceed its period.
     Overrun {
         /// Index of the job.
         job: usize,
-        /// Its response time so far (already beyond its period), ns.
+        /// Its response time so far, ns.
         response_ns: u64,
         /// Its period, ns.
         period_ns: u64,
@@ -69,7 +131,7 @@ impl core::fmt::Display for TimingError {
                 period_ns,
             } => write!(
                 f,
-                "unschedulable: job {job} may take {response_ns} ns, longer than its period of {period_ns} ns"
+                "unschedulable: job {job} may take {response_ns} ns, more processor time than its period of {period_ns} ns"
             ),
             Self::BadJob { job } => write!(f, "job {job} has no period"),
         }
@@ -90,21 +152,33 @@ pub fn utilisation_ppm(jobs: &[Job]) -> Result<u64, TimingError> {
     })
 }
 
-/// The worst response time of job `i`, ns: from its release to the end of the behaviour step
-/// it wakes, with `blocking_ns` the longest poll that may be running when it is released.
+/// The worst response of job `i`: from its release to the end of the behaviour step of cost
+/// `reaction_ns` it wakes, and the longest gap between the starts of two of its samples.
 ///
-/// Errors when the set needs the whole processor, or when the response time exceeds the job's
-/// period (it would be released again before it finishes).
-pub fn response_time(jobs: &[Job], i: usize, blocking_ns: u64) -> Result<u64, TimingError> {
+/// Errors when the set needs the whole processor, or when the job's processor time and
+/// blocking exceed its period.
+pub fn response(
+    jobs: &[Job],
+    i: usize,
+    blocking: Blocking,
+    reaction_ns: u64,
+) -> Result<Response, TimingError> {
     let job = jobs.get(i).ok_or(TimingError::BadJob { job: i })?;
     let utilisation_ppm = utilisation_ppm(jobs)?;
     if utilisation_ppm >= 1_000_000 {
         return Err(TimingError::Unschedulable { utilisation_ppm });
     }
-    let base = blocking_ns.saturating_add(job.cost_ns);
+    let segments = if job.latency_ns > 0 { 2 } else { 1 };
+    let base = blocking
+        .per_segment_ns
+        .saturating_mul(segments)
+        .saturating_add(blocking.before_reaction_ns)
+        .saturating_add(job.latency_ns)
+        .saturating_add(job.cost_ns)
+        .saturating_add(reaction_ns);
     let mut r = base;
     loop {
-        if r > job.period_ns {
+        if r.saturating_sub(job.latency_ns) > job.period_ns {
             return Err(TimingError::Overrun {
                 job: i,
                 response_ns: r,
@@ -122,7 +196,12 @@ pub fn response_time(jobs: &[Job], i: usize, blocking_ns: u64) -> Result<u64, Ti
                 });
         let next = base.saturating_add(interference);
         if next == r {
-            return Ok(r);
+            // A sample that can outlast its period skips the instants it overran.
+            let periods = r.div_ceil(job.period_ns.max(1)).max(1);
+            return Ok(Response {
+                response_ns: r,
+                gap_ns: periods.saturating_mul(job.period_ns),
+            });
         }
         r = next;
     }
@@ -131,16 +210,17 @@ pub fn response_time(jobs: &[Job], i: usize, blocking_ns: u64) -> Result<u64, Ti
 /// The longest time from an obstacle becoming certain to register (its distance beyond
 /// doubt, `margin_ns` after it first could) to the behaviour having reacted, ns:
 ///
-/// `margin + max_lost · T + R`
+/// `margin + max_lost · G + R`
 ///
-/// The first release after the obstacle comes within one period `T`. A lost sample delays
-/// the detection by a period; the runtime tolerates `max_lost - 1` in a row and fails safe at
-/// the next (the robot stops), so the detecting sample is at most the `max_lost`-th release.
-/// Its processing and the behaviour's reaction finish within the response time `R`. O(1).
-pub fn latency_bound(period_ns: u64, max_lost: u8, response_ns: u64, margin_ns: u64) -> u64 {
+/// A sample starts within one gap `G` (the period, see [`Response::gap_ns`]) after the
+/// obstacle. A lost sample delays the detection by a gap; the runtime tolerates
+/// `max_lost - 1` in a row and fails safe at the next (the robot stops), so the detecting
+/// sample is at most the `max_lost`-th. Its read, its delivery and the behaviour's reaction
+/// finish within the response time `R`. O(1).
+pub fn latency_bound(response: Response, max_lost: u8, margin_ns: u64) -> u64 {
     margin_ns
-        .saturating_add(period_ns.saturating_mul(u64::from(max_lost.max(1))))
-        .saturating_add(response_ns)
+        .saturating_add(response.gap_ns.saturating_mul(u64::from(max_lost.max(1))))
+        .saturating_add(response.response_ns)
 }
 
 #[cfg(test)]
@@ -149,31 +229,34 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
+    fn job(period_ms: u64, cost_ns: u64, latency_ms: u64) -> Job {
+        Job {
+            period_ns: period_ms * MS,
+            cost_ns,
+            latency_ns: latency_ms * MS,
+        }
+    }
+
     #[test]
     fn response_time_is_the_least_fixed_point() {
-        // C = 0.5, 1, 1 ms every 4, 6, 10 ms, blocking 0.5 ms:
-        // R₀ = B + C₀ + ⌈R₀/6⌉·1 + ⌈R₀/10⌉·1, iterated from B + C₀.
-        let jobs = [
-            Job {
-                period_ns: 4 * MS,
-                cost_ns: MS / 2,
-            },
-            Job {
-                period_ns: 6 * MS,
-                cost_ns: MS,
-            },
-            Job {
-                period_ns: 10 * MS,
-                cost_ns: MS,
-            },
-        ];
-        // R = 0.5 + 0.5 = 1 → 1 + 1 + 1 = 3 → 3 (⌈3/6⌉ = ⌈3/10⌉ = 1).
-        assert_eq!(response_time(&jobs, 0, MS / 2), Ok(3 * MS));
-        // R₂ = 0.5 + 1 = 1.5 → + ⌈1.5/4⌉·0.5 + ⌈1.5/6⌉·1 = 3 → 3 (⌈3/4⌉ = 1, ⌈3/6⌉ = 1).
-        assert_eq!(response_time(&jobs, 2, MS / 2), Ok(3 * MS));
-        // More blocking, more interference: R₀ = 3 + 0.5 = 3.5 → + 1 + 1 = 5.5 → 5.5.
+        // C = 0.5, 1, 1 ms every 4, 6, 10 ms; one executor, longest deciding poll 0.5 ms; a
+        // behaviour step of 0 ms.
+        let jobs = [job(4, MS / 2, 0), job(6, MS, 0), job(10, MS, 0)];
+        let one = Blocking::one_executor(MS / 2);
+        // R = 0.5 + 0.5 = 1 → 1 + ⌈1/6⌉·1 + ⌈1/10⌉·1 = 3 → 3 (⌈3/6⌉ = ⌈3/10⌉ = 1).
+        let r = response(&jobs, 0, one, 0).unwrap();
         assert_eq!(
-            response_time(&jobs, 0, 3 * MS),
+            r,
+            Response {
+                response_ns: 3 * MS,
+                gap_ns: 4 * MS
+            }
+        );
+        // R₂ = 0.5 + 1 = 1.5 → + ⌈1.5/4⌉·0.5 + ⌈1.5/6⌉·1 = 3 → 3.
+        assert_eq!(response(&jobs, 2, one, 0).unwrap().response_ns, 3 * MS);
+        // More blocking, more interference: R₀ = 3 + 0.5 = 3.5 → + 1 + 1 = 5.5 > 4.
+        assert_eq!(
+            response(&jobs, 0, Blocking::one_executor(3 * MS), 0),
             Err(TimingError::Overrun {
                 job: 0,
                 response_ns: 5_500_000,
@@ -183,19 +266,39 @@ mod tests {
     }
 
     #[test]
+    fn a_read_latency_adds_its_wait_and_a_second_blocked_segment() {
+        // A 100 ms sonar whose read takes 40 ms beside a 20 ms bumper; 0.3 ms per sample,
+        // longest deciding poll 1 ms, behaviour step 0.2 ms.
+        let jobs = [job(100, 300_000, 40), job(20, 300_000, 0)];
+        let reaction = 200_000;
+        // One executor: the sonar's read start and its delivery may each wait for a deciding
+        // poll. R = 2·1 + 40 + 0.3 + 0.2 = 42.5 → + ⌈42.5/20⌉·0.3 = 43.4 → 43.4.
+        let r = response(&jobs, 0, Blocking::one_executor(MS), reaction).unwrap();
+        assert_eq!(r.response_ns, 43_400_000);
+        assert_eq!(r.gap_ns, 100 * MS);
+        // The bumper reads at once: one segment, one blocking. R = 1 + 0.3 + 0.2 = 1.5 → + 0.3.
+        let b = response(&jobs, 1, Blocking::one_executor(MS), reaction).unwrap();
+        assert_eq!(b.response_ns, 1_800_000);
+        // Sensing preempting deciding: only the behaviour step waits for a deciding poll.
+        let p = response(&jobs, 0, Blocking::preemptive(MS), reaction).unwrap();
+        assert_eq!(p.response_ns, 42_400_000);
+        // A read longer than the period is no overload: every second instant is skipped.
+        let slow = [job(100, 300_000, 150)];
+        let s = response(&slow, 0, Blocking::NONE, 0).unwrap();
+        assert_eq!(
+            s,
+            Response {
+                response_ns: 150_300_000,
+                gap_ns: 200 * MS
+            }
+        );
+    }
+
+    #[test]
     fn an_overloaded_set_is_refused_loudly() {
-        let jobs = [
-            Job {
-                period_ns: 10 * MS,
-                cost_ns: 6 * MS,
-            },
-            Job {
-                period_ns: 20 * MS,
-                cost_ns: 9 * MS,
-            },
-        ];
+        let jobs = [job(10, 6 * MS, 0), job(20, 9 * MS, 0)];
         assert_eq!(utilisation_ppm(&jobs), Ok(1_050_000));
-        let err = response_time(&jobs, 0, 0).unwrap_err();
+        let err = response(&jobs, 0, Blocking::NONE, 0).unwrap_err();
         assert_eq!(
             err,
             TimingError::Unschedulable {
@@ -210,15 +313,15 @@ mod tests {
         let full = [Job {
             period_ns: 3,
             cost_ns: 3,
+            latency_ns: 0,
         }];
-        assert!(response_time(&full, 0, 0).is_err());
-        assert_eq!(
-            utilisation_ppm(&[Job {
-                period_ns: 3,
-                cost_ns: 1
-            }]),
-            Ok(333_334)
-        );
+        assert!(response(&full, 0, Blocking::NONE, 0).is_err());
+        let third = [Job {
+            period_ns: 3,
+            cost_ns: 1,
+            latency_ns: 0,
+        }];
+        assert_eq!(utilisation_ppm(&third), Ok(333_334));
     }
 
     #[test]
@@ -226,19 +329,28 @@ mod tests {
         let jobs = [Job {
             period_ns: 0,
             cost_ns: 1,
+            latency_ns: 0,
         }];
         assert_eq!(utilisation_ppm(&jobs), Err(TimingError::BadJob { job: 0 }));
         assert_eq!(
-            response_time(&jobs[..0], 0, 0),
+            response(&jobs[..0], 0, Blocking::NONE, 0),
             Err(TimingError::BadJob { job: 0 })
         );
     }
 
     #[test]
     fn latency_adds_the_wait_for_the_detecting_sample() {
-        // 100 ms sonar, up to 9 lost samples tolerated, 2 ms response, 30 ms margin.
-        assert_eq!(latency_bound(100 * MS, 10, 2 * MS, 30 * MS), 1032 * MS);
+        // 100 ms gap, up to 9 lost samples tolerated, 2 ms response, 30 ms margin.
+        let r = Response {
+            response_ns: 2 * MS,
+            gap_ns: 100 * MS,
+        };
+        assert_eq!(latency_bound(r, 10, 30 * MS), 1032 * MS);
         // max_lost 0 still waits for one sample.
-        assert_eq!(latency_bound(100 * MS, 0, 0, 0), 100 * MS);
+        let r = Response {
+            response_ns: 0,
+            gap_ns: 100 * MS,
+        };
+        assert_eq!(latency_bound(r, 0, 0), 100 * MS);
     }
 }

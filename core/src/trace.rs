@@ -227,9 +227,10 @@ impl TraceHash {
             }
             Value::Mm(mm) => {
                 self.u8(2);
-                self.u32(mm);
+                self.bytes(&mm.to_le_bytes());
             }
             Value::Level(l) => self.bytes(&[3, l]),
+            Value::NoEcho => self.u8(4),
         }
     }
 
@@ -262,6 +263,7 @@ impl TraceHash {
             }
             Failure::StoreFull { key } => self.bytes(&[6, key.0]),
             Failure::InvalidFsm { state } => self.bytes(&[7, state]),
+            Failure::SensingStalled => self.u8(8),
         }
     }
 

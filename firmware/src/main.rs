@@ -1,7 +1,8 @@
 //! psmpa on a Cortex-M4F (QEMU mps2-an386): the same core, the same Fetch Tea mission and the
 //! same simulated world as the host simulator. Every embedded scenario runs under both
 //! architectures from tick 0; each run logs the summary fields of `psmpa-sim run --json`,
-//! which `cargo xtask qemu` compares with the host.
+//! which `cargo xtask qemu` compares with the host. The runtime's sensing side runs on an
+//! executor of its own, polled before the deciding side's whenever it has work.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -19,14 +20,13 @@ mod time_driver;
 
 #[cfg(target_os = "none")]
 mod firmware {
-    use core::mem::MaybeUninit;
-
     use cortex_m_rt::{ExceptionFrame, entry, exception};
     use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
     use defmt::{error, info};
     use defmt_semihosting as _;
     use psmpa_core::{TraceEvent, TraceSink};
     use psmpa_sim::robot::{Arch, Robot};
+    use psmpa_sim::run::{Beside, Sides};
     use psmpa_sim::scenario::Scenario;
 
     use crate::{executor, time_driver};
@@ -51,9 +51,10 @@ mod firmware {
     #[entry]
     fn main() -> ! {
         // `#[entry]` makes these `&'static mut`, safely: main runs once.
-        static mut EXECUTOR: MaybeUninit<embassy_executor::raw::Executor> = MaybeUninit::uninit();
+        static mut EXECUTORS: executor::Slots = executor::Slots::new();
         static mut ROBOT: Robot<'static> = Robot::empty();
         static mut SCENARIO: Scenario = Scenario::empty();
+        static mut SPACE: psmpa_sim::robot::PlannerSpace = psmpa_sim::robot::PlannerSpace::new();
         let Some(mut core) = cortex_m::Peripherals::take() else {
             fail("peripherals already taken")
         };
@@ -65,11 +66,29 @@ mod firmware {
             embassy_time_driver::TICK_HZ
         );
         load_robot(ROBOT);
-        let (robot, scenario) = (ROBOT, SCENARIO);
-        executor::run(EXECUTOR, |spawner| match missions(robot, scenario) {
-            Ok(task) => spawner.spawn(task),
-            Err(_) => fail("the mission task is already running"),
+        let (robot, scenario, space) = (ROBOT, SCENARIO, SPACE);
+        executor::run(EXECUTORS, |deciding, sensing| {
+            match (missions(robot, scenario, space), executor::trampoline()) {
+                (Ok(missions), Ok(trampoline)) => {
+                    deciding.spawn(missions);
+                    sensing.spawn(trampoline);
+                }
+                _ => fail("a task is already running"),
+            }
         })
+    }
+
+    /// Each run's sensing side on the sensing executor.
+    struct SensingFirst;
+
+    impl Sides for SensingFirst {
+        async fn beside<S: core::future::Future, D: core::future::Future>(
+            &self,
+            sensing: S,
+            deciding: D,
+        ) -> D::Output {
+            Beside::new(&executor::SensingSlot, sensing, deciding).await
+        }
     }
 
     /// Reads a scenario's canonical form in place, out of line: no copy of it on the stack.
@@ -101,7 +120,11 @@ mod firmware {
     impl TraceSink for Steps {
         fn record(&mut self, _at: embassy_time::Instant, event: &TraceEvent) {
             executor::note(match event {
-                TraceEvent::Sample { sensor, .. } | TraceEvent::SampleLost { sensor } => {
+                TraceEvent::Sample { sensor, .. }
+                | TraceEvent::SampleLost { sensor }
+                | TraceEvent::SensorOn { sensor }
+                | TraceEvent::SensorOff { sensor }
+                | TraceEvent::SensorFailed { sensor, .. } => {
                     1u32.checked_shl(sensor.index() as u32).unwrap_or(0) & 0xff
                 }
                 // Part of a sample step, or of a behaviour step.
@@ -114,7 +137,11 @@ mod firmware {
     }
 
     #[embassy_executor::task]
-    async fn missions(robot: &'static mut Robot<'static>, scenario: &'static mut Scenario) {
+    async fn missions(
+        robot: &'static mut Robot<'static>,
+        scenario: &'static mut Scenario,
+        space: &'static mut psmpa_sim::robot::PlannerSpace,
+    ) {
         for (index, (file, json)) in SCENARIOS.iter().enumerate() {
             if !parse(scenario, json, index) {
                 error!("{=str}: invalid scenario", file);
@@ -129,7 +156,16 @@ mod firmware {
                 embassy_futures::yield_now().await;
                 executor::take_polls();
                 time_driver::take_isr_max_cycles();
-                let (s, (), _) = psmpa_sim::run::run_robot(robot, scenario, arch, (), Steps).await;
+                let (s, (), _) = psmpa_sim::run::run_robot(
+                    &SensingFirst,
+                    robot,
+                    scenario,
+                    arch,
+                    space,
+                    (),
+                    Steps,
+                )
+                .await;
                 let polls = executor::take_polls();
                 info!(
                     "polls scenario={=str} arch={=str} count={=u32} max_cycles={=u32} max_at_ms={=u64} total_cycles={=u64}",
@@ -141,7 +177,7 @@ mod firmware {
                     polls.total_cycles
                 );
                 info!(
-                    "steps scenario={=str} arch={=str} sample0={=u32} sample1={=u32} sample2={=u32} sample3={=u32} control={=u32} behaviour={=u32} isr={=u32}",
+                    "steps scenario={=str} arch={=str} sample0={=u32} sample1={=u32} sample2={=u32} sample3={=u32} control={=u32} behaviour={=u32} deciding={=u32} isr={=u32}",
                     scenario.name.as_str(),
                     arch.name(),
                     polls.max_sample[0],
@@ -150,11 +186,12 @@ mod firmware {
                     polls.max_sample[3],
                     polls.max_control,
                     polls.max_behaviour,
+                    polls.max_deciding,
                     time_driver::take_isr_max_cycles()
                 );
                 let t = s.tally;
                 info!(
-                    "result scenario={=str} arch={=str} interferences={=u32} detected={=u32} collisions={=u32} reached_door={=bool} time_cost_ms={=u64} max_reaction_ms={=i64} sonar_on_ms={=u64} bumper_on_ms={=u64} trace_hash={=u64:016x}",
+                    "result scenario={=str} arch={=str} interferences={=u32} detected={=u32} collisions={=u32} reached_door={=bool} time_cost_ms={=u64} max_reaction_ms={=i64} sonar_on_ms={=u64} bumper_on_ms={=u64} sonar_gap_ms={=i64} bumper_gap_ms={=i64} trace_hash={=u64:016x}",
                     scenario.name.as_str(),
                     arch.name(),
                     t.interferences,
@@ -165,6 +202,8 @@ mod firmware {
                     t.max_reaction_ms.map_or(-1, |ms| ms as i64),
                     t.on_ms[0],
                     t.on_ms[1],
+                    t.sample_gap_max_ms[0].map_or(-1, |ms| ms as i64),
+                    t.sample_gap_max_ms[1].map_or(-1, |ms| ms as i64),
                     s.trace_hash
                 );
             }

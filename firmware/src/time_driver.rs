@@ -8,10 +8,15 @@
 //! which shifts the tick grid against the core clock by less than a tick and is not observable
 //! by the program. Under QEMU's `-icount` all of it is deterministic.
 //!
-//! Logical time: while the executor polls, `now()` answers the instant the poll began
-//! ([`latch`]/[`release`]), as on the host, where time only moves between polls. What a task
-//! observes then depends on what happened, not on how fast the core ran it; timers still fire
-//! on the real counter, and how long polls take is measured in cycles ([`cycles`]).
+//! Logical time: `now()` answers the instant of the deadline the executors last woke for, and
+//! moves on only when both executors are idle ([`advance`], called from the executor loop):
+//! the SysTick interrupt just ends the WFI at a deadline, and the loop then wakes the timers
+//! due. This is the host simulator's rule (time jumps to the next deadline once every task
+//! waits), so a burst of work at one instant is stamped with that instant however many polls
+//! it takes, and the firmware's trace equals the host's. What a task observes depends on what
+//! happened, not on how fast the core ran it; how long polls take is measured in cycles
+//! ([`cycles`]). A burst that outlasts the time to the next deadline delays that deadline's
+//! work in real time, not in the trace: `cargo xtask timing` bounds the bursts.
 
 use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -38,8 +43,8 @@ struct SysTickDriver {
     cycles_before: Mutex<Cell<u64>>,
     /// Its length in ticks.
     period: Mutex<Cell<u32>>,
-    /// The instant the running poll began, while the executor polls.
-    latched: Mutex<Cell<Option<u64>>>,
+    /// The logical instant: the deadline the executors last woke for.
+    logical: Mutex<Cell<u64>>,
     /// The earliest deadline in `queue`, `u64::MAX` when there is none.
     alarm: Mutex<Cell<u64>>,
     queue: Mutex<RefCell<Queue>>,
@@ -103,22 +108,22 @@ impl SysTickDriver {
 
 impl Driver for SysTickDriver {
     fn now(&self) -> u64 {
-        critical_section::with(|cs| {
-            self.latched
-                .borrow(cs)
-                .get()
-                .unwrap_or_else(|| self.now_in(cs))
-        })
+        critical_section::with(|cs| self.logical.borrow(cs).get())
     }
 
     fn schedule_wake(&self, at: u64, waker: &Waker) {
         critical_section::with(|cs| {
+            // A deadline that has come is due now: the task is polled again at this instant.
+            if at <= self.logical.borrow(cs).get() {
+                waker.wake_by_ref();
+                return;
+            }
             if self.queue.borrow_ref_mut(cs).schedule_wake(at, waker) {
-                let now = self.now_in(cs);
-                // A deadline already past is woken at once.
-                self.expire(cs, now);
+                let alarm = self.alarm.borrow(cs);
+                alarm.set(alarm.get().min(at));
                 let end = self.base.borrow(cs).get() + u64::from(self.period.borrow(cs).get());
-                if self.alarm.borrow(cs).get() < end {
+                if at < end {
+                    let now = self.now_in(cs);
                     self.program(cs, now);
                 }
             }
@@ -130,7 +135,7 @@ embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDri
     base: Mutex::new(Cell::new(0)),
     cycles_before: Mutex::new(Cell::new(0)),
     period: Mutex::new(Cell::new(MAX_PERIOD)),
-    latched: Mutex::new(Cell::new(None)),
+    logical: Mutex::new(Cell::new(0)),
     alarm: Mutex::new(Cell::new(u64::MAX)),
     queue: Mutex::new(RefCell::new(Queue::new())),
 });
@@ -145,9 +150,9 @@ fn SysTick() {
         counted.get() + u64::from(DRIVER.elapsed())
     });
     critical_section::with(|cs| {
-        // The period ended: this is its last tick.
+        // The period ended: this is its last tick. The executor loop, woken from WFI, wakes
+        // the timers due.
         let now = DRIVER.base.borrow(cs).get() + u64::from(DRIVER.period.borrow(cs).get());
-        DRIVER.expire(cs, now);
         DRIVER.program(cs, now);
     });
     let cycles = cycles().saturating_sub(begin);
@@ -178,24 +183,24 @@ pub fn restart() {
         *DRIVER.queue.borrow_ref_mut(cs) = Queue::new();
         DRIVER.alarm.borrow(cs).set(u64::MAX);
         DRIVER.program(cs, 0);
-        let latched = DRIVER.latched.borrow(cs);
-        if latched.get().is_some() {
-            latched.set(Some(0));
-        }
+        DRIVER.logical.borrow(cs).set(0);
     });
 }
 
-/// A poll begins: `now()` answers this instant until [`release`].
-pub fn latch() {
+/// Called when both executors are idle: if the earliest deadline has come on the counter, moves
+/// the logical instant to it and wakes the timers due then; `true` when it did (there is work
+/// again), `false` when the loop may sleep until the next interrupt.
+pub fn advance() -> bool {
     critical_section::with(|cs| {
-        let now = DRIVER.now_in(cs);
-        DRIVER.latched.borrow(cs).set(Some(now));
-    });
-}
-
-/// The poll ended: `now()` follows the counter again.
-pub fn release() {
-    critical_section::with(|cs| DRIVER.latched.borrow(cs).set(None));
+        let next = DRIVER.alarm.borrow(cs).get();
+        if next == u64::MAX || next > DRIVER.now_in(cs) {
+            return false;
+        }
+        let logical = DRIVER.logical.borrow(cs);
+        logical.set(logical.get().max(next));
+        DRIVER.expire(cs, logical.get());
+        true
+    })
 }
 
 /// Core cycles since the clock started, from SysTick's counter: a cycle stamp for measuring

@@ -1,9 +1,17 @@
-//! The host backend: a virtual-time `embassy-time` driver and a hand-driven embassy executor.
+//! The host backend: a virtual-time `embassy-time` driver and two hand-driven embassy
+//! executors, one per priority.
 //!
 //! [`simulate`] polls a future on an `embassy_executor::raw::Executor` until nothing is ready,
 //! then jumps the virtual clock to the earliest timer deadline, and so on until the future
 //! completes. Time only moves when every task waits, so a minute of robot time takes
 //! milliseconds, and the same future gives the same result every time.
+//!
+//! Inside a simulation, [`beside`] runs a second future (a runtime's sensing side) on a
+//! second executor of *higher priority*: whenever it has work, it is polled before the next
+//! poll of the simulated future, so at every instant ready sensing work comes before deciding
+//! work, as on a microcontroller where sensing runs on an interrupt executor (there it can
+//! even preempt a poll; here polls take no time, so preempting at poll boundaries is the same).
+//! [`simulate_split`] is the two together.
 //!
 //! The clock, the timer queue and the executor are per thread: independent simulations run on
 //! parallel test threads without seeing each other. A simulation must stay on its thread.
@@ -19,6 +27,8 @@ use std::task::{Context, Poll, Waker};
 
 use embassy_executor::raw::{Executor, TaskStorage};
 use embassy_time::{Duration, Instant};
+
+use crate::run::{Beside, Erased, HighSlot};
 
 /// Why a simulation did not complete.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,18 +96,39 @@ struct Clock {
 /// lifetime is erased, and [`Cleanup`] takes the pointer back before that frame ends.
 type TaskPtr = *mut (dyn Future<Output = ()> + 'static);
 
+/// The pender context of the higher-priority executor (the lower one's is null).
+const HIGH_CONTEXT: *mut () = std::ptr::without_provenance_mut(1);
+
+/// Both executors of a thread and their task slots.
+struct Executors {
+    low: Executor,
+    low_task: TaskStorage<Trampoline>,
+    high: Executor,
+    high_task: TaskStorage<HighTrampoline>,
+}
+
 thread_local! {
     static CLOCK: RefCell<Clock> = RefCell::new(Clock::default());
     /// The future of the running simulation, polled by the trampoline task.
     static CURRENT: Cell<Option<TaskPtr>> = const { Cell::new(None) };
+    /// The future running at the higher priority, if [`beside`] placed one.
+    static HIGH: Cell<Option<Erased>> = const { Cell::new(None) };
     /// Alarms due at the current instant, reused so that advancing the clock allocates nothing.
     static DUE: RefCell<Vec<Alarm>> = const { RefCell::new(Vec::new()) };
     static TRAMPOLINE_WAKER: RefCell<Option<Waker>> = const { RefCell::new(None) };
+    static HIGH_WAKER: RefCell<Option<Waker>> = const { RefCell::new(None) };
     static PENDING: Cell<bool> = const { Cell::new(false) };
+    static PENDING_HIGH: Cell<bool> = const { Cell::new(false) };
+    /// Tells the higher-priority trampoline to end: the simulation is over.
+    static STOPPING: Cell<bool> = const { Cell::new(false) };
     static RUNNING: Cell<bool> = const { Cell::new(false) };
-    /// One executor and one task slot per thread, made once and kept for the thread's life.
-    static EXECUTOR: &'static (Executor, TaskStorage<Trampoline>) =
-        Box::leak(Box::new((Executor::new(std::ptr::null_mut()), TaskStorage::new())));
+    /// Two executors and their task slots per thread, made once and kept for the thread's life.
+    static EXECUTORS: &'static Executors = Box::leak(Box::new(Executors {
+        low: Executor::new(std::ptr::null_mut()),
+        low_task: TaskStorage::new(),
+        high: Executor::new(HIGH_CONTEXT),
+        high_task: TaskStorage::new(),
+    }));
 }
 
 struct VirtualClock;
@@ -108,6 +139,12 @@ impl embassy_time_driver::Driver for VirtualClock {
     }
 
     fn schedule_wake(&self, at: u64, waker: &Waker) {
+        // A deadline that has come is due now: wake at once, as a hardware driver does, so the
+        // task is polled again at this instant, in its priority's turn.
+        if at <= CLOCK.with(|c| c.borrow().now) {
+            waker.wake_by_ref();
+            return;
+        }
         CLOCK.with(|c| {
             let mut c = c.borrow_mut();
             // One alarm per task: keep the earliest deadline (the driver contract allows an
@@ -129,10 +166,14 @@ impl embassy_time_driver::Driver for VirtualClock {
 
 embassy_time_driver::time_driver_impl!(static DRIVER: VirtualClock = VirtualClock);
 
-// The executor calls this when a task was woken: note it, the run loop polls.
+// An executor calls this when one of its tasks was woken: note which, the run loop polls.
 #[unsafe(export_name = "__pender")]
-fn pender(_context: *mut ()) {
-    PENDING.with(|p| p.set(true));
+fn pender(context: *mut ()) {
+    if context == HIGH_CONTEXT {
+        PENDING_HIGH.with(|p| p.set(true));
+    } else {
+        PENDING.with(|p| p.set(true));
+    }
 }
 
 /// The one task of a thread's executor: polls whatever future [`simulate`] put in `CURRENT`.
@@ -160,13 +201,86 @@ impl Future for Trampoline {
     }
 }
 
-/// Polls until no task is ready.
-fn poll_ready(executor: &'static Executor) {
-    while PENDING.with(|p| p.replace(false)) {
-        // SAFETY: `poll` is never re-entered: the pender only sets a flag, and this thread is
-        // the only one that polls its executor.
-        unsafe { executor.poll() };
+/// The task of the higher-priority executor: polls whatever future [`beside`] put in `HIGH`,
+/// until the simulation ends.
+struct HighTrampoline;
+
+impl Future for HighTrampoline {
+    type Output = ();
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        HIGH_WAKER.with(|w| *w.borrow_mut() = Some(cx.waker().clone()));
+        if STOPPING.with(Cell::get) {
+            return Poll::Ready(());
+        }
+        // Taken out while polled, like the simulation's own future.
+        if let Some(future) = HIGH.with(Cell::take) {
+            // SAFETY: installed by a live `Beside`, whose `Drop` clears `HIGH` first; taken out
+            // while polled, so nothing else uses it.
+            // A future that ends is polled no more; the `Beside` keeps it until dropped.
+            if unsafe { future.poll(cx) }.is_pending() {
+                HIGH.with(|h| h.set(Some(future)));
+            }
+        }
+        Poll::Pending
     }
+}
+
+/// Polls until no task is ready: the higher-priority executor whenever it has work, the
+/// simulation's own executor only when it has none.
+fn poll_ready(executors: &'static Executors) {
+    loop {
+        // SAFETY (both): `poll` is never re-entered: the pender only sets a flag, and this
+        // thread is the only one that polls its executors.
+        if PENDING_HIGH.with(|p| p.replace(false)) {
+            unsafe { executors.high.poll() };
+        } else if PENDING.with(|p| p.replace(false)) {
+            unsafe { executors.low.poll() };
+        } else {
+            return;
+        }
+    }
+}
+
+/// The higher-priority task's slot on this thread.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ThreadSlot;
+
+// SAFETY: the slot is polled only by `HighTrampoline`, which takes the pointer out for the
+// duration of its poll, on this thread, from `poll_ready`, which is never re-entered; a
+// `Beside` runs on the same thread, so it never uninstalls in the middle of that poll.
+unsafe impl HighSlot for ThreadSlot {
+    fn install(&self, future: Erased) -> bool {
+        if HIGH.with(Cell::get).is_some() {
+            return false;
+        }
+        HIGH.with(|h| h.set(Some(future)));
+        if let Some(w) = HIGH_WAKER.with(|w| w.borrow().clone()) {
+            w.wake();
+        }
+        true
+    }
+
+    fn uninstall(&self) {
+        HIGH.with(|h| h.set(None));
+    }
+}
+
+/// Runs `sensing` at the higher priority for as long as `deciding` runs, inside a
+/// [`simulate`]d future, and returns what `deciding` returns: whenever `sensing` has work it
+/// is polled before `deciding` (see the module doc). `sensing` is dropped with the returned
+/// future. One at a time: while another `beside` runs, `sensing` is not run (see [`Beside`]).
+pub fn beside<S: Future, D: Future>(sensing: S, deciding: D) -> Beside<'static, ThreadSlot, S, D> {
+    Beside::new(&ThreadSlot, sensing, deciding)
+}
+
+/// [`simulate`] with `sensing` at the higher priority beside `deciding` ([`beside`]).
+pub fn simulate_split<S: Future, D: Future>(
+    sensing: S,
+    deciding: D,
+    limit: Duration,
+) -> Result<Completed<D::Output>, SimError> {
+    simulate(beside(sensing, deciding), limit)
 }
 
 /// Moves the clock to the earliest alarm and wakes every alarm due by then, in
@@ -213,17 +327,22 @@ fn advance(limit: u64) -> Result<bool, SimError> {
     }
 }
 
-/// Drops the running future and lets the trampoline task finish, so the thread's task slot is
-/// free for the next simulation.
-struct Cleanup(&'static Executor);
+/// Drops the running future and lets both trampoline tasks finish, so the thread's task slots
+/// are free for the next simulation.
+struct Cleanup(&'static Executors);
 
 impl Drop for Cleanup {
     fn drop(&mut self) {
         CURRENT.with(|c| c.set(None));
-        if let Some(waker) = TRAMPOLINE_WAKER.with(|w| w.borrow_mut().take()) {
-            waker.wake();
+        HIGH.with(|h| h.set(None));
+        STOPPING.with(|s| s.set(true));
+        for waker in [&TRAMPOLINE_WAKER, &HIGH_WAKER] {
+            if let Some(waker) = waker.with(|w| w.borrow_mut().take()) {
+                waker.wake();
+            }
         }
         poll_ready(self.0);
+        STOPPING.with(|s| s.set(false));
         CLOCK.with(|c| c.borrow_mut().alarms.clear());
         RUNNING.with(|r| r.set(false));
     }
@@ -235,7 +354,7 @@ pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Ou
     if RUNNING.with(|r| r.replace(true)) {
         return Err(SimError::Nested);
     }
-    let (executor, storage) = EXECUTOR.with(|e| *e);
+    let executors = EXECUTORS.with(|e| *e);
     CLOCK.with(|c| {
         // Keep the alarm list's capacity: a simulation after the first allocates nothing.
         let mut c = c.borrow_mut();
@@ -244,6 +363,7 @@ pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Ou
         c.alarms.clear();
     });
     PENDING.with(|p| p.set(false));
+    PENDING_HIGH.with(|p| p.set(false));
 
     let mut output: Option<F::Output> = None;
     let slot: *mut Option<F::Output> = &mut output;
@@ -263,16 +383,24 @@ pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Ou
     let raw: TaskPtr =
         unsafe { std::mem::transmute::<*mut (dyn Future<Output = ()> + '_), TaskPtr>(raw) };
     CURRENT.with(|c| c.set(Some(raw)));
-    let cleanup = Cleanup(executor);
+    let cleanup = Cleanup(executors);
 
-    let token = storage.spawn(|| Trampoline).map_err(|_| SimError::Nested)?;
-    executor.spawner().spawn(token);
+    let token = executors
+        .low_task
+        .spawn(|| Trampoline)
+        .map_err(|_| SimError::Nested)?;
+    executors.low.spawner().spawn(token);
+    let token = executors
+        .high_task
+        .spawn(|| HighTrampoline)
+        .map_err(|_| SimError::Nested)?;
+    executors.high.spawner().spawn(token);
     PENDING.with(|p| p.set(true));
 
     let limit = limit.as_ticks();
     let mut clock_jumps = 0u64;
     let result = loop {
-        poll_ready(executor);
+        poll_ready(executors);
         if CURRENT.with(|c| c.get().is_none()) {
             break Ok(());
         }

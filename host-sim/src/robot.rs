@@ -4,7 +4,11 @@
 //! [`Registry`]; the behaviours act on a simulated [`World`].
 //!
 //! * "go to door" needs `path_clear`, which the sonar and the foot bumper perceive (cyclic):
-//!   Algorithm 2 runs both beside the walk.
+//!   Algorithm 2 runs both beside the walk. The walk reads their samples from the mutual store
+//!   (Algorithm 3): it stops for a sonar echo below the threshold or a pressed bumper, and, in
+//!   scenarios with a slow zone, slows down as the sonar distance falls.
+//! * A sample takes the scenario's `latency_ms` of that sensor (an echo, a debounce): only
+//!   that sensor waits; it reports the world as it was when the read started.
 //! * "open door" needs `handle_seen` (camera, one shot) and `door_unlocked` (the hand on the
 //!   handle, on demand): the behaviour presses the handle before pushing the door.
 //! * A locked kitchen door fails "open door"; the control loop then plans again from what the
@@ -14,10 +18,11 @@ use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::mission::{self, Bindings, LoadError, Registry};
-use psmpa_core::planner::{Planner, Strategy};
+use psmpa_core::planner::{Planner, Search, Strategy};
+use psmpa_core::timing::{Blocking, Job, Response, TimingError};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, Config, DomainError, FactId, FactSet, Mission, Outcome, Policy,
-    Reading, Runtime, Sensor, SensorFault, SensorId, SensorMode, Value,
+    ActionId, ActionIo, Actuator, Config, DomainError, Entry, FactId, FactSet, Key, Mission,
+    Outcome, Policy, Reading, Runtime, Sensor, SensorFault, SensorId, SensorMode, Value,
 };
 
 use crate::scenario::Scenario;
@@ -254,6 +259,7 @@ pub fn config(scenario: &Scenario, arch: Arch) -> Config {
         max_failures: 3,
         max_plans: 8,
         max_lost: 10,
+        ..Config::default()
     }
 }
 
@@ -263,48 +269,78 @@ pub fn config(scenario: &Scenario, arch: Arch) -> Config {
 pub struct LatencyBound {
     /// The sensor.
     pub sensor: SensorId,
-    /// Its sampling period, ns.
-    pub period_ns: u64,
+    /// Its sampling job.
+    pub job: Job,
+    /// Its worst response.
+    pub response: Response,
     /// The bound, ns.
     pub bound_ns: u64,
 }
 
+impl Robot<'_> {
+    /// How long a read of `sensor` takes in `scenario`, ms (the camera and the handle: none).
+    pub fn read_latency_ms(&self, sensor: SensorId, scenario: &Scenario) -> u64 {
+        match self.bindings.sensor(sensor) {
+            Some(NaoSensor::Sonar) => scenario.sonar.latency_ms,
+            Some(NaoSensor::Bumper) => scenario.bumper_latency_ms,
+            _ => 0,
+        }
+    }
+}
+
 /// The reaction-latency bound of every cyclic sensor of `robot`'s mission (after
-/// [`Robot::apply`]) under P-SMPA, given the worst response time of each sensor's sampling job:
-/// 0 in virtual time, where computing takes no time; the response-time analysis of
-/// [`psmpa_core::timing`] on a microcontroller. Latencies count from the instant a sensor is
-/// certain to register the obstacle (see [`crate::world`]), so no margin for noise is needed.
+/// [`Robot::apply`]) under P-SMPA: the response-time analysis of [`psmpa_core::timing`] with
+/// the scenario's read latencies, the sample step `cost_ns` of each sensor, the behaviour step
+/// `reaction_ns` and the `blocking` of the platform. In virtual time, where computing takes no
+/// time, costs and blocking are 0 and only the read latencies remain. Latencies count from the
+/// instant a sensor is certain to register the obstacle (see [`crate::world`]), so no margin
+/// for noise is needed.
 pub fn latency_bounds(
     robot: &Robot<'_>,
     scenario: &Scenario,
-    response_ns: impl Fn(SensorId) -> u64,
-) -> heapless::Vec<LatencyBound, 4> {
+    blocking: Blocking,
+    reaction_ns: u64,
+    cost_ns: impl Fn(SensorId) -> u64,
+) -> Result<heapless::Vec<LatencyBound, 4>, TimingError> {
     let max_lost = config(scenario, Arch::PSmpa).max_lost;
     let domain = &robot.mission.domain;
-    (0..domain.sensors().len())
+    let jobs: heapless::Vec<(SensorId, Job), 4> = (0..domain.sensors().len())
         .filter_map(SensorId::new)
         .filter_map(|id| match domain.sensor(id)?.mode {
-            SensorMode::Cyclic { period } => {
-                let period_ns = period.as_micros().saturating_mul(1_000);
-                Some(LatencyBound {
-                    sensor: id,
-                    period_ns,
-                    bound_ns: psmpa_core::timing::latency_bound(
-                        period_ns,
-                        max_lost,
-                        response_ns(id),
-                        0,
-                    ),
-                })
-            }
+            SensorMode::Cyclic { period } => Some((
+                id,
+                Job {
+                    period_ns: period.as_micros().saturating_mul(1_000),
+                    cost_ns: cost_ns(id),
+                    latency_ns: robot
+                        .read_latency_ms(id, scenario)
+                        .saturating_mul(1_000_000),
+                },
+            )),
             _ => None,
         })
-        .collect()
+        .collect();
+    let only: heapless::Vec<Job, 4> = jobs.iter().map(|(_, j)| *j).collect();
+    let mut bounds = heapless::Vec::new();
+    for (i, (sensor, job)) in jobs.iter().enumerate() {
+        let response = psmpa_core::timing::response(&only, i, blocking, reaction_ns)?;
+        // At most 4 cyclic sensors: room for each.
+        let _ = bounds.push(LatencyBound {
+            sensor: *sensor,
+            job: *job,
+            response,
+            bound_ns: psmpa_core::timing::latency_bound(response, max_lost, 0),
+        });
+    }
+    Ok(bounds)
 }
 
 /// The planner the robot uses when no library plan applies: shortest plans, 64 nodes (the
-/// Fetch Tea domain needs a handful; 64 keep the search's stack at about 2 KiB).
+/// Fetch Tea domain needs a handful; 64 keep the search space at about 2 KiB).
 pub const PLANNER: Planner<64> = Planner::new(Strategy::BreadthFirst);
+
+/// The space [`PLANNER`] searches in.
+pub type PlannerSpace = Search<64>;
 
 /// Application-defined trace codes of the robot's behaviours.
 pub mod codes {
@@ -314,7 +350,16 @@ pub mod codes {
     pub const RESUME: u16 = 2;
     /// The door handle did not give: the door is locked.
     pub const LOCKED: u16 = 3;
+    /// The walk changed its speed (value: thousandths of full speed).
+    pub const SPEED: u16 = 4;
 }
+
+/// Where the sonar puts the round-trip time of its echo, µs, beside the distance (Algorithm 3:
+/// a sensor's own `(k', v')` pairs).
+pub const ECHO_US: Key = Key(1);
+
+/// The slowest the walk goes in the slow zone, thousandths of full speed.
+pub const SLOWEST_PERMILLE: u16 = 250;
 
 /// How far the robot must walk, by odometry, while an echo in range keeps the same distance,
 /// before the sonar counts as stuck: walking towards an object must bring its echo closer.
@@ -327,26 +372,70 @@ pub struct Nao<'w, 's, L: WorldLog> {
     percepts: Percepts,
     /// The sonar's last echo in range and the odometry when it was first read.
     echo: core::cell::Cell<Option<(u32, i64)>>,
+    /// The sonar and the bumper of the mission, if it has them.
+    sonar: Option<SensorId>,
+    bumper: Option<SensorId>,
 }
 
 impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
     /// The robot in `world`, running `robot`'s behaviours.
     pub fn new(world: &'w World<'s, L>, robot: &Robot<'_>) -> Self {
+        let find = |which: NaoSensor| {
+            (0..robot.mission.domain.sensors().len())
+                .filter_map(SensorId::new)
+                .find(|s| robot.bindings.sensor(*s) == Some(which))
+        };
         Self {
             world,
             bindings: robot.bindings.clone(),
             percepts: robot.percepts,
             echo: core::cell::Cell::new(None),
+            sonar: find(NaoSensor::Sonar),
+            bumper: find(NaoSensor::Bumper),
         }
     }
 
-    /// Walk to `place`; when a percept says the path is not clear, stop and side-step, then
-    /// walk on. A violation counts as new evidence only if a sample showed it at or after the
-    /// end of the last side step (the world settles the step before a sample at that instant;
-    /// under SMPA the flag stays up, stale, until the next sense phase).
+    /// Whether a sample read from the mutual store shows an obstacle in the way: a sonar echo
+    /// below the threshold, or the bumper pressed.
+    fn shows_obstacle(&self, sensor: Option<SensorId>, entry: Entry) -> bool {
+        let sonar = self.world.scenario().sonar;
+        match entry.value {
+            Value::Mm(mm) => sensor == self.sonar && sonar.registers(i64::from(mm)),
+            Value::Level(level) => sensor == self.bumper && level == 2,
+            _ => false,
+        }
+    }
+
+    /// The walking speed the latest sonar reading calls for, thousandths of full speed: full
+    /// outside the scenario's slow zone, falling linearly to [`SLOWEST_PERMILLE`] at the
+    /// threshold.
+    fn speed_for(&self, reading: Option<Entry>) -> u16 {
+        let sc = self.world.scenario();
+        let threshold_mm = sc.sonar.threshold_mm();
+        let slow_mm = crate::scenario::to_mm(sc.slow_um);
+        let Some(Value::Mm(mm)) = reading.map(|e| e.value) else {
+            return 1000;
+        };
+        let mm = i64::from(mm);
+        if slow_mm <= threshold_mm || mm >= slow_mm {
+            return 1000;
+        }
+        let slowest = i64::from(SLOWEST_PERMILLE);
+        let span = slow_mm - threshold_mm;
+        let permille = slowest + (1000 - slowest) * (mm - threshold_mm).max(0) / span;
+        u16::try_from(permille.clamp(slowest, 1000)).unwrap_or(1000)
+    }
+
+    /// Walk to `place`, deciding from the samples of the sonar and the bumper in the mutual
+    /// store: an echo below the threshold or a pressed bumper stops the walk for a side step;
+    /// in a slow zone the walk slows down as the echo comes nearer. A sample counts only if it
+    /// was taken at or after the end of the last side step (or the start of the walk): the
+    /// world settles a step before a sample at that instant, and under SMPA the store keeps
+    /// the sense phase's samples, stale, through the act phase. A violation of the
+    /// precondition seen since then stops it too (a sensor this walk does not read).
     async fn walk(&self, place: Place, io: &ActionIo<'_>) -> Outcome {
         let world = self.world;
-        let mut handled: Option<Instant> = None;
+        let mut handled = Instant::now();
         let mut stepping = false;
         let mut version = io.version();
         loop {
@@ -355,7 +444,7 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
                 if stepping {
                     // The side step ended.
                     stepping = false;
-                    handled = Some(Instant::now());
+                    handled = Instant::now();
                     io.trace(codes::RESUME, 0);
                 }
                 if world.at(place) {
@@ -363,16 +452,29 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
                     world.arrived(place);
                     return Outcome::Success;
                 }
-                let fresh = io
-                    .violation()
-                    .is_some_and(|v| handled.is_none_or(|h| v.last_seen >= h));
-                if fresh {
+                let fresh = |e: &Entry| e.at >= handled;
+                let sonar = self.sonar.and_then(|s| io.sample(s)).filter(fresh);
+                let bumper = self.bumper.and_then(|s| io.sample(s)).filter(fresh);
+                let seen = sonar.filter(|e| self.shows_obstacle(self.sonar, *e));
+                let felt = bumper.filter(|e| self.shows_obstacle(self.bumper, *e));
+                // The runtime's verdict too, for sensors this walk does not read.
+                let other = io.violation().is_some_and(|v| v.last_seen >= handled);
+                if seen.is_some() || felt.is_some() || other {
                     world.stop();
                     world.begin_avoid();
                     stepping = true;
-                    handled = Some(Instant::now());
-                    io.trace(codes::AVOID, 0);
+                    handled = Instant::now();
+                    let mm = match seen.map(|e| e.value) {
+                        Some(Value::Mm(mm)) => mm,
+                        _ => 0,
+                    };
+                    io.trace(codes::AVOID, mm);
                     continue;
+                }
+                let speed = self.speed_for(self.sonar.and_then(|s| io.sample(s)));
+                if speed != world.speed_permille() {
+                    world.set_speed(speed);
+                    io.trace(codes::SPEED, i32::from(speed));
                 }
                 if motion != Motion::Walking {
                     world.walk_to(place);
@@ -438,48 +540,67 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
                 FactSet::EMPTY
             }
         };
+        let sc = self.world.scenario();
         Ok(match self.device(sensor).ok_or(SensorFault::Device(1))? {
             Device::Sonar => {
                 if self.world.sonar_fault() == Some(crate::scenario::FaultKind::Silent) {
                     // The echo never comes: the runtime's sample timeout notices.
                     core::future::pending::<()>().await;
                 }
-                let Some(mm) = self.world.sonar() else {
+                let echo = self.world.sonar_read();
+                // The ping's round trip: only this sensor waits.
+                read_latency(sc.sonar.latency_ms).await;
+                let Some(mm) = self.world.sonar_deliver(echo) else {
                     return Ok(None);
                 };
-                self.check_sonar(mm)?;
-                Some(Reading {
-                    value: Value::Mm(mm),
-                    // The rule the world registers obstacles by.
-                    holds: if self.world.scenario().sonar.registers(i64::from(mm)) {
-                        FactSet::EMPTY
-                    } else {
-                        clear
-                    },
-                })
+                self.check_sonar(mm, echo.pos_um)?;
+                let max_mm = crate::scenario::to_mm(sc.sonar.max_um);
+                let mm = i32::try_from(mm).map_err(|_| SensorFault::OutOfRange)?;
+                // The rule the world registers obstacles by.
+                let holds = if sc.sonar.registers(i64::from(mm)) {
+                    FactSet::EMPTY
+                } else {
+                    clear
+                };
+                if i64::from(mm) == max_mm {
+                    Some(Reading::new(Value::NoEcho, holds))
+                } else {
+                    // Sound at about 343 m/s: 5.83 µs per mm, there and back.
+                    let echo_us = mm.saturating_mul(583) / 100;
+                    let reading = Reading::new(Value::Mm(mm), holds);
+                    Some(
+                        reading
+                            .with(ECHO_US, Value::Int(echo_us))
+                            .map_err(|_| SensorFault::Device(2))?,
+                    )
+                }
             }
             Device::Bumper => {
-                let level = self.world.bumper();
-                Some(Reading {
-                    value: Value::Level(level),
-                    holds: if level == 2 { FactSet::EMPTY } else { clear },
-                })
+                let touch = self.world.bumper_read();
+                read_latency(sc.bumper_latency_ms).await;
+                let level = self.world.bumper_deliver(touch);
+                let holds = if level == 2 { FactSet::EMPTY } else { clear };
+                Some(Reading::new(Value::Level(level), holds))
             }
             Device::Camera => {
                 let seen = self.world.camera();
-                Some(Reading {
-                    value: Value::Bool(seen),
-                    holds: when(seen, p.handle_seen),
-                })
+                Some(Reading::new(Value::Bool(seen), when(seen, p.handle_seen)))
             }
             Device::Handle => {
                 let gives = self.world.handle();
-                Some(Reading {
-                    value: Value::Bool(gives),
-                    holds: when(gives, p.door_unlocked),
-                })
+                Some(Reading::new(
+                    Value::Bool(gives),
+                    when(gives, p.door_unlocked),
+                ))
             }
         })
+    }
+}
+
+/// Waits out a sensor's read latency; no await at all when there is none.
+async fn read_latency(ms: u64) {
+    if ms > 0 {
+        Timer::after(Duration::from_millis(ms)).await;
     }
 }
 
@@ -487,7 +608,7 @@ impl<L: WorldLog> Nao<'_, '_, L> {
     /// The sonar driver's plausibility checks: a reading outside the sonar's range is a device
     /// fault; an echo in range that keeps the same distance while the robot walks on is stuck.
     /// (A sonar stuck at its maximum, "nothing in range", cannot be told from an empty path.)
-    fn check_sonar(&self, mm: u32) -> Result<(), SensorFault> {
+    fn check_sonar(&self, mm: u32, at: i64) -> Result<(), SensorFault> {
         let sonar = self.world.scenario().sonar;
         let (min, max) = (
             crate::scenario::to_mm(sonar.min_um),
@@ -500,7 +621,6 @@ impl<L: WorldLog> Nao<'_, '_, L> {
             self.echo.set(None);
             return Ok(());
         }
-        let at = self.world.position_um();
         match self.echo.get() {
             Some((last, since)) if last == mm => {
                 if at - since >= STUCK_AFTER_UM {

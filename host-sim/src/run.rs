@@ -2,7 +2,13 @@
 //! until the goal holds, the control loop gives up, or `max_s` passes.
 //!
 //! `no_std`: the firmware awaits [`run`] inside an embassy task, the host inside
-//! [`backend::simulate`](crate::backend::simulate).
+//! [`backend::simulate`](crate::backend::simulate). Each places the runtime's sensing side
+//! through [`Sides`]: the host on its higher-priority executor, the firmware on its own.
+
+use core::future::Future;
+use core::marker::PhantomPinned;
+use core::pin::Pin;
+use core::task::{Context, Poll};
 
 use embassy_futures::select::{Either, select};
 use embassy_time::{Instant, Timer};
@@ -42,24 +48,146 @@ pub struct Summary {
     pub trace_events: u32,
 }
 
+/// Where the two sides of a runtime run: the platform's choice.
+#[allow(async_fn_in_trait)] // Single-threaded executors: no `Send` bound wanted.
+pub trait Sides {
+    /// Runs `sensing` at a higher priority than `deciding` for as long as `deciding` runs, and
+    /// returns what `deciding` returns. `sensing` is dropped when `deciding` ends.
+    async fn beside<S: Future, D: Future>(&self, sensing: S, deciding: D) -> D::Output;
+}
+
+/// A pinned future with its type and lifetime erased: its address and the function that polls
+/// it (dropping its output). Valid only while installed in a [`HighSlot`].
+#[derive(Clone, Copy, Debug)]
+pub struct Erased {
+    data: *mut (),
+    poll: unsafe fn(*mut (), &mut Context<'_>) -> Poll<()>,
+}
+
+/// Polls the `F` at `data`, dropping its output.
+///
+/// # Safety
+///
+/// `data` points to a live, pinned `F` that nothing else uses during the call.
+unsafe fn poll_erased<F: Future>(data: *mut (), cx: &mut Context<'_>) -> Poll<()> {
+    // SAFETY: the caller's contract.
+    unsafe { Pin::new_unchecked(&mut *data.cast::<F>()) }
+        .poll(cx)
+        .map(|_| ())
+}
+
+impl Erased {
+    /// Polls the future.
+    ///
+    /// # Safety
+    ///
+    /// Only while it is installed in a [`HighSlot`] (the future is alive and pinned), and not
+    /// re-entrantly.
+    pub unsafe fn poll(self, cx: &mut Context<'_>) -> Poll<()> {
+        // SAFETY: the caller's contract.
+        unsafe { (self.poll)(self.data, cx) }
+    }
+}
+
+/// The slot a higher-priority task polls: where [`Beside`] puts a sensing side.
+///
+/// # Safety
+///
+/// The task that polls the slot polls the future only between [`install`](Self::install)
+/// and [`uninstall`](Self::uninstall), never re-entrantly, and never while the code that
+/// uninstalls is running in the middle of a poll of it (the poller runs on the same thread
+/// and is not re-entered, or at a priority that preempts the uninstalling code).
+pub unsafe trait HighSlot {
+    /// Makes `future` the one the higher-priority task polls and wakes that task; `false` when
+    /// another future is installed.
+    fn install(&self, future: Erased) -> bool;
+    /// Removes the installed future: it is not polled again.
+    fn uninstall(&self);
+}
+
+/// Runs `sensing` from `slot` for as long as `deciding` runs: the future of
+/// [`Sides::beside`] on a platform with a higher-priority task polling `slot`. One at a time:
+/// while the slot holds another sensing side, this one is not run (a runtime's deciding side
+/// then fails with [`Failure::SensingStalled`](psmpa_core::Failure::SensingStalled)).
+pub struct Beside<'h, H: HighSlot, S, D> {
+    slot: &'h H,
+    sensing: S,
+    deciding: D,
+    /// Not yet offered to the slot.
+    first: bool,
+    installed: bool,
+    _pinned: PhantomPinned,
+}
+
+impl<'h, H: HighSlot, S: Future, D: Future> Beside<'h, H, S, D> {
+    /// `sensing` beside `deciding`, through `slot`.
+    pub fn new(slot: &'h H, sensing: S, deciding: D) -> Self {
+        Self {
+            slot,
+            sensing,
+            deciding,
+            first: true,
+            installed: false,
+            _pinned: PhantomPinned,
+        }
+    }
+}
+
+impl<H: HighSlot, S: Future, D: Future> Future for Beside<'_, H, S, D> {
+    type Output = D::Output;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<D::Output> {
+        // SAFETY: nothing is moved out of the pinned fields.
+        let this = unsafe { self.get_unchecked_mut() };
+        if core::mem::take(&mut this.first) {
+            // `Drop` uninstalls before `sensing` ends, and `HighSlot`'s contract keeps the
+            // poller from using it afterwards.
+            let erased = Erased {
+                data: core::ptr::addr_of_mut!(this.sensing).cast(),
+                poll: poll_erased::<S>,
+            };
+            this.installed = this.slot.install(erased);
+        }
+        // SAFETY: `deciding` is pinned with `self`.
+        let out = unsafe { Pin::new_unchecked(&mut this.deciding) }.poll(cx);
+        if out.is_ready() && core::mem::take(&mut this.installed) {
+            this.slot.uninstall();
+        }
+        out
+    }
+}
+
+impl<H: HighSlot, S, D> Drop for Beside<'_, H, S, D> {
+    fn drop(&mut self) {
+        if core::mem::take(&mut self.installed) {
+            self.slot.uninstall();
+        }
+    }
+}
+
 /// Runs `scenario` under `arch`, logging the world into `log` and tracing the runtime into
 /// `sink`; returns the summary and gives the log and the sink back.
 pub async fn run<L: WorldLog, T: TraceSink>(
+    sides: &impl Sides,
     scenario: &Scenario,
     arch: Arch,
     log: L,
     sink: T,
 ) -> Result<(Summary, L, T), MissionError> {
     let robot = robot::fetch_tea(scenario)?;
-    Ok(run_robot(&robot, scenario, arch, log, sink).await)
+    let mut space = robot::PlannerSpace::new();
+    Ok(run_robot(sides, &robot, scenario, arch, &mut space, log, sink).await)
 }
 
-/// Runs a mission already loaded for `scenario` ([`robot::fetch_tea`]). The run starts at the
-/// current instant; the host and the firmware start it at tick 0 so their traces agree.
+/// Runs a mission already loaded for `scenario` ([`robot::fetch_tea`]), planning in `space`
+/// when it must. The run starts at the current instant; the host and the firmware start it at
+/// tick 0 so their traces agree.
 pub async fn run_robot<L: WorldLog, T: TraceSink>(
+    sides: &impl Sides,
     robot: &Robot<'_>,
     scenario: &Scenario,
     arch: Arch,
+    space: &mut robot::PlannerSpace,
     log: L,
     sink: T,
 ) -> (Summary, L, T) {
@@ -73,7 +201,8 @@ pub async fn run_robot<L: WorldLog, T: TraceSink>(
         robot::config(scenario, arch),
     );
     let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
-    let ending = match select(runtime.run_planning(&robot::PLANNER), deadline).await {
+    let deciding = select(runtime.run_planning(&robot::PLANNER, space), deadline);
+    let ending = match sides.beside(runtime.sensing(), deciding).await {
         Either::First(Ok(report)) => Ending::Goal(report),
         Either::First(Err(error)) => Ending::Error(error),
         Either::Second(()) => {

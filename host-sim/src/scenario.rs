@@ -32,7 +32,7 @@ pub const MAX_INTERFERENCES: usize = 32;
 pub const MAX_NAME: usize = 64;
 
 /// What a person puts in front of the robot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Kind {
     /// A tall box (0.8 m): the sonar sees it.
@@ -51,6 +51,10 @@ pub struct RobotFile {
     /// Time a side step around a detected obstacle takes, s.
     #[serde(default, deserialize_with = "number")]
     pub avoid_s: Option<f64>,
+    /// Extension: while the sonar reads an obstacle nearer than this, the walk slows down, m;
+    /// 0 (the default) walks at `speed_mps` throughout.
+    #[serde(default, deserialize_with = "number")]
+    pub slow_m: Option<f64>,
 }
 
 /// `sonar` as written in the file.
@@ -75,6 +79,9 @@ pub struct SonarFile {
     /// Probability that a sample is lost.
     #[serde(default, deserialize_with = "number")]
     pub dropout: Option<f64>,
+    /// How long a sample takes, from its start to its result, ms (whole, 0 to 1000).
+    #[serde(default, deserialize_with = "number")]
+    pub latency_ms: Option<f64>,
 }
 
 /// `bumper` as written in the file.
@@ -84,6 +91,9 @@ pub struct BumperFile {
     /// Sampling period, ms.
     #[serde(default, deserialize_with = "number")]
     pub period_ms: Option<f64>,
+    /// How long a sample takes, from its start to its result, ms (whole, 0 to 1000).
+    #[serde(default, deserialize_with = "number")]
+    pub latency_ms: Option<f64>,
 }
 
 /// `smpa` as written in the file.
@@ -111,7 +121,7 @@ pub struct DoorsFile {
 }
 
 /// How the sonar fails (extension of the contract's format).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FaultKind {
     /// It stops answering: a sample never completes.
@@ -219,27 +229,22 @@ impl<'de> Deserialize<'de> for Interferences {
 }
 
 /// The sonar, in integer units.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Sonar {
     /// Sampling period, ms.
-    #[serde(rename = "p")]
     pub period_ms: u64,
     /// Shortest measured distance, µm.
-    #[serde(rename = "lo")]
     pub min_um: i64,
     /// Longest measured distance, µm.
-    #[serde(rename = "hi")]
     pub max_um: i64,
     /// Detection threshold, µm.
-    #[serde(rename = "t")]
     pub threshold_um: i64,
     /// Noise amplitude, µm.
-    #[serde(rename = "e")]
     pub noise_um: i64,
     /// A sample is lost when a uniform `u32` draw is below this (probability × 2³²).
-    #[serde(rename = "x")]
     pub dropout: u64,
+    /// How long a sample takes, ms.
+    pub latency_ms: u64,
 }
 
 impl Sonar {
@@ -261,91 +266,161 @@ pub const fn to_mm(um: i64) -> i64 {
 }
 
 /// One interference, in integer units.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Interference {
     /// Box or ball.
-    #[serde(rename = "k")]
     pub kind: Kind,
     /// When it is put down, ms.
-    #[serde(rename = "t")]
     pub at_ms: u32,
     /// How far in front of the robot, µm (at most 1 km).
-    #[serde(rename = "a")]
     pub ahead_um: i32,
     /// How long until a person takes it away, ms.
-    #[serde(rename = "h")]
     pub hold_ms: u32,
 }
 
 /// A validated scenario in integer units.
 ///
-/// Its serde form is the *canonical* scenario: compact JSON with integer fields only and
-/// short keys, made at build time from a scenario file ([`to_canonical`](Self::to_canonical))
-/// so that a microcontroller reads it with serde-json-core at boot, with no float parser and
-/// little flash ([`from_canonical`](Self::from_canonical)). It is not a file format for people:
-/// write scenario files.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+/// Its serde form is the *canonical* scenario: a JSON array of integers in field order, made
+/// at build time from a scenario file ([`to_canonical`](Self::to_canonical)) so that a
+/// microcontroller reads it with serde-json-core at boot, with no float parser, no field names
+/// to match and little flash ([`from_canonical`](Self::from_canonical)). It is not a file
+/// format for people: write scenario files.
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Scenario {
     /// Name.
-    #[serde(rename = "n")]
     pub name: String<MAX_NAME>,
     /// PRNG seed.
-    #[serde(rename = "s")]
     pub seed: u64,
     /// Distance to the door, µm.
-    #[serde(rename = "d")]
     pub door_um: i64,
     /// Longest run, ms.
-    #[serde(rename = "m")]
     pub max_ms: u64,
     /// Walking speed, µm per ms (= mm/s).
-    #[serde(rename = "v")]
     pub speed_um_per_ms: i64,
     /// Side step duration, ms.
-    #[serde(rename = "a")]
     pub avoid_ms: u64,
+    /// The walk slows down while the sonar reads an obstacle nearer than this, µm; 0: never.
+    pub slow_um: i64,
     /// The sonar.
-    #[serde(rename = "o")]
     pub sonar: Sonar,
     /// Bumper period, ms.
-    #[serde(rename = "b")]
     pub bumper_period_ms: u64,
+    /// How long a bumper sample takes, ms.
+    pub bumper_latency_ms: u64,
     /// SMPA sense phase, ms.
-    #[serde(rename = "ss")]
     pub sense_ms: u64,
     /// SMPA act phase, ms.
-    #[serde(rename = "sa")]
     pub act_ms: u64,
     /// Whether the kitchen door is locked.
-    #[serde(rename = "l")]
     pub door_locked: bool,
     /// Distance from the kitchen door on to the back door, µm.
-    #[serde(rename = "bd")]
     pub back_door_um: i64,
     /// A sonar fault and when it starts, ms.
-    #[serde(rename = "f")]
     pub fault: Option<(FaultKind, u32)>,
     /// The interferences, in file order.
-    #[serde(rename = "i")]
     pub interferences: Vec<Interference, MAX_INTERFERENCES>,
 }
 
-/// The canonical keys of [`Scenario`], in declaration order (see its `serde` renames).
-const CANONICAL_KEYS: [&str; 14] = [
-    "n", "s", "d", "m", "v", "a", "o", "b", "ss", "sa", "l", "bd", "f", "i",
-];
-/// The bit of `"f"` in the keys seen: the only optional one.
-const FAULT_KEY: u16 = 1 << 12;
+/// The canonical sonar: `[period, min, max, threshold, noise, dropout, latency]`.
+type SonarRow = (u64, i64, i64, i64, i64, u64, u64);
+/// A canonical interference: `[kind, at, ahead, hold]`, kind 0 for a box, 1 for a ball.
+type InterferenceRow = (u8, u32, i32, u32);
 
-/// Fills a scenario from its canonical form, field by field.
+impl Kind {
+    const fn code(self) -> u8 {
+        match self {
+            Self::Box => 0,
+            Self::Ball => 1,
+        }
+    }
+}
+
+impl FaultKind {
+    const fn code(self) -> u8 {
+        match self {
+            Self::Silent => 0,
+            Self::OutOfRange => 1,
+            Self::Stuck => 2,
+        }
+    }
+
+    const fn from_code(code: u8) -> Option<Self> {
+        match code {
+            0 => Some(Self::Silent),
+            1 => Some(Self::OutOfRange),
+            2 => Some(Self::Stuck),
+            _ => None,
+        }
+    }
+}
+
+impl Serialize for Scenario {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple;
+        let o = &self.sonar;
+        let sonar: SonarRow = (
+            o.period_ms,
+            o.min_um,
+            o.max_um,
+            o.threshold_um,
+            o.noise_um,
+            o.dropout,
+            o.latency_ms,
+        );
+        let mut t = serializer.serialize_tuple(CANONICAL_FIELDS)?;
+        t.serialize_element(self.name.as_str())?;
+        t.serialize_element(&self.seed)?;
+        t.serialize_element(&self.door_um)?;
+        t.serialize_element(&self.max_ms)?;
+        t.serialize_element(&self.speed_um_per_ms)?;
+        t.serialize_element(&self.avoid_ms)?;
+        t.serialize_element(&self.slow_um)?;
+        t.serialize_element(&sonar)?;
+        t.serialize_element(&self.bumper_period_ms)?;
+        t.serialize_element(&self.bumper_latency_ms)?;
+        t.serialize_element(&self.sense_ms)?;
+        t.serialize_element(&self.act_ms)?;
+        t.serialize_element(&self.door_locked)?;
+        t.serialize_element(&self.back_door_um)?;
+        t.serialize_element(&self.fault.map(|(k, at)| (k.code(), at)))?;
+        t.serialize_element(&Rows(&self.interferences))?;
+        t.end()
+    }
+}
+
+/// The interferences as canonical rows.
+struct Rows<'v>(&'v [Interference]);
+
+impl Serialize for Rows<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_seq(
+            self.0
+                .iter()
+                .map(|i| -> InterferenceRow { (i.kind.code(), i.at_ms, i.ahead_um, i.hold_ms) }),
+        )
+    }
+}
+
+/// Elements of the canonical array.
+const CANONICAL_FIELDS: usize = 16;
+
+/// Fills a scenario from its canonical form, element by element.
 struct Fill<'s>(&'s mut Scenario);
 
 impl<'de> serde::de::DeserializeSeed<'de> for Fill<'_> {
     type Value = ();
     fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
-        d.deserialize_map(self)
+        d.deserialize_tuple(CANONICAL_FIELDS, self)
     }
+}
+
+/// The next element of a canonical array, which must be there.
+fn element<'de, T: Deserialize<'de>, A: serde::de::SeqAccess<'de>>(
+    seq: &mut A,
+    index: usize,
+) -> Result<T, A::Error> {
+    seq.next_element()?
+        .ok_or_else(|| serde::de::Error::invalid_length(index, &"a canonical scenario"))
 }
 
 impl<'de> serde::de::Visitor<'de> for Fill<'_> {
@@ -353,37 +428,49 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("a canonical scenario")
     }
-    fn visit_map<M: serde::de::MapAccess<'de>>(self, mut map: M) -> Result<(), M::Error> {
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
         let s = self.0;
+        s.name = element(&mut seq, 0)?;
+        s.seed = element(&mut seq, 1)?;
+        s.door_um = element(&mut seq, 2)?;
+        s.max_ms = element(&mut seq, 3)?;
+        s.speed_um_per_ms = element(&mut seq, 4)?;
+        s.avoid_ms = element(&mut seq, 5)?;
+        s.slow_um = element(&mut seq, 6)?;
+        let (period_ms, min_um, max_um, threshold_um, noise_um, dropout, latency_ms): SonarRow =
+            element(&mut seq, 7)?;
+        s.sonar = Sonar {
+            period_ms,
+            min_um,
+            max_um,
+            threshold_um,
+            noise_um,
+            dropout,
+            latency_ms,
+        };
+        s.bumper_period_ms = element(&mut seq, 8)?;
+        s.bumper_latency_ms = element(&mut seq, 9)?;
+        s.sense_ms = element(&mut seq, 10)?;
+        s.act_ms = element(&mut seq, 11)?;
+        s.door_locked = element(&mut seq, 12)?;
+        s.back_door_um = element(&mut seq, 13)?;
+        let fault: Option<(u8, u32)> = element(&mut seq, 14)?;
+        s.fault = match fault {
+            Some((code, at)) => Some((
+                FaultKind::from_code(code).ok_or_else(|| {
+                    serde::de::Error::custom("a canonical fault kind is 0, 1 or 2")
+                })?,
+                at,
+            )),
+            None => None,
+        };
         s.interferences.clear();
-        s.fault = None;
-        let mut seen = 0u16;
-        while let Some(key) = map.next_key::<&str>()? {
-            let Some(index) = CANONICAL_KEYS.iter().position(|k| *k == key) else {
-                return Err(serde::de::Error::unknown_field(key, &CANONICAL_KEYS));
-            };
-            seen |= 1 << index;
-            match key {
-                "n" => s.name = map.next_value()?,
-                "s" => s.seed = map.next_value()?,
-                "d" => s.door_um = map.next_value()?,
-                "m" => s.max_ms = map.next_value()?,
-                "v" => s.speed_um_per_ms = map.next_value()?,
-                "a" => s.avoid_ms = map.next_value()?,
-                "o" => s.sonar = map.next_value()?,
-                "b" => s.bumper_period_ms = map.next_value()?,
-                "ss" => s.sense_ms = map.next_value()?,
-                "sa" => s.act_ms = map.next_value()?,
-                "l" => s.door_locked = map.next_value()?,
-                "bd" => s.back_door_um = map.next_value()?,
-                "f" => s.fault = map.next_value()?,
-                _ => map.next_value_seed(Items(&mut s.interferences))?,
-            }
-        }
-        // Every key but the fault, which the writer leaves out when there is none.
-        if seen | FAULT_KEY != (1 << CANONICAL_KEYS.len()) - 1 {
-            return Err(serde::de::Error::custom(
-                "a canonical scenario has every field",
+        seq.next_element_seed(Items(&mut s.interferences))?
+            .ok_or_else(|| serde::de::Error::invalid_length(15, &"a canonical scenario"))?;
+        if seq.next_element::<serde::de::IgnoredAny>()?.is_some() {
+            return Err(serde::de::Error::invalid_length(
+                17,
+                &"a canonical scenario",
             ));
         }
         Ok(())
@@ -406,7 +493,18 @@ impl<'de> serde::de::Visitor<'de> for Items<'_> {
         write!(f, "at most {MAX_INTERFERENCES} interferences")
     }
     fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
-        while let Some(item) = seq.next_element::<Interference>()? {
+        while let Some((kind, at_ms, ahead_um, hold_ms)) = seq.next_element::<InterferenceRow>()? {
+            let kind = match kind {
+                0 => Kind::Box,
+                1 => Kind::Ball,
+                _ => return Err(serde::de::Error::custom("a canonical kind is 0 or 1")),
+            };
+            let item = Interference {
+                kind,
+                at_ms,
+                ahead_um,
+                hold_ms,
+            };
             self.0
                 .push(item)
                 .map_err(|_| serde::de::Error::invalid_length(MAX_INTERFERENCES + 1, &self))?;
@@ -506,6 +604,13 @@ pub enum Problem {
     },
     /// The name is empty or only spaces.
     Empty,
+    /// Must be a whole number of milliseconds from 0 to `max`.
+    NotWholeMillis {
+        /// The value.
+        value: f64,
+        /// Largest allowed.
+        max: u64,
+    },
     /// `threshold_m` must lie in `(min_m, max_m]`.
     ThresholdOutsideRange,
 }
@@ -522,6 +627,10 @@ impl fmt::Display for Problem {
                 write!(f, "must lie between {min} and {max}, got {value}")
             }
             Self::Empty => f.write_str("must not be empty"),
+            Self::NotWholeMillis { value, max } => write!(
+                f,
+                "must be a whole number of milliseconds from 0 to {max}, got {value}"
+            ),
             Self::ThresholdOutsideRange => {
                 f.write_str("threshold_m must lie above min_m and at most max_m")
             }
@@ -621,6 +730,27 @@ fn millis(field: Field, value: f64) -> Result<u64, ScenarioError> {
     Ok(whole)
 }
 
+/// Longest sensor read latency accepted, ms.
+pub const MAX_LATENCY_MS: u64 = 1_000;
+
+/// A sensor read latency: a whole number of milliseconds from 0 to [`MAX_LATENCY_MS`].
+fn latency(field: Field, value: f64) -> Result<u64, ScenarioError> {
+    // `fract` needs std: compare with the whole part instead.
+    let whole = value >= 0.0 && value <= MAX_LATENCY_MS as f64 && (value as u64) as f64 == value;
+    if !value.is_finite() || !whole {
+        let problem = if value < 0.0 {
+            Problem::Negative(value)
+        } else {
+            Problem::NotWholeMillis {
+                value,
+                max: MAX_LATENCY_MS,
+            }
+        };
+        return Err(invalid(field, problem));
+    }
+    Ok(value as u64)
+}
+
 /// A non-negative distance in metres, rounded to µm.
 fn metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
     if !value.is_finite() {
@@ -685,6 +815,7 @@ impl Scenario {
         robot: Some(RobotFile {
             speed_mps: Some(0.1),
             avoid_s: Some(2.0),
+            slow_m: Some(0.0),
         }),
         sonar: Some(SonarFile {
             period_ms: Some(100.0),
@@ -693,9 +824,11 @@ impl Scenario {
             threshold_m: Some(0.5),
             noise_m: Some(0.0),
             dropout: Some(0.0),
+            latency_ms: Some(0.0),
         }),
         bumper: Some(BumperFile {
             period_ms: Some(20.0),
+            latency_ms: Some(0.0),
         }),
         smpa: Some(SmpaFile {
             sense_ms: Some(1000.0),
@@ -732,6 +865,7 @@ impl Scenario {
             max_ms: 0,
             speed_um_per_ms: 0,
             avoid_ms: 0,
+            slow_um: 0,
             sonar: Sonar {
                 period_ms: 0,
                 min_um: 0,
@@ -739,8 +873,10 @@ impl Scenario {
                 threshold_um: 0,
                 noise_um: 0,
                 dropout: 0,
+                latency_ms: 0,
             },
             bumper_period_ms: 0,
+            bumper_latency_ms: 0,
             sense_ms: 0,
             act_ms: 0,
             door_locked: false,
@@ -845,6 +981,10 @@ impl Scenario {
                 }
                 (p * 4_294_967_296.0 + 0.5) as u64
             },
+            latency_ms: latency(
+                Field::of("sonar", "latency_ms"),
+                pick(s.latency_ms, ds.latency_ms),
+            )?,
         };
         if sonar.max_um <= sonar.min_um {
             return Err(invalid(
@@ -866,6 +1006,11 @@ impl Scenario {
             Field::of("bumper", "period_ms"),
             pick(b.period_ms, db.period_ms),
         )?;
+        let bumper_latency_ms = latency(
+            Field::of("bumper", "latency_ms"),
+            pick(b.latency_ms, db.latency_ms),
+        )?;
+        let slow_um = metres(Field::of("robot", "slow_m"), pick(r.slow_m, dr.slow_m))?;
         let sense_ms = millis(Field::of("smpa", "sense_ms"), pick(p.sense_ms, dp.sense_ms))?;
         let act_ms = millis(Field::of("smpa", "act_ms"), pick(p.act_ms, dp.act_ms))?;
         let doors = file.doors.unwrap_or_default();
@@ -905,8 +1050,10 @@ impl Scenario {
             max_ms,
             speed_um_per_ms,
             avoid_ms,
+            slow_um,
             sonar,
             bumper_period_ms,
+            bumper_latency_ms,
             sense_ms,
             act_ms,
             door_locked,
@@ -1004,6 +1151,58 @@ mod tests {
         );
         let e = err(r#"{"name":"x","robot":{"speed_mps":0},"interferences":[]}"#);
         assert!(e.to_string().starts_with("robot.speed_mps:"));
+        for (latency, problem) in [
+            ("-1", "must not be negative, got -1"),
+            (
+                "2.5",
+                "must be a whole number of milliseconds from 0 to 1000, got 2.5",
+            ),
+            (
+                "1001",
+                "must be a whole number of milliseconds from 0 to 1000, got 1001",
+            ),
+        ] {
+            let json = std::format!(
+                r#"{{"name":"x","sonar":{{"latency_ms":{latency}}},"interferences":[]}}"#
+            );
+            assert_eq!(
+                err(&json).to_string(),
+                std::format!("sonar.latency_ms: {problem}")
+            );
+            let json = std::format!(
+                r#"{{"name":"x","bumper":{{"latency_ms":{latency}}},"interferences":[]}}"#
+            );
+            assert_eq!(
+                err(&json).to_string(),
+                std::format!("bumper.latency_ms: {problem}")
+            );
+        }
+        let e = err(r#"{"name":"x","robot":{"slow_m":-0.5},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "robot.slow_m: must not be negative, got -0.5"
+        );
+    }
+
+    #[test]
+    fn read_latencies_default_to_none_and_take_whole_milliseconds() {
+        let s = Scenario::parse(br#"{"name":"x","interferences":[]}"#).unwrap();
+        assert_eq!(
+            (s.sonar.latency_ms, s.bumper_latency_ms, s.slow_um),
+            (0, 0, 0)
+        );
+        let s = Scenario::parse(
+            br#"{"name":"x","sonar":{"latency_ms":40},"bumper":{"latency_ms":1000},
+                "robot":{"slow_m":1.2},"interferences":[]}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            (s.sonar.latency_ms, s.bumper_latency_ms, s.slow_um),
+            (40, 1000, 1_200_000)
+        );
+        let mut buf = [0u8; 4096];
+        let len = s.to_canonical(&mut buf).unwrap();
+        assert_eq!(Scenario::from_canonical(&buf[..len]).unwrap(), s);
     }
 
     #[test]

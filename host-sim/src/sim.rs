@@ -3,9 +3,9 @@
 use embassy_time::{Duration, Instant};
 use psmpa_core::{TraceEvent, TraceSink};
 
-use crate::backend::{SimError, simulate};
+use crate::backend::{SimError, beside, simulate};
 use crate::robot::{Arch, MissionError};
-use crate::run::{Summary, run};
+use crate::run::{Sides, Summary, run};
 use crate::scenario::Scenario;
 use crate::world::{WorldEvent, WorldLog};
 
@@ -60,13 +60,28 @@ pub struct Recorded {
     pub trace: TraceRecord,
 }
 
+/// The host's placement of a runtime's two sides: sensing on the backend's higher-priority
+/// executor ([`beside`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Prioritized;
+
+impl Sides for Prioritized {
+    async fn beside<S: core::future::Future, D: core::future::Future>(
+        &self,
+        sensing: S,
+        deciding: D,
+    ) -> D::Output {
+        beside(sensing, deciding).await
+    }
+}
+
 /// Virtual time allowed beyond `max_s`: the run stops itself at `max_s`.
 const SLACK: Duration = Duration::from_secs(1);
 
 /// Runs `scenario` under `arch` with nothing recorded (fast path for sweeps and benchmarks).
 pub fn run_summary(scenario: &Scenario, arch: Arch) -> Result<Summary, RunError> {
     let limit = Duration::from_millis(scenario.max_ms) + SLACK;
-    let done = simulate(run(scenario, arch, (), ()), limit).map_err(RunError::Sim)?;
+    let done = simulate(run(&Prioritized, scenario, arch, (), ()), limit).map_err(RunError::Sim)?;
     done.output.map(|(s, (), ())| s).map_err(RunError::Mission)
 }
 
@@ -75,6 +90,7 @@ pub fn run_recorded(scenario: &Scenario, arch: Arch) -> Result<Recorded, RunErro
     let limit = Duration::from_millis(scenario.max_ms) + SLACK;
     let done = simulate(
         run(
+            &Prioritized,
             scenario,
             arch,
             WorldRecord::default(),

@@ -138,6 +138,8 @@ pub enum WorldEvent {
     Locked,
     /// The robot entered the kitchen.
     InKitchen,
+    /// The walking speed changed, in thousandths of `speed_mps`.
+    Speed(u16),
 }
 
 impl WorldEvent {
@@ -174,6 +176,10 @@ impl WorldEvent {
             Self::DoorOpened(p) => hash.write(&[16, p as u8]),
             Self::InKitchen => hash.write(&[17]),
             Self::Locked => hash.write(&[18]),
+            Self::Speed(permille) => {
+                hash.write(&[19]);
+                hash.write(&permille.to_le_bytes());
+            }
         }
     }
 }
@@ -261,15 +267,50 @@ pub enum Motion {
     },
 }
 
+/// Delivered samples of one device, for the largest gap between two while it stayed on.
+#[derive(Clone, Copy, Debug, Default)]
+struct Gaps {
+    /// The last delivery since the device was switched on.
+    last_ms: Option<u64>,
+    max_ms: Option<u64>,
+}
+
+/// What a sonar read measured when it started; [`World::sonar_deliver`] hands it over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[must_use = "a read is delivered with `sonar_deliver`"]
+pub struct Echo {
+    /// The reading in mm; `None`: lost to dropout.
+    mm: Option<u32>,
+    /// The obstacles it registers, by index.
+    registers: u32,
+    /// The obstacles it was certain to register whatever the noise.
+    certain: u32,
+    /// Whether a stuck fault is to stick at this reading.
+    sticks: bool,
+    /// The robot's position when the read started (odometry), µm.
+    pub pos_um: i64,
+}
+
+/// What a bumper read felt when it started; [`World::bumper_deliver`] hands it over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[must_use = "a read is delivered with `bumper_deliver`"]
+pub struct Touch {
+    /// The obstacles touched, by index.
+    touching: u32,
+}
+
 struct State<L> {
     now: u64,
     pos_um: i64,
     /// Where a walk ends.
     target_um: i64,
+    /// Walking speed, thousandths of the scenario's.
+    speed_permille: u16,
     motion: Motion,
     held: bool,
     on: [bool; 4],
     on_ms: [u64; 4],
+    gaps: [Gaps; 4],
     obstacles: Vec<Obstacle, MAX_INTERFERENCES>,
     rng: Pcg32,
     at_door_ms: Option<u64>,
@@ -322,6 +363,9 @@ pub struct Tally {
     pub reached_door: bool,
     /// On-time of sonar, bumper, camera and handle, ms.
     pub on_ms: [u64; 4],
+    /// The largest interval between two delivered samples of sonar, bumper, camera and handle
+    /// while it stayed on, ms; `None` with fewer than two such samples.
+    pub sample_gap_max_ms: [Option<u64>; 4],
 }
 
 /// A time in ms as 32 bits (a scenario spans at most a day).
@@ -339,6 +383,26 @@ fn div_ceil(a: i64, b: i64) -> u64 {
 impl<L: WorldLog> State<L> {
     fn moving(&self) -> bool {
         self.motion == Motion::Walking && !self.held
+    }
+
+    /// The walking speed now, µm/ms: at least 1 while the scenario's speed is.
+    fn speed(&self, sc: &Scenario) -> i64 {
+        let scaled = sc
+            .speed_um_per_ms
+            .saturating_mul(i64::from(self.speed_permille))
+            / 1000;
+        scaled.max(sc.speed_um_per_ms.min(1))
+    }
+
+    /// A sample of `device` was delivered now.
+    fn delivered(&mut self, device: Device) {
+        let now = self.now;
+        if let Some(g) = self.gaps.get_mut(device.slot()) {
+            if let Some(last) = g.last_ms {
+                g.max_ms = g.max_ms.max(Some(now - last));
+            }
+            g.last_ms = Some(now);
+        }
     }
 
     fn emit(&mut self, event: WorldEvent) {
@@ -401,10 +465,11 @@ impl<L: WorldLog> State<L> {
                 _ => {}
             }
         }
-        if self.moving() && sc.speed_um_per_ms > 0 {
+        let speed = self.speed(sc);
+        if self.moving() && speed > 0 {
             let limit = self.limit_um();
             if limit > self.pos_um {
-                consider(now.saturating_add(div_ceil(limit - self.pos_um, sc.speed_um_per_ms)));
+                consider(now.saturating_add(div_ceil(limit - self.pos_um, speed)));
             }
             if self.on[0] {
                 // A box ahead enters the sonar threshold, then the blind zone below min_m.
@@ -415,7 +480,7 @@ impl<L: WorldLog> State<L> {
                         let below = sc.sonar.threshold_mm() * 1000 - 500;
                         for edge in [below, sc.sonar.min_um] {
                             if d >= edge {
-                                let dt = (d - edge) / sc.speed_um_per_ms + 1;
+                                let dt = (d - edge) / speed + 1;
                                 consider(now.saturating_add(dt as u64));
                             }
                         }
@@ -439,7 +504,7 @@ impl<L: WorldLog> State<L> {
             }
         }
         if self.moving() {
-            let step = sc.speed_um_per_ms.saturating_mul(dt as i64);
+            let step = self.speed(sc).saturating_mul(dt as i64);
             let limit = self.limit_um();
             self.pos_um = self.pos_um.saturating_add(step).min(limit).max(self.pos_um);
         }
@@ -605,10 +670,12 @@ impl<'s, L: WorldLog> World<'s, L> {
                 now: 0,
                 pos_um: 0,
                 target_um: scenario.door_um,
+                speed_permille: 1000,
                 motion: Motion::Idle,
                 held: false,
                 on: [false; 4],
                 on_ms: [0; 4],
+                gaps: [Gaps::default(); 4],
                 obstacles,
                 rng: Pcg32::seed_from_u64(scenario.seed),
                 at_door_ms: None,
@@ -648,6 +715,11 @@ impl<'s, L: WorldLog> World<'s, L> {
     /// The robot's position, µm.
     pub fn position_um(&self) -> i64 {
         self.view(|s, _| s.pos_um)
+    }
+
+    /// The walking speed, thousandths of the scenario's `speed_mps`.
+    pub fn speed_permille(&self) -> u16 {
+        self.view(|s, _| s.speed_permille)
     }
 
     /// What the legs do.
@@ -731,6 +803,7 @@ impl<'s, L: WorldLog> World<'s, L> {
             let at_door = s.pos_um == sc.door_um;
             let gives = at_door && !sc.door_locked;
             s.emit(WorldEvent::Sample(Device::Handle, u32::from(gives)));
+            s.delivered(Device::Handle);
             if at_door && sc.door_locked {
                 s.emit(WorldEvent::Locked);
             }
@@ -771,6 +844,10 @@ impl<'s, L: WorldLog> World<'s, L> {
             if let Some(slot) = s.on.get_mut(device.slot()) {
                 *slot = on;
             }
+            // An interval that spans a switch-off is no gap.
+            if let Some(g) = s.gaps.get_mut(device.slot()) {
+                g.last_ms = None;
+            }
             s.emit(if on {
                 WorldEvent::SensorOn(device)
             } else {
@@ -790,30 +867,36 @@ impl<'s, L: WorldLog> World<'s, L> {
         })
     }
 
-    /// One sonar sample in mm, or `None` when it is lost to dropout. Registers the boxes it
-    /// sees, by the same rule the robot applies ([`Sonar::registers`](crate::scenario::Sonar::registers)).
-    /// A faulty sonar (see [`sonar_fault`](Self::sonar_fault)) registers nothing: it reports
+    /// Starts a sonar read: what the echo will say describes the world now (the nearest box
+    /// ahead within range, with noise; or nothing in range, `max_m`; or lost to dropout), and
+    /// is delivered by [`sonar_deliver`](Self::sonar_deliver) when the read completes. A
+    /// faulty sonar (see [`sonar_fault`](Self::sonar_fault)) registers nothing: it reports
     /// beyond its range, or the same reading again and again.
-    pub fn sonar(&self) -> Option<u32> {
+    pub fn sonar_read(&self) -> Echo {
         let fault = self.sonar_fault();
         self.with(|s, sc| {
             let sonar = sc.sonar;
+            let mut echo = Echo {
+                mm: None,
+                registers: 0,
+                certain: 0,
+                sticks: false,
+                pos_um: s.pos_um,
+            };
             match fault {
                 Some(FaultKind::OutOfRange) => {
                     let mm = u32::try_from(to_mm(sonar.max_um) + 1_500).unwrap_or(u32::MAX);
-                    s.emit(WorldEvent::Sample(Device::Sonar, mm));
-                    return Some(mm);
+                    echo.mm = Some(mm);
+                    return echo;
                 }
                 Some(FaultKind::Stuck) if s.stuck_mm.is_some() => {
-                    let mm = s.stuck_mm.unwrap_or_default();
-                    s.emit(WorldEvent::Sample(Device::Sonar, mm));
-                    return Some(mm);
+                    echo.mm = s.stuck_mm;
+                    return echo;
                 }
                 _ => {}
             }
             if sonar.dropout > 0 && u64::from(s.rng.next_u32()) < sonar.dropout {
-                s.emit(WorldEvent::SampleLost(Device::Sonar));
-                return None;
+                return echo;
             }
             // The nearest box ahead, if it lies within the sonar's range.
             let seen = s
@@ -836,49 +919,106 @@ impl<'s, L: WorldLog> World<'s, L> {
                 let certain = certain_at(&sonar, d);
                 let registered = sonar.registers(mm);
                 // Every box at that distance is what the echo came from.
-                for i in 0..s.obstacles.len() {
-                    let here = s.obstacles.get(i).is_some_and(|o| {
-                        o.blocks() && o.kind == Kind::Box && o.pos_um - s.pos_um == d
-                    });
-                    if !here {
-                        continue;
-                    }
-                    if certain {
-                        if let Some(o) = s.obstacles.get_mut(i) {
-                            o.certain_samples = o.certain_samples.saturating_add(1);
-                        }
-                    }
-                    if registered {
-                        s.register(i, Device::Sonar);
+                for (i, o) in s.obstacles.iter().enumerate() {
+                    if o.blocks() && o.kind == Kind::Box && o.pos_um - s.pos_um == d {
+                        echo.certain |= u32::from(certain) << i;
+                        echo.registers |= u32::from(registered) << i;
                     }
                 }
             }
-            let mm = u32::try_from(mm).unwrap_or(u32::MAX);
-            if fault == Some(FaultKind::Stuck) {
-                // The first reading after the fault is the one it sticks at.
+            echo.mm = Some(u32::try_from(mm).unwrap_or(u32::MAX));
+            // The first reading after the fault is the one it sticks at.
+            echo.sticks = fault == Some(FaultKind::Stuck);
+            echo
+        })
+    }
+
+    /// Completes a sonar read: the reading reaches the robot now, registering the boxes it
+    /// saw that are still there (by the same rule the robot applies,
+    /// [`Sonar::registers`](crate::scenario::Sonar::registers)). `None`: the sample was lost.
+    pub fn sonar_deliver(&self, echo: Echo) -> Option<u32> {
+        self.with(|s, _| {
+            let Some(mm) = echo.mm else {
+                s.emit(WorldEvent::SampleLost(Device::Sonar));
+                return None;
+            };
+            if echo.sticks {
                 s.stuck_mm = Some(mm);
             }
+            // What the read saw counts only for obstacles still there: one taken away while the
+            // echo travelled cannot be registered any more.
+            for i in 0..s.obstacles.len() {
+                let bit = 1u32 << i;
+                let Some(o) = s.obstacles.get_mut(i).filter(|o| o.blocks()) else {
+                    continue;
+                };
+                if echo.certain & bit != 0 {
+                    o.certain_samples = o.certain_samples.saturating_add(1);
+                }
+                if echo.registers & bit != 0 {
+                    s.register(i, Device::Sonar);
+                }
+            }
             s.emit(WorldEvent::Sample(Device::Sonar, mm));
+            s.delivered(Device::Sonar);
             Some(mm)
         })
     }
 
-    /// One bumper sample: 2 on contact (registering everything it touches), else 1.
-    pub fn bumper(&self) -> u8 {
+    /// Starts a bumper read: what the robot touches now.
+    pub fn bumper_read(&self) -> Touch {
+        self.with(|s, _| Touch {
+            touching: s
+                .obstacles
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| s.touching(o))
+                .fold(0, |acc, (i, _)| acc | 1 << i),
+        })
+    }
+
+    /// Completes a bumper read: 2 when the read felt contact (registering every obstacle
+    /// touched that is still there), else 1.
+    pub fn bumper_deliver(&self, touch: Touch) -> u8 {
         self.with(|s, _| {
             let mut level = 1;
             for i in 0..s.obstacles.len() {
-                if s.obstacles.get(i).is_some_and(|o| s.touching(o)) {
-                    if let Some(o) = s.obstacles.get_mut(i) {
-                        o.certain_samples = o.certain_samples.saturating_add(1);
-                    }
-                    s.register(i, Device::Bumper);
-                    level = 2;
+                if touch.touching & (1 << i) == 0 {
+                    continue;
                 }
+                // Contact with an obstacle taken away meanwhile is still contact felt.
+                level = 2;
+                let Some(o) = s.obstacles.get_mut(i).filter(|o| o.blocks()) else {
+                    continue;
+                };
+                o.certain_samples = o.certain_samples.saturating_add(1);
+                s.register(i, Device::Bumper);
             }
             s.emit(WorldEvent::Sample(Device::Bumper, u32::from(level)));
+            s.delivered(Device::Bumper);
             level
         })
+    }
+
+    /// A sonar read that starts and completes now.
+    pub fn sonar(&self) -> Option<u32> {
+        self.sonar_deliver(self.sonar_read())
+    }
+
+    /// A bumper read that starts and completes now.
+    pub fn bumper(&self) -> u8 {
+        self.bumper_deliver(self.bumper_read())
+    }
+
+    /// Sets the walking speed, in thousandths of the scenario's `speed_mps` (1 to 1000).
+    pub fn set_speed(&self, permille: u16) {
+        self.with(|s, _| {
+            let permille = permille.clamp(1, 1000);
+            if s.speed_permille != permille {
+                s.speed_permille = permille;
+                s.emit(WorldEvent::Speed(permille));
+            }
+        });
     }
 
     /// One camera image: whether the door handle is in view (the robot is at the door).
@@ -886,6 +1026,7 @@ impl<'s, L: WorldLog> World<'s, L> {
         self.with(|s, sc| {
             let seen = s.pos_um == sc.door_um;
             s.emit(WorldEvent::Sample(Device::Camera, u32::from(seen)));
+            s.delivered(Device::Camera);
             seen
         })
     }
@@ -903,6 +1044,7 @@ impl<'s, L: WorldLog> World<'s, L> {
                 max_reaction_ms: None,
                 reached_door: s.at_door_ms.is_some(),
                 on_ms: s.on_ms,
+                sample_gap_max_ms: s.gaps.map(|g| g.max_ms),
             };
             let placed = s
                 .obstacles

@@ -193,8 +193,12 @@ fn run_json_prints_exactly_the_contract_object() {
         "time_cost_s",
         "max_reaction_ms",
         "sensor_on_s",
+        "sample_gap_max_ms",
         "trace_hash",
     ];
+    // In the contract's order, too.
+    let at = |key: &str| stdout.find(&format!("\"{key}\":")).unwrap();
+    assert!(expected.windows(2).all(|w| at(w[0]) < at(w[1])), "{stdout}");
     let mut sorted = keys.clone();
     sorted.sort_unstable();
     expected.sort_unstable();
@@ -210,12 +214,29 @@ fn run_json_prints_exactly_the_contract_object() {
     assert!(v["max_reaction_ms"].as_u64().unwrap() <= 100);
     let on = v["sensor_on_s"].as_object().unwrap();
     assert_eq!(on.keys().collect::<Vec<_>>(), ["bumper", "sonar"]);
+    // Each sensor samples on its own period, whatever the other does.
+    assert_eq!(v["sample_gap_max_ms"]["sonar"], 100);
+    assert_eq!(v["sample_gap_max_ms"]["bumper"], 20);
     let hash = v["trace_hash"].as_str().unwrap();
     assert_eq!(hash.len(), 16);
     assert!(
         hash.chars()
             .all(|c| c.is_ascii_hexdigit() && !c.is_ascii_uppercase())
     );
+}
+
+#[test]
+fn a_sample_gap_is_null_for_a_sensor_with_fewer_than_two_samples() {
+    // A sonar period longer than the walk: one sample when the walk starts, then no more.
+    let path = file(
+        "slow-sonar.json",
+        r#"{"name":"slow-sonar","sonar":{"period_ms":60000},"interferences":[]}"#,
+    );
+    let out = run(&path, "psmpa", true);
+    assert_success(&out);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["sample_gap_max_ms"]["sonar"], serde_json::Value::Null);
+    assert_eq!(v["sample_gap_max_ms"]["bumper"], 20);
 }
 
 #[test]

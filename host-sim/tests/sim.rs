@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use psmpa_core::timing::Blocking;
 use psmpa_core::{TraceEvent, Value};
 use psmpa_sim::cli::{sweep, table1};
 use psmpa_sim::load::load;
@@ -10,7 +11,7 @@ use psmpa_sim::robot::Arch;
 use psmpa_sim::run::Ending;
 use psmpa_sim::scenario::Scenario;
 use psmpa_sim::sim::{run_recorded, run_summary};
-use psmpa_sim::world::{Device, Fate};
+use psmpa_sim::world::{Device, Fate, WorldEvent};
 
 fn scenario(name: &str) -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("../scenarios/{name}.json"));
@@ -103,7 +104,7 @@ fn a_far_box_is_seen_once_it_comes_within_the_threshold() {
             .all(|o| o.fate == Fate::Detected(Device::Sonar))
     );
     // The sonar reports it every sample, but it counts only below the threshold.
-    let readings: Vec<u32> = rec
+    let readings: Vec<i32> = rec
         .trace
         .0
         .iter()
@@ -145,6 +146,7 @@ fn noise_free_reactions_take_less_than_one_period_of_the_detecting_sensor() {
         "far-box",
         "blind-box",
         "mixed",
+        "slow-echo",
     ] {
         let sc = scenario(name);
         for arch in Arch::ALL {
@@ -152,11 +154,11 @@ fn noise_free_reactions_take_less_than_one_period_of_the_detecting_sensor() {
                 let (Fate::Detected(device), Some(r)) = (o.fate, o.reaction_ms) else {
                     continue;
                 };
-                let period = match device {
-                    Device::Sonar => sc.sonar.period_ms,
-                    _ => sc.bumper_period_ms,
+                let (period, latency) = match device {
+                    Device::Sonar => (sc.sonar.period_ms, sc.sonar.latency_ms),
+                    _ => (sc.bumper_period_ms, sc.bumper_latency_ms),
                 };
-                assert!(r < period, "{name} {arch:?} {device:?}: {r} ms");
+                assert!(r < period + latency, "{name} {arch:?} {device:?}: {r} ms");
                 checked += 1;
             }
         }
@@ -179,7 +181,8 @@ fn every_psmpa_reaction_is_within_the_latency_bound() {
     let (mut checked, mut worst_slack_ns) = (0, u64::MAX);
     for sc in &scenarios {
         let robot = psmpa_sim::robot::fetch_tea(sc).unwrap();
-        let bounds = psmpa_sim::robot::latency_bounds(&robot, sc, |_| 0);
+        let bounds =
+            psmpa_sim::robot::latency_bounds(&robot, sc, Blocking::NONE, 0, |_| 0).unwrap();
         assert_eq!(bounds.len(), 2, "sonar and bumper are cyclic");
         // A box is perceived by both, and the slower one's bound holds for either.
         let bound_ns = bounds.iter().map(|b| b.bound_ns).max().unwrap();
@@ -197,6 +200,146 @@ fn every_psmpa_reaction_is_within_the_latency_bound() {
     assert!(checked > 500, "{checked}");
 }
 
+/// A sonar whose every read takes 40 ms (an echo; `scenarios/slow-echo.json`, the interferences
+/// of `mixed`) beside a 20 ms bumper: under P-SMPA the bumper keeps its 20 ms, the sonar its
+/// 100 ms, every detectable obstacle is detected, nothing collides, and the sonar's reactions
+/// take its read time longer than they would without it.
+#[test]
+fn a_slow_sonar_read_leaves_the_bumper_on_its_period_and_misses_nothing() {
+    let slow = scenario("slow-echo");
+    assert_eq!((slow.sonar.latency_ms, slow.bumper_period_ms), (40, 20));
+    let s = run_summary(&slow, Arch::PSmpa).unwrap();
+    let t = s.tally;
+    assert_eq!(t.sample_gap_max_ms[1], Some(20), "bumper");
+    assert_eq!(t.sample_gap_max_ms[0], Some(100), "sonar");
+    assert_eq!(t.placed, 6);
+    assert_eq!((t.detected, t.detectable, t.collisions), (6, 6, 0));
+    assert!(t.reached_door);
+    // The same world with an instant sonar: the same detections. A sonar reaction takes at
+    // least the read and at most a period more (the sampling grid starts 40 ms later, when
+    // the initial model's read is in, so the two runs' reactions differ otherwise).
+    let mut instant = slow.clone();
+    instant.sonar.latency_ms = 0;
+    let i = run_summary(&instant, Arch::PSmpa).unwrap();
+    assert_eq!(i.tally.sample_gap_max_ms[1], Some(20));
+    let mut by_sonar = 0;
+    for (a, b) in s.obstacles.iter().zip(&i.obstacles) {
+        assert_eq!(a.fate, b.fate);
+        if a.fate == Fate::Detected(Device::Sonar) {
+            let r = a.reaction_ms.unwrap();
+            assert!((40..140).contains(&r), "{r} ms");
+            by_sonar += 1;
+        }
+    }
+    assert_eq!(by_sonar, 3);
+    let robot = psmpa_sim::robot::fetch_tea(&slow).unwrap();
+    let bounds = psmpa_sim::robot::latency_bounds(&robot, &slow, Blocking::NONE, 0, |_| 0).unwrap();
+    let bound_ms = bounds.iter().map(|b| b.bound_ns).max().unwrap() / 1_000_000;
+    assert!(t.max_reaction_ms.unwrap() <= bound_ms);
+}
+
+/// The walk decides from the sonar distance it reads in the mutual store: in a slow zone it
+/// slows down as a box comes nearer (`robot.slow_m`), and still stops for it at the threshold.
+#[test]
+fn in_a_slow_zone_the_walk_slows_down_as_the_sonar_distance_falls() {
+    let far = scenario("far-box");
+    let mut slow = far.clone();
+    slow.slow_um = 1_500_000;
+    let fast = run_recorded(&far, Arch::PSmpa).unwrap();
+    let careful = run_recorded(&slow, Arch::PSmpa).unwrap();
+    let speeds = |rec: &psmpa_sim::sim::Recorded| -> Vec<(u64, u16)> {
+        rec.world
+            .0
+            .iter()
+            .filter_map(|(t, _, e)| match e {
+                WorldEvent::Speed(p) => Some((*t, *p)),
+                _ => None,
+            })
+            .collect()
+    };
+    assert!(
+        speeds(&fast).is_empty(),
+        "no slow zone: full speed throughout"
+    );
+    let slowing = speeds(&careful);
+    // The first box, put 1.2 m ahead at 1.23 s, slows the walk sample by sample: the nearer
+    // the slower, never below the slowest. When it is taken away the second, farther, box is
+    // the nearest: a little faster again. Full speed once the path is clear.
+    let first_box: Vec<u16> = slowing
+        .iter()
+        .take_while(|(t, _)| *t < 16_230)
+        .map(|(_, p)| *p)
+        .collect();
+    assert!(first_box.len() > 100, "{slowing:?}");
+    assert!(first_box.windows(2).all(|w| w[1] <= w[0]), "{slowing:?}");
+    assert!(
+        first_box
+            .iter()
+            .all(|p| *p >= psmpa_sim::robot::SLOWEST_PERMILLE)
+    );
+    assert!(*first_box.last().unwrap() < 300, "{slowing:?}");
+    assert_eq!(slowing.last().map(|(_, p)| *p), Some(1000));
+    // Creeping, the careful robot had not reached the first box's threshold when it was taken
+    // away (met by neither sensor); the second it stopped for. Nothing collides either way.
+    let (f, c) = (fast.summary.tally, careful.summary.tally);
+    assert_eq!((f.detected, f.collisions), (2, 0));
+    assert_eq!((c.detected, c.collisions), (1, 0));
+    assert_eq!(careful.summary.obstacles[0].fate, Fate::Unmet);
+    assert!(careful.summary.time_cost_ms > fast.summary.time_cost_ms);
+    // Without a slow zone the same file gives the same run as before it existed.
+    assert_eq!(far.slow_um, 0);
+}
+
+/// A read delivers what the world was when it started, and registers only obstacles still
+/// there: a box taken away while a slow echo travelled is not counted as detected by it.
+#[test]
+fn a_box_taken_away_while_the_echo_travels_is_not_registered_by_it() {
+    // The walk starts at 40 ms, when the initial model's 40 ms read is in: the sonar reads
+    // at 40, 140, ..., 1040 ms. The box is put 0.3 m ahead at 1.04 s and taken away 30 ms
+    // later, before that read is delivered at 1.08 s.
+    let gone = |hold_s: f64| {
+        inline(&format!(
+            r#"{{"name":"gone","door_m":3.0,"sonar":{{"latency_ms":40}},
+               "interferences":[{{"kind":"box","at_s":1.04,"ahead_m":0.3,"hold_s":{hold_s}}}]}}"#
+        ))
+    };
+    let rec = run_recorded(&gone(0.03), Arch::PSmpa).unwrap();
+    let o = rec.summary.obstacles[0];
+    assert!(o.placed);
+    assert_eq!(o.fate, Fate::Unmet);
+    assert!(!o.detectable, "no delivered read could register it");
+    // The robot still hears the echo: 300 mm, delivered at 1.08 s.
+    let echo = rec
+        .world
+        .0
+        .iter()
+        .find(|(_, _, e)| *e == WorldEvent::Sample(Device::Sonar, 300));
+    assert_eq!(echo.map(|(t, _, _)| *t), Some(1_080));
+    // Held 100 ms, the same box is still there when the echo arrives: detected, 40 ms after
+    // it was put down.
+    let o = run_summary(&gone(0.1), Arch::PSmpa).unwrap().obstacles[0];
+    assert_eq!(
+        (o.fate, o.reaction_ms),
+        (Fate::Detected(Device::Sonar), Some(40))
+    );
+}
+
+/// A sample gap is measured between deliveries while the sensor stays on: switching off (SMPA's
+/// act phases) starts again. SMPA's sonar, sampling every 100 ms in its sense phases, has no
+/// gap longer than 100 ms although it is off for seconds in between.
+#[test]
+fn a_gap_spanning_a_switch_off_is_no_gap() {
+    let sc = scenario("sonar-6");
+    let s = run_summary(&sc, Arch::Smpa).unwrap().tally;
+    assert_eq!(s.sample_gap_max_ms[0], Some(100));
+    assert_eq!(s.sample_gap_max_ms[1], Some(20));
+    // Lost samples are not delivered: a lossy sonar's gaps are multiples of its period.
+    let noisy = scenario("noisy-sonar");
+    let n = run_summary(&noisy, Arch::PSmpa).unwrap().tally;
+    let gap = n.sample_gap_max_ms[0].unwrap();
+    assert!(gap > 100 && gap % 100 == 0, "{gap}");
+}
+
 /// Sonar and bumper both perceive `path_clear`: a bumper sample saying "free" must not clear a
 /// violation the sonar raised (the conjunction of the two decides).
 #[test]
@@ -211,6 +354,10 @@ fn a_bumper_saying_free_does_not_clear_what_the_sonar_saw() {
                 value: Value::Mm(mm),
                 ..
             } => sonar_blocked = mm < 500,
+            TraceEvent::Sample {
+                value: Value::NoEcho,
+                ..
+            } => sonar_blocked = false,
             TraceEvent::Sample {
                 value: Value::Level(1),
                 ..
@@ -242,6 +389,19 @@ fn the_run_stops_at_max_s() {
 #[test]
 fn trace_hashes_are_pinned() {
     let pins: &[(&str, u64, u64)] = &PINS;
+    // Every shipped scenario has its pin.
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+    let mut files: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| load(&e.unwrap().path()).unwrap().name.as_str().to_owned())
+        .collect();
+    let mut pinned: Vec<String> = pins.iter().map(|(n, _, _)| (*n).to_owned()).collect();
+    files.sort();
+    pinned.sort();
+    assert_eq!(
+        files, pinned,
+        "a scenario without a pin, or a pin without a scenario"
+    );
     let mut got = Vec::new();
     for (name, _, _) in pins {
         let sc = scenario(name);
@@ -256,20 +416,21 @@ fn trace_hashes_are_pinned() {
     assert_eq!(got.as_slice(), pins, "new hashes:\n{}", report.join("\n"));
 }
 
-const PINS: [(&str, u64, u64); 13] = [
-    ("sonar-6", 0xb0ddef01d8c25214, 0xdd540fd836957b39),
-    ("sonar-7", 0x9f676d516f8319b3, 0x90d3292f5f341c72),
-    ("sonar-8", 0xdb9f2dcb255fa40a, 0xb96b354b182e6138),
-    ("bumper-4", 0x3edb0ef43ece770c, 0x88b3e0dd273688e3),
-    ("bumper-5", 0xccfe2c2abee442a0, 0x01868c71766d1316),
-    ("bumper-6", 0x3716d6cd3161204d, 0xef386f7a17e1aca6),
-    ("quiet", 0x2b6f443f43a3d9b1, 0xad7d394011a805b6),
-    ("blind-box", 0x5a5fd63a87c35dfe, 0xc13eba0ce78a0899),
-    ("far-box", 0x61c7ffc7292b90fa, 0x7059694187fe4e51),
-    ("transient", 0xcb01099d217d47bf, 0x7236ae7e462dd25e),
-    ("noisy-sonar", 0x4b4980071df710c6, 0x0d74c84c1ad3fe0b),
-    ("locked-door", 0x6bb16381538a1d62, 0x9b55392e4f7132d3),
-    ("mixed", 0x05353d56e803afaf, 0xd66518f0df79d463),
+const PINS: [(&str, u64, u64); 14] = [
+    ("sonar-6", 0x19071704f06cab70, 0x58c343ae1c0ac49b),
+    ("sonar-7", 0xf92344e3db6661df, 0x74fd9f9e9b44144c),
+    ("sonar-8", 0xc50009a8c9f2b8b4, 0xb38bea704245c30c),
+    ("bumper-4", 0x26739505c66717f3, 0xda278d3cef0f901b),
+    ("bumper-5", 0xbd1ed69f69f6b042, 0x71379220fc89e6fb),
+    ("bumper-6", 0x055d41ffcac74394, 0xc76e142add524ab1),
+    ("quiet", 0x57af6fde6534b7b5, 0xedb60ffdcb34d4de),
+    ("blind-box", 0xeaf29fc348a02953, 0xbdc05c1b0badb5a1),
+    ("far-box", 0x9941c50bea4f5221, 0x3380b28076e35e1c),
+    ("transient", 0xb01a9d68e3772289, 0x469effaf454b4fe1),
+    ("noisy-sonar", 0x47cb02e8c833093b, 0x98f985cc12cd250a),
+    ("locked-door", 0x5a0b5cbc4d266c13, 0xe4a1810e12d46b46),
+    ("mixed", 0x73c3cdcbc8abee62, 0xc6c1477a283b476f),
+    ("slow-echo", 0xf248b88bcd39cb80, 0x934cc6b0ee7604a2),
 ];
 
 #[test]

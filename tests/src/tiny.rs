@@ -6,9 +6,9 @@ use embassy_futures::select::select;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Config, Domain, FactSet, Mission, Outcome, Plan,
-    PlanLibrary, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode, Task,
-    Value,
+    ActionId, ActionIo, Actuator, ActuatorAction, Config, Domain, FactSet, Key, Mission, Outcome,
+    Plan, PlanLibrary, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode,
+    Task, Value,
 };
 
 use crate::Recorder;
@@ -33,6 +33,9 @@ pub struct Ids {
     /// A walk that always fails.
     pub stumble: ActionId,
 }
+
+/// Where the range sensor puts its echo's time of flight, ns, beside the distance.
+pub const TIME_OF_FLIGHT: Key = Key(1);
 
 /// Range sensor period.
 pub const RANGE_PERIOD: Duration = Duration::from_millis(100);
@@ -146,7 +149,7 @@ pub struct TinyWorld {
     /// Time windows `[from, to)` in which an obstacle stands right in front of the robot.
     obstacles: Vec<(Instant, Instant)>,
     /// When false the camera never answers a sample.
-    pub camera_answers: bool,
+    pub camera_answers: core::cell::Cell<bool>,
     state: RefCell<State>,
 }
 
@@ -159,7 +162,7 @@ impl TinyWorld {
                 .iter()
                 .map(|&(a, b)| (Instant::from_millis(a), Instant::from_millis(b)))
                 .collect(),
-            camera_answers: true,
+            camera_answers: core::cell::Cell::new(true),
             state: RefCell::new(State::default()),
         }
     }
@@ -252,18 +255,20 @@ impl Sensor for TinyWorld {
         if sensor == self.ids.range {
             let blocked = self.blocked(Instant::now());
             let clear = FactSet::single(psmpa_core::FactId::new(0).unwrap());
-            Ok(Some(Reading {
-                value: Value::Mm(if blocked { 300 } else { 2550 }),
-                holds: if blocked { FactSet::EMPTY } else { clear },
-            }))
+            let mm = if blocked { 300 } else { 2550 };
+            // Light: about 6.67 ns per mm, there and back.
+            let reading = Reading::new(Value::Mm(mm), if blocked { FactSet::EMPTY } else { clear })
+                .with(TIME_OF_FLIGHT, Value::Int(mm * 20 / 3))
+                .map_err(|_| SensorFault::Device(0))?;
+            Ok(Some(reading))
         } else {
-            if !self.camera_answers {
+            if !self.camera_answers.get() {
                 core::future::pending::<()>().await;
             }
-            Ok(Some(Reading {
-                value: Value::Bool(true),
-                holds: FactSet::single(psmpa_core::FactId::new(2).unwrap()),
-            }))
+            Ok(Some(Reading::new(
+                Value::Bool(true),
+                FactSet::single(psmpa_core::FactId::new(2).unwrap()),
+            )))
         }
     }
 }

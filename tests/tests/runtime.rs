@@ -4,7 +4,7 @@ use embassy_time::{Duration, Instant};
 use psmpa_core::{
     ControlError, DataStore, Failure, Policy, Runtime, SensorSet, StoreAccess, TraceEvent, Value,
 };
-use psmpa_sim::backend::simulate;
+use psmpa_sim::backend::simulate_split;
 use psmpa_tests::Recorder;
 use psmpa_tests::tiny::{self, Ids, Note, SMPA, TinyWorld};
 
@@ -34,7 +34,7 @@ fn run_with(
         Recorder::default(),
         tiny::config(policy),
     );
-    let done = simulate(rt.run(), LIMIT).expect("simulation completes");
+    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).expect("simulation completes");
     let hash = rt.trace_hash().value();
     Run {
         result: done.output,
@@ -323,7 +323,9 @@ fn no_applicable_plan_is_a_clear_error_not_a_hang() {
         Recorder::default(),
         tiny::config(Policy::PSmpa),
     );
-    let out = simulate(rt.run(), LIMIT).unwrap().output;
+    let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
+        .unwrap()
+        .output;
     assert!(
         matches!(out, Err(ControlError::NoApplicablePlan { .. })),
         "{out:?}"
@@ -354,7 +356,9 @@ fn repeated_failure_ends_with_exhausted_not_a_loop() {
         Recorder::default(),
         tiny::config(Policy::PSmpa),
     );
-    let out = simulate(rt.run(), LIMIT).unwrap().output;
+    let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
+        .unwrap()
+        .output;
     assert!(
         matches!(out, Err(ControlError::Exhausted { .. })),
         "{out:?}"
@@ -366,7 +370,7 @@ fn repeated_failure_ends_with_exhausted_not_a_loop() {
 #[test]
 fn a_sensor_that_stops_answering_fails_the_action_after_its_timeout() {
     let ids = ids();
-    let r = run_with(Policy::PSmpa, &[], false, |w| w.camera_answers = false);
+    let r = run_with(Policy::PSmpa, &[], false, |w| w.camera_answers.set(false));
     assert!(r.result.is_err());
     let fault_at = r
         .trace
@@ -388,6 +392,85 @@ fn a_sensor_that_stops_answering_fails_the_action_after_its_timeout() {
     )));
 }
 
+/// A sensor that failed is out of service: a later state that needs it, of a library plan as
+/// much as of a generated one, fails at once without switching it on; `clear_faults` puts it
+/// back into service.
+#[test]
+fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared() {
+    let (mut mission, ids) = tiny::mission(false);
+    // Two library plans with the same body: when the first fails, the second is tried.
+    let mut library = psmpa_core::PlanLibrary::new();
+    for name in ["first", "second"] {
+        let plan = psmpa_core::Plan::new(
+            name,
+            mission.task.event,
+            psmpa_core::FactSet::EMPTY,
+            &[ids.walk, ids.open],
+        );
+        library.add(plan.unwrap()).unwrap();
+    }
+    mission.library = library;
+    let world = TinyWorld::new(ids, &[]);
+    world.camera_answers.set(false);
+    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
+        &mission,
+        &world,
+        &world,
+        Recorder::default(),
+        tiny::config(Policy::PSmpa),
+    );
+    let (broken, repaired) = simulate_split(
+        rt.sensing(),
+        async {
+            let broken = (rt.run().await, rt.faulty_sensors(), Instant::now());
+            // The camera is repaired.
+            world.camera_answers.set(true);
+            rt.clear_faults();
+            (broken, rt.run().await)
+        },
+        LIMIT,
+    )
+    .unwrap()
+    .output;
+    let (result, faulty, ended) = broken;
+    assert!(result.is_err(), "{result:?}");
+    assert_eq!(faulty, SensorSet::EMPTY.with(ids.camera));
+    let trace = rt.into_sink().0;
+    let failures: Vec<(Instant, Failure)> = trace
+        .iter()
+        .filter_map(|(t, e)| match e {
+            TraceEvent::PlanFailed { reason, .. } => Some((*t, *reason)),
+            _ => None,
+        })
+        .collect();
+    // The first plan: the camera timed out 500 ms into "open". The second plan: its "open"
+    // fails the instant it starts, before any switching on.
+    assert_eq!(
+        failures[0].1,
+        Failure::SensorFault {
+            sensor: ids.camera,
+            fault: psmpa_core::SensorFault::Timeout
+        }
+    );
+    assert_eq!(
+        failures[1],
+        (ended, Failure::SensorUnavailable { sensor: ids.camera })
+    );
+    let camera_on: Vec<Instant> = trace
+        .iter()
+        .filter(|(_, e)| *e == TraceEvent::SensorOn { sensor: ids.camera })
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(
+        camera_on.len(),
+        2,
+        "once before the fault, once after the repair"
+    );
+    assert!(camera_on[0] < failures[0].0 && camera_on[1] >= ended);
+    // After the repair the same library plan runs to the goal.
+    assert_eq!(repaired.unwrap().plans_failed, 0);
+}
+
 /// A precondition that stays false longer than `max_violation` takes the failure edge.
 #[test]
 fn a_precondition_that_stays_violated_fails_the_state() {
@@ -398,7 +481,7 @@ fn a_precondition_that_stays_violated_fails_the_state() {
     config.max_failures = 0;
     let rt: tiny::TinyRuntime<'_, 4> =
         Runtime::new(&mission, &world, &world, Recorder::default(), config);
-    let out = simulate(rt.run(), LIMIT).unwrap();
+    let out = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
     assert!(matches!(
         out.output,
         Err(ControlError::TooManyFailures {
@@ -419,7 +502,9 @@ fn a_full_sensor_store_is_an_error_not_a_silent_drop() {
     config.max_failures = 0;
     let rt: tiny::TinyRuntime<'_, 0> =
         Runtime::new(&mission, &world, &world, Recorder::default(), config);
-    let out = simulate(rt.run(), LIMIT).unwrap().output;
+    let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
+        .unwrap()
+        .output;
     // The very first sample, establishing the model, finds no room.
     assert_eq!(
         out,
@@ -479,13 +564,17 @@ fn sensor_stores_keep_the_latest_sample_with_its_time() {
         Recorder::default(),
         tiny::config(Policy::PSmpa),
     );
-    simulate(rt.run(), LIMIT).unwrap().output.unwrap();
+    simulate_split(rt.sensing(), rt.run(), LIMIT)
+        .unwrap()
+        .output
+        .unwrap();
     let store: &DataStore<_, 4> = rt.sensor_store(ids.range).unwrap();
     let last = store.get(psmpa_core::store::SAMPLE_KEY).unwrap();
     assert_eq!(last.value, Value::Mm(2550));
     // Sampled every 100 ms from 0 while walking. The walk ends at 10.0 s, the instant the next
-    // sample is due: the sensor ends with the action, so the last sample is from 9.9 s.
-    assert_eq!(last.at, Instant::from_millis(9_900));
+    // sample is due: sensing comes first at an instant, so that sample is taken before the
+    // walk, and the sensor with it, ends.
+    assert_eq!(last.at, Instant::from_millis(10_000));
     let model = rt.model();
     assert!(model.goal_holds());
     assert_eq!(model.percept(ids.range), Some(last));

@@ -116,6 +116,8 @@ struct Outcome {
     max_reaction_ms: String,
     sonar_on_ms: String,
     bumper_on_ms: String,
+    sonar_gap_ms: String,
+    bumper_gap_ms: String,
     trace_hash: String,
 }
 
@@ -162,11 +164,18 @@ fn parse_results(log: &str) -> BTreeMap<(String, String), Outcome> {
                     max_reaction_ms: get("max_reaction_ms"),
                     sonar_on_ms: get("sonar_on_ms"),
                     bumper_on_ms: get("bumper_on_ms"),
+                    sonar_gap_ms: get("sonar_gap_ms"),
+                    bumper_gap_ms: get("bumper_gap_ms"),
                     trace_hash: get("trace_hash"),
                 },
             )
         })
         .collect()
+}
+
+/// A sample gap as the firmware logs it: -1 for none.
+fn gap(ms: Option<u64>) -> String {
+    ms.map_or("-1".to_owned(), |m| m.to_string())
 }
 
 /// The host simulator's outcome for every scenario file and both architectures.
@@ -188,6 +197,8 @@ fn host_results() -> Result<BTreeMap<(String, String), Outcome>, String> {
                     max_reaction_ms: t.max_reaction_ms.map_or("-1".to_owned(), |m| m.to_string()),
                     sonar_on_ms: t.on_ms[0].to_string(),
                     bumper_on_ms: t.on_ms[1].to_string(),
+                    sonar_gap_ms: gap(t.sample_gap_max_ms[0]),
+                    bumper_gap_ms: gap(t.sample_gap_max_ms[1]),
                     trace_hash: format!("{:016x}", s.trace_hash),
                 },
             );

@@ -57,13 +57,18 @@ const BOUNDED_RECURSION: &[(&str, u64, &str)] = &[
 const ONLY_FROM: &[(&str, &str, &str)] = &[
     (
         "embassy_executor::raw::TaskStorage<",
-        "psmpa_firmware::executor::run",
-        "the executor's poll loop is the only caller of a task's poll function",
+        "psmpa_firmware::executor::poll",
+        "the executors' poll loop is the only caller of a task's poll function",
     ),
     (
         " as core::fmt::",
         "core::fmt::write",
         "the formatting functions in fmt::Arguments are called by core::fmt::write only",
+    ),
+    (
+        "psmpa_sim::run::poll_erased",
+        "psmpa_firmware::executor::trampoline",
+        "a run's sensing side is installed for the sensing executor's trampoline task only",
     ),
 ];
 

@@ -1,22 +1,25 @@
 //! `cargo xtask timing`: the response-time analysis of the firmware, from step costs measured
 //! in QEMU, and its check against every reaction the runs measure.
 //!
-//! * Costs: the firmware classifies every poll by the trace events it emitted (a sample of
-//!   sensor `i`, control work, or neither: a behaviour step) and logs the longest of each kind,
-//!   in cycles, per run; the SysTick handler's longest run too. Under `-icount` QEMU counts one
-//!   cycle per instruction, deterministically.
-//! * Model ([`psmpa_core::timing`]): each cyclic sensor is a periodic job whose cost is its
-//!   sample step, the behaviour step it wakes and one SysTick interrupt; the longest poll of
-//!   any kind blocks it once. The response time `R` and the latency bound
-//!   `max_lost · T + R` follow per sensor and per scenario.
+//! * Costs: the firmware tells its two executors' polls apart: a sensing poll counts for the
+//!   sensors whose events it emitted (sample, switch, fault); a deciding poll is control work
+//!   (planning, a plan, the FSM) or a behaviour step. It logs the longest of each kind, the
+//!   longest deciding poll, and the SysTick handler's longest run, in cycles, per run. Under
+//!   `-icount` QEMU counts one cycle per instruction, deterministically.
+//! * Model ([`psmpa_core::timing`]): each cyclic sensor is a periodic job whose processor time
+//!   is its sample step and one SysTick interrupt, whose read waits the scenario's latency,
+//!   and whose reaction is one behaviour step. Both sides share one thread, sensing first: a
+//!   sample may wait for the deciding poll in progress, at its start and, after a read that
+//!   waits, at its delivery ([`Blocking::one_executor`]). The response time `R` and the
+//!   latency bound `max_lost · G + R` follow per sensor and per scenario.
 //! * Check: every scenario's measured P-SMPA reactions are within its bound, and the set is
 //!   schedulable; otherwise the task fails, naming why.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use psmpa_core::timing::{Job, response_time, utilisation_ppm};
-use psmpa_core::{SensorId, SensorMode};
+use psmpa_core::SensorId;
+use psmpa_core::timing::{Blocking, Job, utilisation_ppm};
 use psmpa_sim::robot::{fetch_tea, latency_bounds};
 use serde::Serialize;
 
@@ -28,15 +31,17 @@ const EXCEPTION_CYCLES: u64 = 24;
 /// The worst cost of each kind of step over all runs, cycles.
 #[derive(Debug, Default, Serialize)]
 struct Costs {
-    /// A poll that sampled sensor `i` (no control work), by sensor index.
+    /// A sensing poll that worked for sensor `i`, by sensor index.
     sample: Vec<u64>,
-    /// A poll that planned, selected a plan or moved the FSM.
+    /// A deciding poll that planned, selected a plan or moved the FSM.
     control: u64,
-    /// A poll with no sample and no control: a behaviour step.
+    /// A deciding poll with no control work: a behaviour step.
     behaviour: u64,
     /// The SysTick handler, entry and exit included.
     systick: u64,
-    /// The longest poll of any kind: what a released job may have to wait for.
+    /// The longest deciding poll: what a released sample may have to wait for.
+    longest_deciding: u64,
+    /// The longest poll of either executor.
     longest_poll: u64,
     /// Runs they were measured over.
     runs: usize,
@@ -47,6 +52,7 @@ struct Task {
     task: String,
     period_ns: u64,
     cost_ns: u64,
+    read_latency_ns: u64,
     response_ns: u64,
     latency_bound_ns: u64,
 }
@@ -78,21 +84,18 @@ struct HostCost {
     instructions: u64,
 }
 
-/// The core's steps as they appear in the host binary. Store writes, plan selection and the
-/// belief update are inlined into the sample step and the control loop; the shipped scenarios
-/// never need the planner (its cost per expansion is in `psmpa_core::planner`'s docs).
+/// The core's steps as they appear in the host binary. The sensing side (reads, store writes,
+/// fusion) is inlined into the poll of the installed sensing future; plan selection into the
+/// control loop; only `locked-door` needs the planner (its cost per expansion is in
+/// `psmpa_core::planner`'s docs).
 const HOST_STEPS: &[(&str, &str)] = &[
     (
-        "sample step (one poll)",
-        "psmpa_core::exec::Runtime<M,S,A,T,_,_,_,_,_>::sample::{{closure}}",
+        "sensing side: one poll (samples)",
+        "psmpa_sim::run::poll_erased",
     ),
     (
         "precondition check",
-        "psmpa_core::exec::Runtime<M,S,A,T,_,_,_,_,_>::monitor_precondition",
-    ),
-    (
-        "sensing loop (one poll)",
-        "psmpa_core::exec::Runtime<M,S,A,T,_,_,_,_,_>::sense::{{closure}}",
+        "Runtime<M,S,A,T,_,_,_,_,_>>::check_precondition",
     ),
     (
         "behaviour step (one poll)",
@@ -195,6 +198,7 @@ fn costs(log: &str) -> Result<Costs, String> {
         }
         c.control = c.control.max(number(s, "control")?);
         c.behaviour = c.behaviour.max(number(s, "behaviour")?);
+        c.longest_deciding = c.longest_deciding.max(number(s, "deciding")?);
         c.systick = c.systick.max(number(s, "isr")? + EXCEPTION_CYCLES);
     }
     for p in &polls {
@@ -242,76 +246,61 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
     cost_rows.push(("behaviour step".to_owned(), costs.behaviour));
     cost_rows.push(("control (planning, plan, FSM)".to_owned(), costs.control));
     cost_rows.push(("SysTick handler".to_owned(), costs.systick));
-    cost_rows.push(("longest poll (blocking)".to_owned(), costs.longest_poll));
+    cost_rows.push((
+        "longest deciding poll (blocking)".to_owned(),
+        costs.longest_deciding,
+    ));
     for (name, c) in &cost_rows {
         println!("  {name:<36} {c:>8} {:>12}", show_ms(ns(*c)));
     }
 
-    let blocking_ns = ns(costs.longest_poll);
+    let blocking_ns = ns(costs.longest_deciding);
+    let blocking = Blocking::one_executor(blocking_ns);
     let mut scenarios = Vec::new();
     let mut failures = Vec::new();
     println!(
-        "\n{:<13} {:<7} {:>10} {:>11} {:>12} {:>14} {:>10}",
-        "scenario", "task", "period", "job cost", "response", "latency bound", "measured"
+        "\n{:<13} {:<7} {:>10} {:>11} {:>10} {:>12} {:>14} {:>10}",
+        "scenario", "task", "period", "job cost", "read", "response", "latency bound", "measured"
     );
     for file in firmware::scenario_files()? {
         let sc = psmpa_sim::load::load(&file).map_err(|e| e.to_string())?;
         let robot = fetch_tea(&sc).map_err(|e| format!("{}: {e:?}", sc.name))?;
         let domain = &robot.mission.domain;
-        // One job per cyclic sensor: its sample step, the behaviour step it wakes, and the
-        // SysTick interrupt that releases it.
-        let cyclic: Vec<(SensorId, &str, Job)> = (0..domain.sensors().len())
-            .filter_map(SensorId::new)
-            .filter_map(|id| {
-                let s = domain.sensor(id)?;
-                let SensorMode::Cyclic { period } = s.mode else {
-                    return None;
-                };
-                let step = costs.sample.get(id.index()).copied().unwrap_or(0);
-                Some((
-                    id,
-                    s.name,
-                    Job {
-                        period_ns: period.as_micros() * 1_000,
-                        cost_ns: ns(step + costs.behaviour + costs.systick),
-                    },
-                ))
-            })
-            .collect();
-        let jobs: Vec<Job> = cyclic.iter().map(|(_, _, j)| *j).collect();
-        let utilisation = utilisation_ppm(&jobs).map_err(|e| e.to_string())?;
-        let mut responses = BTreeMap::new();
-        for (i, (id, name, _)) in cyclic.iter().enumerate() {
-            match response_time(&jobs, i, blocking_ns) {
-                Ok(r) => {
-                    responses.insert(*id, r);
-                }
-                Err(e) => failures.push(format!("{} {name}: {e}", sc.name)),
+        // One job per cyclic sensor: its sample step and the SysTick interrupt that releases
+        // it; the behaviour step it wakes is the reaction.
+        let cost = |id: SensorId| {
+            let step = costs.sample.get(id.index()).copied().unwrap_or(0);
+            ns(step + costs.systick)
+        };
+        let bounds = match latency_bounds(&robot, &sc, blocking, ns(costs.behaviour), cost) {
+            Ok(bounds) => bounds,
+            Err(e) => {
+                failures.push(format!("{}: {e}", sc.name));
+                continue;
             }
-        }
-        if responses.len() != cyclic.len() {
-            continue;
-        }
-        let bounds = latency_bounds(&robot, &sc, |id| responses.get(&id).copied().unwrap_or(0));
+        };
+        let jobs: Vec<Job> = bounds.iter().map(|b| b.job).collect();
+        let utilisation = utilisation_ppm(&jobs).map_err(|e| e.to_string())?;
         let measured = reactions
             .get(&(sc.name.as_str(), "psmpa"))
             .copied()
             .ok_or_else(|| format!("{}: no P-SMPA result in the firmware log", sc.name))?;
         let measured = u64::try_from(measured).ok();
         let mut tasks = Vec::new();
-        for (b, (id, name, job)) in bounds.iter().zip(&cyclic) {
-            let response_ns = responses.get(id).copied().unwrap_or(0);
+        for b in &bounds {
+            let name = domain.sensor(b.sensor).map_or("?", |s| s.name);
             println!(
-                "{:<13} {:<7} {:>10} {:>11} {:>12} {:>14} {:>10}",
+                "{:<13} {:<7} {:>10} {:>11} {:>10} {:>12} {:>14} {:>10}",
                 if tasks.is_empty() {
                     sc.name.as_str()
                 } else {
                     ""
                 },
                 name,
-                show_ms(job.period_ns),
-                show_ms(job.cost_ns),
-                show_ms(response_ns),
+                show_ms(b.job.period_ns),
+                show_ms(b.job.cost_ns),
+                show_ms(b.job.latency_ns),
+                show_ms(b.response.response_ns),
                 show_ms(b.bound_ns),
                 match (tasks.is_empty(), measured) {
                     (true, Some(m)) => format!("{m} ms"),
@@ -320,10 +309,11 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
                 }
             );
             tasks.push(Task {
-                task: (*name).to_owned(),
-                period_ns: job.period_ns,
-                cost_ns: job.cost_ns,
-                response_ns,
+                task: name.to_owned(),
+                period_ns: b.job.period_ns,
+                cost_ns: b.job.cost_ns,
+                read_latency_ns: b.job.latency_ns,
+                response_ns: b.response.response_ns,
                 latency_bound_ns: b.bound_ns,
             });
         }

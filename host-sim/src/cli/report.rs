@@ -18,6 +18,16 @@ pub struct SensorOn {
     pub bumper: f64,
 }
 
+/// The largest interval between two delivered samples of each sensor while it stayed on, ms;
+/// `null` for a sensor with fewer than two such samples.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SampleGaps {
+    /// Sonar.
+    pub sonar: Option<u64>,
+    /// Foot bumper.
+    pub bumper: Option<u64>,
+}
+
 /// The JSON object `psmpa-sim run --json` prints (`SIMULATION.md`), field for field.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunJson {
@@ -41,6 +51,8 @@ pub struct RunJson {
     pub max_reaction_ms: Option<u64>,
     /// Sensor on-time.
     pub sensor_on_s: SensorOn,
+    /// The largest gap between delivered samples, per sensor.
+    pub sample_gap_max_ms: SampleGaps,
     /// Trace hash, 16 lower-case hex digits.
     pub trace_hash: String,
 }
@@ -75,6 +87,10 @@ impl RunJson {
             sensor_on_s: SensorOn {
                 sonar: seconds(t.on_ms[0]),
                 bumper: seconds(t.on_ms[1]),
+            },
+            sample_gap_max_ms: SampleGaps {
+                sonar: t.sample_gap_max_ms[0],
+                bumper: t.sample_gap_max_ms[1],
             },
             trace_hash: format!("{:016x}", summary.trace_hash),
         }
@@ -139,6 +155,13 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
         j.sensor_on_s.sonar,
         j.sensor_on_s.bumper,
         seconds(summary.tally.on_ms[2])
+    );
+    let gap = |g: Option<u64>| g.map_or("-".to_owned(), |ms| format!("{ms} ms"));
+    let _ = writeln!(
+        out,
+        "  longest gap      sonar {}, bumper {} (between delivered samples)",
+        gap(j.sample_gap_max_ms.sonar),
+        gap(j.sample_gap_max_ms.bumper)
     );
     let _ = writeln!(out, "  outcome          {}", ending(&summary.ending));
     let _ = writeln!(out, "  trace hash       {}", j.trace_hash);

@@ -58,24 +58,36 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
     }
     let mut name = heapless::String::new();
     let _ = core::fmt::write(&mut name, format_args!("sweep-{seed}-{index}"));
+    let avoid_ms = uniform(r, 1_000, 3_000);
+    let sonar_period_ms = [50, 100, 200][uniform(r, 0, 2) as usize];
+    let bumper_period_ms = [10, 20, 50][uniform(r, 0, 2) as usize];
+    let sense_ms = uniform(r, 5, 20) * 100;
+    let act_ms = uniform(r, 10, 40) * 100;
+    // Drawn last, so every other draw is what it was before read latencies existed: an echo
+    // of up to 40 ms, a bumper debounce of up to 5 ms (within the mission's timeouts).
+    let sonar_latency_ms = uniform(r, 0, 40);
+    let bumper_latency_ms = uniform(r, 0, 5);
     Scenario {
         name,
         seed: seed ^ index.rotate_left(17),
         door_um,
         max_ms: 600_000,
         speed_um_per_ms,
-        avoid_ms: uniform(r, 1_000, 3_000),
+        avoid_ms,
+        slow_um: 0,
         sonar: Sonar {
-            period_ms: [50, 100, 200][uniform(r, 0, 2) as usize],
+            period_ms: sonar_period_ms,
             min_um: 250_000,
             max_um: 2_550_000,
             threshold_um: 500_000,
             noise_um,
             dropout,
+            latency_ms: sonar_latency_ms,
         },
-        bumper_period_ms: [10, 20, 50][uniform(r, 0, 2) as usize],
-        sense_ms: uniform(r, 5, 20) * 100,
-        act_ms: uniform(r, 10, 40) * 100,
+        bumper_period_ms,
+        bumper_latency_ms,
+        sense_ms,
+        act_ms,
         door_locked: false,
         back_door_um: 3_000_000,
         fault: None,

@@ -1,0 +1,452 @@
+//! The sensing side of the runtime (the paper's sensory controller): every sensor samples on
+//! its own, above the deciding side.
+//!
+//! [`Runtime::sensing`] runs one *sampler* per sensor of the domain. A sampler waits until the
+//! deciding side commands its sensor (a state that needs it started: least commitment), then
+//! switches it on and samples it:
+//!
+//! * cyclic: at `start`, `start + T`, `start + 2T`, ... The next instant follows from the
+//!   previous *due* instant, not from when the sample finished, so the phase is kept; an
+//!   instant that passed while a slow read was still running is skipped, so one sensor never
+//!   samples twice at one instant and never queues up a backlog;
+//! * one-shot: once, at the start of the state (under SMPA, of its first sense phase);
+//! * on demand: whenever the running behaviour asks ([`ActionIo::request`](crate::exec::ActionIo::request)).
+//!
+//! A sample's read is bounded by the sensor's timeout and awaits only that sensor's I/O:
+//! another sensor's read time, timeout, loss or fault never moves this sensor's instants, and
+//! nothing on the deciding side waits for a read. Its result is *delivered* in one step:
+//!
+//! 1. the value and the sensor's own `(k', v')` pairs go into the sensor's store, stamped with
+//!    the instant the read started (Algorithm 3 line 6);
+//! 2. the perception facts are fused into the beliefs: a fact of `per(s)` holds only if no
+//!    running sensor that perceives it and has sampled says otherwise;
+//! 3. the running action's precondition is checked, and a change traced;
+//! 4. the deciding side is woken.
+//!
+//! Cost of a delivery: the store writes (O(1) per key for keys below `K`, O(K) worst case),
+//! the fusion over the running sensors (O(NS)), the precondition check (O(NS)), two or three
+//! trace events (O(1) each). Every wake of the sensing future polls each of the NS samplers
+//! once (O(NS)).
+
+use core::convert::Infallible;
+use core::future::{pending, poll_fn};
+use core::task::Poll;
+
+use embassy_futures::join::join_array;
+use embassy_futures::select::{Either, select};
+use embassy_sync::blocking_mutex::raw::RawMutex;
+use embassy_time::{Instant, TimeoutError, with_timeout};
+
+use crate::action::{SensorAction, SensorId, SensorMode, SensorSet};
+use crate::exec::{Failure, Mode, Runtime, Violation, sleep_until};
+use crate::facts::FactSet;
+use crate::platform::{Actuator, Reading, Sensor, SensorFault};
+use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
+use crate::trace::{TraceEvent, TraceSink};
+
+/// The instant after `due` at which a cyclic sensor of period `period` (in ticks, at least 1)
+/// is next due, once its sample has finished at `now`: `due + k·period` for the least `k ≥ 1`
+/// that is not before `now`. A sample that took longer than a period skips the instants it
+/// overran. O(1).
+pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
+    let period = period.max(1);
+    let late = now.as_ticks().saturating_sub(due.as_ticks());
+    let periods = late.div_ceil(period).max(1);
+    Instant::from_ticks(
+        due.as_ticks()
+            .saturating_add(periods.saturating_mul(period)),
+    )
+}
+
+impl<
+    M: RawMutex,
+    S: Sensor,
+    A: Actuator,
+    T: TraceSink,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+> Runtime<'_, '_, M, S, A, T, NS, NA, NP, L, K>
+{
+    /// The sensing side: one sampler per sensor, all concurrent. Never ends; drop it to stop
+    /// sensing. Place it on an executor of higher priority than the deciding side, or run it
+    /// beside the control loop on one executor (`select(rt.sensing(), rt.run())`, which polls
+    /// sensing first).
+    pub async fn sensing(&self) -> Infallible {
+        let samplers: [_; NS] = core::array::from_fn(|index| self.sampler(index));
+        join_array(samplers).await;
+        // Samplers never end.
+        pending().await
+    }
+
+    /// The sampler of sensor `index`: serves every command that includes it, forever. One flat
+    /// loop, so that little of its state lives across awaits (its future is in the sensing
+    /// side's `NS` times).
+    async fn sampler(&self, index: usize) {
+        let Some((sensor, spec)) =
+            SensorId::new(index).and_then(|id| Some((id, self.mission.domain.sensor(id)?)))
+        else {
+            // A capacity the domain does not use.
+            return pending().await;
+        };
+        let mut served = None;
+        loop {
+            // A command that includes this sensor, and that it has not served yet.
+            let (epoch, mode, start) = poll_fn(|cx| {
+                let c = self.shared.lock(|s| s.command.get());
+                if c.sensors.contains(sensor) && served != Some(c.epoch) {
+                    return Poll::Ready((c.epoch, c.mode, c.start));
+                }
+                self.register_sensing(cx);
+                Poll::Pending
+            })
+            .await;
+            served = Some(epoch);
+            self.shared
+                .lock(|s| s.active.set(s.active.get().with(sensor)));
+            let fault = match with_timeout(spec.timeout, self.sensors.switch_on(sensor)).await {
+                Ok(Ok(())) => None,
+                Ok(Err(fault)) => Some(fault),
+                Err(_) => Some(SensorFault::Timeout),
+            };
+            if let Some(fault) = fault {
+                self.sensor_failed(sensor, fault, epoch);
+                self.shared
+                    .lock(|s| s.active.set(s.active.get().without(sensor)));
+                self.notify();
+                continue;
+            }
+            self.trace(TraceEvent::SensorOn { sensor });
+            self.shared.lock(|s| {
+                s.running.set(s.running.get().with(sensor));
+                s.fresh.set(s.fresh.get().without(sensor));
+            });
+            let mut due = match (spec.mode, mode) {
+                (SensorMode::Cyclic { .. }, _) => Some(start),
+                (SensorMode::OneShot, Mode::Phase { first: false }) => None,
+                (SensorMode::OneShot, _) => Some(start),
+                (SensorMode::OnDemand, _) => None,
+            };
+            if due.is_none() {
+                self.mark_ready(sensor, epoch);
+            }
+            // Sample until the command ends or the sensor fails. The end of the command comes
+            // first at every await: no sample starts, or is delivered, once the state is over.
+            loop {
+                let wait = async {
+                    match spec.mode {
+                        SensorMode::OnDemand => self.requested(sensor).await,
+                        _ => sleep_until(due).await,
+                    }
+                };
+                if let Either::First(()) = select(self.ended(epoch), wait).await {
+                    break;
+                }
+                let started = Instant::now();
+                if self.read_at(sensor, started) {
+                    // This instant's read was taken already (by the state or sense phase that
+                    // just ended, or the initial model): a sensor never reads twice at one
+                    // instant.
+                    self.shared.lock(|s| {
+                        let delivered = s
+                            .percepts
+                            .get(sensor.index())
+                            .and_then(|p| p.get())
+                            .is_some_and(|e| e.at == started);
+                        if delivered {
+                            s.fresh.set(s.fresh.get().with(sensor));
+                        }
+                    });
+                } else {
+                    self.shared.lock(|s| {
+                        if let Some(r) = s.last_read.get(sensor.index()) {
+                            r.set(Some(started));
+                        }
+                    });
+                    let read = with_timeout(spec.timeout, self.sensors.sample(sensor));
+                    let Either::Second(read) = select(self.ended(epoch), read).await else {
+                        break;
+                    };
+                    if self.take(sensor, spec, read, started, epoch).is_err() {
+                        break;
+                    }
+                }
+                self.mark_ready(sensor, epoch);
+                due = match (spec.mode, mode, due) {
+                    (SensorMode::Cyclic { .. }, Mode::Once, _) => None,
+                    (SensorMode::Cyclic { period }, _, Some(due)) => {
+                        Some(next_due(due, period.as_ticks(), Instant::now()))
+                    }
+                    _ => None,
+                };
+            }
+            // A sensor that does not answer is traced and counted off: it is not used again
+            // until it is switched on.
+            if with_timeout(spec.timeout, self.sensors.switch_off(sensor))
+                .await
+                .is_err()
+            {
+                self.trace(TraceEvent::SensorFailed {
+                    sensor,
+                    fault: SensorFault::Timeout,
+                });
+            }
+            self.trace(TraceEvent::SensorOff { sensor });
+            self.shared.lock(|s| {
+                s.running.set(s.running.get().without(sensor));
+                s.fresh.set(s.fresh.get().without(sensor));
+                s.active.set(s.active.get().without(sensor));
+            });
+            self.notify();
+        }
+    }
+
+    /// Completes when the deciding side's command is no longer the one of `epoch`.
+    async fn ended(&self, epoch: u32) {
+        poll_fn(|cx| {
+            if self.shared.lock(|s| s.command.get().epoch) != epoch {
+                return Poll::Ready(());
+            }
+            self.register_sensing(cx);
+            Poll::Pending
+        })
+        .await;
+    }
+
+    /// Whether a read of `sensor` started at `at`.
+    fn read_at(&self, sensor: SensorId, at: Instant) -> bool {
+        self.shared.lock(|s| {
+            s.last_read
+                .get(sensor.index())
+                .is_some_and(|r| r.get() == Some(at))
+        })
+    }
+
+    /// Waits until the behaviour asks for a sample of `sensor`, and takes the request.
+    async fn requested(&self, sensor: SensorId) {
+        poll_fn(|cx| {
+            let asked = self.shared.lock(|s| {
+                let requests = s.requests.get();
+                s.requests.set(requests.without(sensor));
+                requests.contains(sensor)
+            });
+            if asked {
+                return Poll::Ready(());
+            }
+            self.register_sensing(cx);
+            Poll::Pending
+        })
+        .await;
+    }
+
+    fn mark_ready(&self, sensor: SensorId, epoch: u32) {
+        let marked = self.shared.lock(|s| {
+            let current = s.command.get().epoch == epoch && !s.ready.get().contains(sensor);
+            if current {
+                s.ready.set(s.ready.get().with(sensor));
+            }
+            current
+        });
+        if marked {
+            self.notify();
+        }
+    }
+
+    /// Takes the outcome of one read of `sensor` that started at `started`: delivers a reading,
+    /// counts a lost sample, or reports a fault. `Err` when the sensor failed (reported).
+    fn take(
+        &self,
+        sensor: SensorId,
+        spec: &SensorAction<'_>,
+        read: Result<Result<Option<Reading>, SensorFault>, TimeoutError>,
+        started: Instant,
+        epoch: u32,
+    ) -> Result<(), ()> {
+        let fault = match read {
+            Ok(Ok(Some(reading))) => {
+                return self.deliver(sensor, spec, &reading, started).map_err(|f| {
+                    self.report(f, epoch);
+                });
+            }
+            Ok(Ok(None)) => {
+                self.trace(TraceEvent::SampleLost { sensor });
+                let lost = self.shared.lock(|s| {
+                    s.lost.get(sensor.index()).map_or(u8::MAX, |n| {
+                        n.set(n.get().saturating_add(1));
+                        n.get()
+                    })
+                });
+                if lost < self.config.max_lost {
+                    return Ok(());
+                }
+                SensorFault::Silent
+            }
+            Ok(Err(fault)) => fault,
+            Err(TimeoutError) => SensorFault::Timeout,
+        };
+        self.sensor_failed(sensor, fault, epoch);
+        Err(())
+    }
+
+    /// Delivers a reading taken at `at`: store (Algorithm 3 line 6), fuse, check, wake.
+    fn deliver(
+        &self,
+        sensor: SensorId,
+        spec: &SensorAction<'_>,
+        reading: &Reading,
+        at: Instant,
+    ) -> Result<(), Failure> {
+        let store = self
+            .sensor_stores
+            .get(sensor.index())
+            .ok_or(Failure::SensorUnavailable { sensor })?;
+        let full = |e: crate::store::StoreFull| Failure::StoreFull { key: e.key };
+        store.put(SAMPLE_KEY, reading.value, at).map_err(full)?;
+        for (key, value) in reading.pairs() {
+            store.put(key, value, at).map_err(full)?;
+        }
+        let holds = reading.holds.intersection(spec.per);
+        let domain = &self.mission.domain;
+        self.shared.lock(|s| {
+            if let Some(n) = s.lost.get(sensor.index()) {
+                n.set(0);
+            }
+            if let Some(h) = s.holds.get(sensor.index()) {
+                h.set(holds);
+            }
+            let fresh = s.fresh.get().with(sensor);
+            s.fresh.set(fresh);
+            // Sensor fusion by conjunction: a fact of per(s) holds only if no running sensor that
+            // perceives it and has sampled says otherwise (the sonar sees a box while the bumper
+            // feels nothing: the path is not clear).
+            let sampled = SensorSet::from_bits(s.running.get().bits() & fresh.bits()).with(sensor);
+            let decided = sampled.iter().fold(spec.per, |acc, t| {
+                let per_t = domain.sensor(t).map_or(FactSet::EMPTY, |t| t.per);
+                let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, |h| h.get());
+                acc.difference(per_t.difference(holds_t))
+            });
+            s.beliefs
+                .set(s.beliefs.get().difference(spec.per).union(decided));
+            s.sensed.set(s.sensed.get().union(spec.per));
+            if let Some(p) = s.percepts.get(sensor.index()) {
+                p.set(Some(Entry {
+                    value: reading.value,
+                    at,
+                }));
+            }
+        });
+        self.trace(TraceEvent::Sample {
+            sensor,
+            value: reading.value,
+            holds,
+        });
+        self.check_precondition();
+        self.notify();
+        Ok(())
+    }
+
+    /// After a delivery: compares the watched action's `pre(a)` with the beliefs and traces a
+    /// change. The deciding side fails the state once a violation has lasted
+    /// [`Config::max_violation`](crate::exec::Config::max_violation).
+    pub(crate) fn check_precondition(&self) {
+        let (watch, beliefs, before) = self
+            .shared
+            .lock(|s| (s.command.get().watch, s.beliefs.get(), s.violation.get()));
+        let Some((action, pre)) = watch else {
+            return;
+        };
+        let missing = pre.difference(beliefs);
+        let now = Instant::now();
+        let after = match (missing.is_empty(), before) {
+            (true, None) => return,
+            (true, Some(_)) => None,
+            (false, None) => {
+                let seen = self.evidence(missing).unwrap_or(now);
+                Some(Violation {
+                    missing,
+                    since: seen,
+                    last_seen: seen,
+                })
+            }
+            (false, Some(v)) => Some(Violation {
+                missing,
+                last_seen: self.evidence(missing).unwrap_or(v.last_seen),
+                ..v
+            }),
+        };
+        self.shared.lock(|s| s.violation.set(after));
+        match (after, before) {
+            (None, _) => self.trace(TraceEvent::PreconditionRestored { action }),
+            (Some(a), b) if b.is_none_or(|b| b.missing != a.missing) => {
+                self.trace(TraceEvent::PreconditionViolated { action, missing });
+            }
+            _ => {}
+        }
+    }
+
+    /// When the latest sample was taken that says one of `missing` does not hold: the newest
+    /// evidence of a violation. Samples of other sensors that only repeat the fused verdict are
+    /// not evidence.
+    fn evidence(&self, missing: FactSet) -> Option<Instant> {
+        let domain = &self.mission.domain;
+        self.shared.lock(|s| {
+            let sampled = SensorSet::from_bits(s.running.get().bits() & s.fresh.get().bits());
+            sampled
+                .iter()
+                .filter(|t| {
+                    let per_t = domain.sensor(*t).map_or(FactSet::EMPTY, |t| t.per);
+                    let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, |h| h.get());
+                    per_t.difference(holds_t).intersects(missing)
+                })
+                .filter_map(|t| s.percepts.get(t.index()).and_then(|p| p.get()))
+                .map(|e| e.at)
+                .max()
+        })
+    }
+
+    /// A sensor failed: it is out of service until [`clear_faults`](Self::clear_faults), and
+    /// the deciding side is told.
+    fn sensor_failed(&self, sensor: SensorId, fault: SensorFault, epoch: u32) {
+        self.shared
+            .lock(|s| s.faulty.set(s.faulty.get().with(sensor)));
+        self.trace(TraceEvent::SensorFailed { sensor, fault });
+        self.report(Failure::SensorFault { sensor, fault }, epoch);
+    }
+
+    /// Hands `failure` to the deciding side, unless an earlier one of the same command is
+    /// pending or the command is over.
+    fn report(&self, failure: Failure, epoch: u32) {
+        self.shared.lock(|s| {
+            if s.command.get().epoch == epoch && s.failure.get().is_none() {
+                s.failure.set(Some((epoch, failure)));
+            }
+        });
+        self.notify();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(t: u64) -> Instant {
+        Instant::from_ticks(t)
+    }
+
+    #[test]
+    fn the_next_instant_keeps_the_phase_and_skips_what_a_slow_read_overran() {
+        // A read that takes no time: the next period.
+        assert_eq!(next_due(at(100), 20, at(100)), at(120));
+        // A read that ends within the period: still the next period.
+        assert_eq!(next_due(at(100), 20, at(115)), at(120));
+        // A read that ends exactly on the next instant: that instant (a new sample, not the
+        // same one twice).
+        assert_eq!(next_due(at(100), 20, at(120)), at(120));
+        // A 40 ms read on a 15 ms period: 115 and 130 passed during the read; 145 is next.
+        assert_eq!(next_due(at(100), 15, at(140)), at(145));
+        // A period of 0 ticks counts as 1: never twice at one instant.
+        assert_eq!(next_due(at(7), 0, at(7)), at(8));
+    }
+}

@@ -1,0 +1,320 @@
+//! The sensing side: every sensor samples on its own schedule, above the deciding side.
+//!
+//! A two-sensor robot: a time-of-flight ranger (`tof`, cyclic, a read takes `latency`) and a
+//! cliff sensor (`cliff`, cyclic every 20 ms, instant). Both perceive `clear`, which "drive"
+//! needs, so both run beside it. The platform records when every read started and ended.
+
+use core::cell::{Cell, RefCell};
+
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_time::{Duration, Instant, Timer};
+use psmpa_core::{
+    ActionId, ActionIo, Actuator, ActuatorAction, Config, ControlError, Domain, Entry, FactSet,
+    Failure, Key, Mission, Outcome, Plan, PlanLibrary, Reading, Runtime, Sensor, SensorAction,
+    SensorFault, SensorId, SensorMode, Task, TraceEvent, Value,
+};
+use psmpa_sim::backend::{simulate, simulate_split};
+use psmpa_tests::Recorder;
+
+const CLIFF_PERIOD: Duration = Duration::from_millis(20);
+const TOF_PERIOD: Duration = Duration::from_millis(100);
+/// Where the ranger puts its signal strength beside the distance.
+const STRENGTH: Key = Key(1);
+const LIMIT: Duration = Duration::from_secs(60);
+
+type Pair = Mission<'static, 2, 1, 1, 1>;
+
+struct Ids {
+    tof: SensorId,
+    cliff: SensorId,
+}
+
+fn mission() -> (Pair, Ids) {
+    let mut d: Domain<'static, 2, 1> = Domain::new();
+    let clear = d.add_fact("clear").unwrap();
+    let arrived = d.add_fact("arrived").unwrap();
+    let go = d.add_event("go").unwrap();
+    let cyclic = |period| SensorMode::Cyclic { period };
+    let tof = d
+        .add_sensor(
+            SensorAction::new("tof", FactSet::single(clear), cyclic(TOF_PERIOD))
+                .with_timeout(Duration::from_millis(500)),
+        )
+        .unwrap();
+    let cliff = d
+        .add_sensor(SensorAction::new(
+            "cliff",
+            FactSet::single(clear),
+            cyclic(CLIFF_PERIOD),
+        ))
+        .unwrap();
+    let drive = d
+        .add_action(ActuatorAction::new(
+            "drive",
+            FactSet::single(clear),
+            FactSet::single(arrived),
+            FactSet::EMPTY,
+        ))
+        .unwrap();
+    let mut library: PlanLibrary<'static, 1, 1> = PlanLibrary::new();
+    library
+        .add(Plan::new("drive", go, FactSet::EMPTY, &[drive]).unwrap())
+        .unwrap();
+    let task = Task {
+        event: go,
+        init: FactSet::EMPTY,
+        goal: FactSet::single(arrived),
+    };
+    let mission = Mission {
+        name: "pair",
+        domain: d,
+        library,
+        task,
+    };
+    (mission, Ids { tof, cliff })
+}
+
+/// One read: which sensor, when it started, when it ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Read {
+    sensor: SensorId,
+    start: Instant,
+    end: Instant,
+}
+
+/// What the drive saw when it woke.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Seen {
+    at: Instant,
+    cliff: Option<Entry>,
+    tof: Option<Entry>,
+    strength: Option<Entry>,
+}
+
+struct Robot {
+    ids: Ids,
+    tof_latency: Duration,
+    /// The drive wakes this long after it starts, looks, and ends.
+    drive: Duration,
+    reads: RefCell<Vec<Read>>,
+    seen: Cell<Option<Seen>>,
+}
+
+impl Robot {
+    fn new(tof_latency_ms: u64, drive_ms: u64) -> Self {
+        Self {
+            ids: mission().1,
+            tof_latency: Duration::from_millis(tof_latency_ms),
+            drive: Duration::from_millis(drive_ms),
+            reads: RefCell::new(Vec::new()),
+            seen: Cell::new(None),
+        }
+    }
+
+    /// When the reads of `sensor` from `from` on started, ms.
+    fn starts(&self, sensor: SensorId, from: Instant) -> Vec<u64> {
+        self.reads
+            .borrow()
+            .iter()
+            .filter(|r| r.sensor == sensor && r.start >= from)
+            .map(|r| r.start.as_millis())
+            .collect()
+    }
+}
+
+impl Sensor for Robot {
+    async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+        Ok(())
+    }
+
+    async fn switch_off(&self, _: SensorId) {}
+
+    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
+        let start = Instant::now();
+        let clear = FactSet::ALL;
+        let reading = if sensor == self.ids.tof {
+            Timer::after(self.tof_latency).await;
+            Reading::new(Value::Mm(1200), clear)
+                .with(STRENGTH, Value::Int(-42))
+                .map_err(|_| SensorFault::Device(0))?
+        } else {
+            Reading::new(Value::Bool(false), clear)
+        };
+        self.reads.borrow_mut().push(Read {
+            sensor,
+            start,
+            end: Instant::now(),
+        });
+        Ok(Some(reading))
+    }
+}
+
+impl Actuator for Robot {
+    async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
+        Timer::after(self.drive).await;
+        self.seen.set(Some(Seen {
+            at: Instant::now(),
+            cliff: io.sample(self.ids.cliff),
+            tof: io.sample(self.ids.tof),
+            strength: io.get(self.ids.tof, STRENGTH),
+        }));
+        Outcome::Success
+    }
+}
+
+type PairRuntime<'r> = Runtime<'r, 'static, NoopRawMutex, Robot, Robot, Recorder, 2, 1, 1, 1, 4>;
+
+/// Runs the mission; returns the trace and when the drive state started.
+fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
+    let (mission, _) = mission();
+    let rt: PairRuntime<'_> = Runtime::new(
+        &mission,
+        robot,
+        robot,
+        Recorder::default(),
+        Config::default(),
+    );
+    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
+    done.output.unwrap();
+    let trace = rt.into_sink().0;
+    let start = trace
+        .iter()
+        .find(|(_, e)| matches!(e, TraceEvent::StateEntered { .. }))
+        .map(|(t, _)| *t)
+        .unwrap();
+    (trace, start)
+}
+
+/// The instants `from, from + step, ...` up to `to`, ms.
+fn grid(from: Instant, step: u64, to: Instant) -> Vec<u64> {
+    (from.as_millis()..=to.as_millis())
+        .step_by(step as usize)
+        .collect()
+}
+
+#[test]
+fn a_read_longer_than_another_sensors_period_leaves_its_instants_unchanged() {
+    let ids = mission().1;
+    // The drive lasts 1 s; the ranger's read takes nothing, 40 ms (twice the cliff sensor's
+    // period) or 150 ms (longer than its own period).
+    let runs: Vec<(Robot, Instant)> = [0, 40, 150]
+        .into_iter()
+        .map(|latency| {
+            let robot = Robot::new(latency, 1_000);
+            let (_, start) = run(&robot);
+            (robot, start)
+        })
+        .collect();
+    for (robot, start) in &runs {
+        // The drive starts once every sensor has delivered its first sample.
+        let end = *start + robot.tof_latency + Duration::from_millis(1_000);
+        // The cliff sensor: every 20 ms from the start of the state, whatever the ranger does.
+        assert_eq!(
+            robot.starts(ids.cliff, *start),
+            grid(*start, 20, end),
+            "tof latency {}",
+            robot.tof_latency.as_millis()
+        );
+        // The ranger keeps its own phase: every 100 ms, or every 200 ms when a read takes
+        // 150 ms (the instants it overran are skipped, none is taken twice).
+        let step = if robot.tof_latency > TOF_PERIOD {
+            200
+        } else {
+            100
+        };
+        let tof = robot.starts(ids.tof, *start);
+        let last_start = end - robot.tof_latency;
+        assert_eq!(tof, grid(*start, step, last_start));
+    }
+    // Reads overlap: while a slow ranger read was in flight, the cliff sensor read too.
+    let (slow, start) = &runs[1];
+    let reads = slow.reads.borrow();
+    let tof = reads
+        .iter()
+        .find(|r| r.sensor == ids.tof && r.start > *start)
+        .unwrap();
+    let during = reads
+        .iter()
+        .filter(|r| r.sensor == ids.cliff && r.start > tof.start && r.start < tof.end)
+        .count();
+    assert_eq!(during, 1, "one cliff read 20 ms into the 40 ms one");
+}
+
+#[test]
+fn a_sample_due_at_the_instant_a_behaviour_wakes_is_taken_first() {
+    // The drive wakes 200 ms after it starts: a cliff sample (every 20 ms) and a ranger sample
+    // (every 100 ms) are due at that very instant.
+    let robot = Robot::new(0, 200);
+    let (trace, start) = run(&robot);
+    let seen = robot.seen.get().unwrap();
+    let woke = start + Duration::from_millis(200);
+    assert_eq!(seen.at, woke);
+    assert_eq!(
+        seen.cliff.unwrap().at,
+        woke,
+        "the cliff sample of that instant"
+    );
+    assert_eq!(
+        seen.tof.unwrap().at,
+        woke,
+        "the ranger sample of that instant"
+    );
+    // In the trace, the samples of that instant come before the state ends.
+    let at_woke: Vec<&TraceEvent> = trace
+        .iter()
+        .filter(|(t, _)| *t == woke)
+        .map(|(_, e)| e)
+        .collect();
+    let left = at_woke
+        .iter()
+        .position(|e| matches!(e, TraceEvent::StateLeft { .. }))
+        .unwrap();
+    assert_eq!(
+        at_woke[..left]
+            .iter()
+            .filter(|e| matches!(e, TraceEvent::Sample { .. }))
+            .count(),
+        2
+    );
+}
+
+#[test]
+fn a_behaviour_reads_every_pair_a_sensor_put_by_sensor() {
+    let robot = Robot::new(40, 200);
+    let (_, start) = run(&robot);
+    let seen = robot.seen.get().unwrap();
+    let tof = seen.tof.unwrap();
+    assert_eq!(tof.value, Value::Mm(1200));
+    assert_eq!(seen.strength.unwrap().value, Value::Int(-42));
+    // The drive started when the first 40 ms read was in and woke 200 ms later, as the read
+    // that started 200 ms after the first was delivered: both pairs of that sample carry the
+    // instant its read started.
+    assert_eq!(seen.at, start + Duration::from_millis(240));
+    assert_eq!(tof.at, start + Duration::from_millis(200));
+    assert_eq!(seen.strength.unwrap().at, tof.at);
+    // The cliff sensor's store has no such key.
+    assert_eq!(seen.cliff.unwrap().value, Value::Bool(false));
+}
+
+#[test]
+fn a_control_loop_without_its_sensing_side_fails_clearly_instead_of_hanging() {
+    let robot = Robot::new(0, 200);
+    let (mission, _) = mission();
+    let rt: PairRuntime<'_> = Runtime::new(
+        &mission,
+        &robot,
+        &robot,
+        Recorder::default(),
+        Config::default(),
+    );
+    // Nobody runs `rt.sensing()`.
+    let done = simulate(rt.run(), LIMIT).unwrap();
+    assert_eq!(
+        done.output,
+        Err(ControlError::InitialModel {
+            failure: Failure::SensingStalled
+        })
+    );
+    // Within the sensors' own bounds: switching on and one sample, 500 ms each, and a tick.
+    assert_eq!(done.elapsed, Duration::from_millis(1_001));
+}
