@@ -318,3 +318,37 @@ fn a_control_loop_without_its_sensing_side_fails_clearly_instead_of_hanging() {
     // Within the sensors' own bounds: switching on and one sample, 500 ms each, and a tick.
     assert_eq!(done.elapsed, Duration::from_millis(1_001));
 }
+
+/// With a critical-section mutex and a platform that is `Sync`, the runtime can be shared by
+/// tasks at two priorities: it is `Sync`, and its sensing side is a `Send` future, as an
+/// `InterruptExecutor`'s spawner requires.
+#[test]
+fn a_runtime_with_a_critical_section_mutex_can_be_shared_across_priorities() {
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+    /// A platform whose state would live in atomics or critical-section mutexes.
+    struct Stateless;
+    impl Sensor for Stateless {
+        async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+            Ok(())
+        }
+        async fn switch_off(&self, _: SensorId) {}
+        async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> {
+            Timer::after_millis(5).await;
+            Ok(None)
+        }
+    }
+    impl Actuator for Stateless {
+        async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome {
+            Outcome::Success
+        }
+    }
+    fn shared<T: Sync>(_: &T) {}
+    fn sendable<F: core::future::Future + Send>(_: &F) {}
+
+    let (mission, _) = mission();
+    let rt: Runtime<'_, '_, CriticalSectionRawMutex, Stateless, Stateless, (), 2, 1, 1, 1, 4> =
+        Runtime::new(&mission, &Stateless, &Stateless, (), Config::default());
+    shared(&rt);
+    sendable(&rt.sensing());
+}
