@@ -304,6 +304,15 @@ pub fn config(policy: psmpa_core::Policy) -> Config {
     }
 }
 
+/// A runtime of `mission` on `world`, recording its trace, with `config`.
+pub fn runtime<'r, const K: usize>(
+    mission: &'r TinyMission,
+    world: &'r TinyWorld,
+    config: Config,
+) -> TinyRuntime<'r, K> {
+    Runtime::new(mission, world, world, Recorder::default(), config)
+}
+
 /// SMPA with 1 s sense and 3 s act phases.
 pub const SMPA: psmpa_core::Policy = psmpa_core::Policy::Smpa {
     sense: Duration::from_secs(1),

@@ -2,10 +2,9 @@
 
 use embassy_time::{Duration, Instant};
 use psmpa_core::{
-    ControlError, DataStore, Failure, Policy, Runtime, SensorSet, StoreAccess, TraceEvent, Value,
+    ControlError, DataStore, Failure, Policy, SensorSet, StoreAccess, TraceEvent, Value,
 };
 use psmpa_sim::backend::simulate_split;
-use psmpa_tests::Recorder;
 use psmpa_tests::tiny::{self, Ids, Note, SMPA, TinyWorld};
 
 const LIMIT: Duration = Duration::from_secs(600);
@@ -27,13 +26,7 @@ fn run_with(
     let (mission, ids) = tiny::mission(failing_plan);
     let mut world = TinyWorld::new(ids, windows);
     tweak(&mut world);
-    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
-        &mission,
-        &world,
-        &world,
-        Recorder::default(),
-        tiny::config(policy),
-    );
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(policy));
     let done = simulate_split(rt.sensing(), rt.run(), LIMIT).expect("simulation completes");
     let hash = rt.trace_hash().value();
     Run {
@@ -316,13 +309,7 @@ fn no_applicable_plan_is_a_clear_error_not_a_hang() {
         .unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
-        &mission,
-        &world,
-        &world,
-        Recorder::default(),
-        tiny::config(Policy::PSmpa),
-    );
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
         .unwrap()
         .output;
@@ -349,13 +336,7 @@ fn repeated_failure_ends_with_exhausted_not_a_loop() {
         .unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
-        &mission,
-        &world,
-        &world,
-        Recorder::default(),
-        tiny::config(Policy::PSmpa),
-    );
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
         .unwrap()
         .output;
@@ -412,13 +393,7 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
     world.camera_answers.set(false);
-    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
-        &mission,
-        &world,
-        &world,
-        Recorder::default(),
-        tiny::config(Policy::PSmpa),
-    );
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let (broken, repaired) = simulate_split(
         rt.sensing(),
         async {
@@ -479,8 +454,7 @@ fn a_precondition_that_stays_violated_fails_the_state() {
     let mut config = tiny::config(Policy::PSmpa);
     config.max_violation = Duration::from_secs(3);
     config.max_failures = 0;
-    let rt: tiny::TinyRuntime<'_, 4> =
-        Runtime::new(&mission, &world, &world, Recorder::default(), config);
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, config);
     let out = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
     assert!(matches!(
         out.output,
@@ -500,8 +474,7 @@ fn a_full_sensor_store_is_an_error_not_a_silent_drop() {
     let world = TinyWorld::new(ids, &[]);
     let mut config = tiny::config(Policy::PSmpa);
     config.max_failures = 0;
-    let rt: tiny::TinyRuntime<'_, 0> =
-        Runtime::new(&mission, &world, &world, Recorder::default(), config);
+    let rt: tiny::TinyRuntime<'_, 0> = tiny::runtime(&mission, &world, config);
     let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
         .unwrap()
         .output;
@@ -557,13 +530,7 @@ fn the_same_run_gives_the_same_trace_hash_twice_and_on_8_parallel_threads() {
 fn sensor_stores_keep_the_latest_sample_with_its_time() {
     let (mission, ids) = tiny::mission(false);
     let world = TinyWorld::new(ids, &[]);
-    let rt: tiny::TinyRuntime<'_, 4> = Runtime::new(
-        &mission,
-        &world,
-        &world,
-        Recorder::default(),
-        tiny::config(Policy::PSmpa),
-    );
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     simulate_split(rt.sensing(), rt.run(), LIMIT)
         .unwrap()
         .output
