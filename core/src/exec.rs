@@ -523,20 +523,40 @@ impl<
         });
     }
 
-    fn register_deciding(&self, cx: &mut Context<'_>) {
-        self.shared.lock(|s| {
-            if let Ok(mut w) = s.deciding.try_borrow_mut() {
-                w.register(cx.waker());
+    /// A wait of the deciding side on the shared state: `done` decides, and when it says not
+    /// yet the waker is registered, in the same lock, so that a sensing side that preempts in
+    /// between cannot wake nobody.
+    fn poll_deciding<R>(
+        &self,
+        cx: &mut Context<'_>,
+        done: impl FnOnce(&Shared<NS>) -> Option<R>,
+    ) -> Poll<R> {
+        self.shared.lock(|s| match done(s) {
+            Some(r) => Poll::Ready(r),
+            None => {
+                if let Ok(mut w) = s.deciding.try_borrow_mut() {
+                    w.register(cx.waker());
+                }
+                Poll::Pending
             }
-        });
+        })
     }
 
-    pub(crate) fn register_sensing(&self, cx: &mut Context<'_>) {
-        self.shared.lock(|s| {
-            if let Ok(mut w) = s.sensing.try_borrow_mut() {
-                w.register(cx.waker());
+    /// [`poll_deciding`](Self::poll_deciding) for a sampler.
+    pub(crate) fn poll_sensing<R>(
+        &self,
+        cx: &mut Context<'_>,
+        done: impl FnOnce(&Shared<NS>) -> Option<R>,
+    ) -> Poll<R> {
+        self.shared.lock(|s| match done(s) {
+            Some(r) => Poll::Ready(r),
+            None => {
+                if let Ok(mut w) = s.sensing.try_borrow_mut() {
+                    w.register(cx.waker());
+                }
+                Poll::Pending
             }
-        });
+        })
     }
 
     /// The sensors that failed and are out of service: a state that needs one fails at once
@@ -601,21 +621,19 @@ impl<
         Duration::from_ticks(ticks.saturating_add(1))
     }
 
-    /// Waits until `sensors` are on and have taken the samples due at the command's start, or
-    /// one of them failed.
+    /// Waits until `sensors` are on and have attempted the samples due at the command's start
+    /// (a sample lost there counts: waiting for the next one could take a period), or one of
+    /// them failed.
     pub(crate) async fn ready(&self, epoch: u32, sensors: SensorSet) -> Result<(), Failure> {
         // Switching on and the first sample are each bounded by the sensor's timeout.
         let limit = Instant::now().saturating_add(self.answer_within(sensors, 2));
         let answered = poll_fn(|cx| {
-            if let Some(failure) = self.failure_of(epoch) {
-                return Poll::Ready(Err(failure));
-            }
-            let ready = self.shared.lock(|s| s.ready.get());
-            if sensors.bits() & !ready.bits() == 0 {
-                return Poll::Ready(Ok(()));
-            }
-            self.register_deciding(cx);
-            Poll::Pending
+            self.poll_deciding(cx, |s| {
+                if let Some((_, failure)) = s.failure.get().filter(|(e, _)| *e == epoch) {
+                    return Some(Err(failure));
+                }
+                (sensors.bits() & !s.ready.get().bits() == 0).then_some(Ok(()))
+            })
         });
         match select(answered, Timer::at(limit)).await {
             Either::First(result) => result,
@@ -630,14 +648,9 @@ impl<
         if active.is_empty() {
             return Ok(());
         }
-        let limit = Instant::now().saturating_add(self.answer_within(active, 1));
-        let off = poll_fn(|cx| {
-            if self.shared.lock(|s| s.active.get()).is_empty() {
-                return Poll::Ready(());
-            }
-            self.register_deciding(cx);
-            Poll::Pending
-        });
+        // A sampler may still be switching on (after another sensor failed), then off.
+        let limit = Instant::now().saturating_add(self.answer_within(active, 2));
+        let off = poll_fn(|cx| self.poll_deciding(cx, |s| s.active.get().is_empty().then_some(())));
         match select(off, Timer::at(limit)).await {
             Either::First(()) => Ok(()),
             Either::Second(()) => Err(Failure::SensingStalled),
@@ -897,12 +910,10 @@ impl<
     }
 
     fn poll_changed(&self, cx: &mut Context<'_>, since: u32) -> Poll<u32> {
-        let now = Monitor::version(self);
-        if now != since {
-            return Poll::Ready(now);
-        }
-        self.register_deciding(cx);
-        Poll::Pending
+        self.poll_deciding(cx, |s| {
+            let now = s.version.get();
+            (now != since).then_some(now)
+        })
     }
 
     fn request(&self, sensor: SensorId) {

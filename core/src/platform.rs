@@ -50,6 +50,9 @@ impl Reading {
 
     /// Adds a `(key, value)` pair for the sensor's store, or replaces the value of a key already
     /// added. At most [`MAX_PAIRS`] keys; [`SAMPLE_KEY`] belongs to [`value`](Self::value).
+    /// The store keeps a key until a later sample puts it again (Algorithm 3 line 6 adds to the
+    /// store), so a sensor whose readings carry a key only sometimes should put it every time,
+    /// or readers compare its instant with the sample's.
     pub fn put(&mut self, key: Key, value: Value) -> Result<(), PairRejected> {
         let rejected = PairRejected { key, value };
         if key == SAMPLE_KEY {

@@ -30,7 +30,6 @@
 
 use core::convert::Infallible;
 use core::future::{pending, poll_fn};
-use core::task::Poll;
 
 use embassy_futures::join::join_array;
 use embassy_futures::select::{Either, select};
@@ -38,7 +37,8 @@ use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, TimeoutError, with_timeout};
 
 use crate::action::{SensorAction, SensorId, SensorMode, SensorSet};
-use crate::exec::{Failure, Mode, Runtime, Violation, sleep_until};
+use crate::domain::Domain;
+use crate::exec::{Failure, Mode, Runtime, Shared, Violation, sleep_until};
 use crate::facts::FactSet;
 use crate::platform::{Actuator, Reading, Sensor, SensorFault};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
@@ -95,12 +95,11 @@ impl<
         loop {
             // A command that includes this sensor, and that it has not served yet.
             let (epoch, mode, start) = poll_fn(|cx| {
-                let c = self.shared.lock(|s| s.command.get());
-                if c.sensors.contains(sensor) && served != Some(c.epoch) {
-                    return Poll::Ready((c.epoch, c.mode, c.start));
-                }
-                self.register_sensing(cx);
-                Poll::Pending
+                self.poll_sensing(cx, |s| {
+                    let c = s.command.get();
+                    (c.sensors.contains(sensor) && served != Some(c.epoch))
+                        .then_some((c.epoch, c.mode, c.start))
+                })
             })
             .await;
             served = Some(epoch);
@@ -146,9 +145,9 @@ impl<
                 }
                 let started = Instant::now();
                 if self.read_at(sensor, started) {
-                    // This instant's read was taken already (by the state or sense phase that
-                    // just ended, or the initial model): a sensor never reads twice at one
-                    // instant.
+                    // A read that started at this instant was completed already (by the state or
+                    // sense phase that just ended, or the initial model): a sensor never takes
+                    // two samples of one instant.
                     self.shared.lock(|s| {
                         let delivered = s
                             .percepts
@@ -160,15 +159,16 @@ impl<
                         }
                     });
                 } else {
+                    let read = with_timeout(spec.timeout, self.sensors.sample(sensor));
+                    let Either::Second(read) = select(self.ended(epoch), read).await else {
+                        // Cancelled: no read of this instant was taken.
+                        break;
+                    };
                     self.shared.lock(|s| {
                         if let Some(r) = s.last_read.get(sensor.index()) {
                             r.set(Some(started));
                         }
                     });
-                    let read = with_timeout(spec.timeout, self.sensors.sample(sensor));
-                    let Either::Second(read) = select(self.ended(epoch), read).await else {
-                        break;
-                    };
                     if self.take(sensor, spec, read, started, epoch).is_err() {
                         break;
                     }
@@ -205,14 +205,8 @@ impl<
 
     /// Completes when the deciding side's command is no longer the one of `epoch`.
     async fn ended(&self, epoch: u32) {
-        poll_fn(|cx| {
-            if self.shared.lock(|s| s.command.get().epoch) != epoch {
-                return Poll::Ready(());
-            }
-            self.register_sensing(cx);
-            Poll::Pending
-        })
-        .await;
+        poll_fn(|cx| self.poll_sensing(cx, |s| (s.command.get().epoch != epoch).then_some(())))
+            .await;
     }
 
     /// Whether a read of `sensor` started at `at`.
@@ -227,16 +221,11 @@ impl<
     /// Waits until the behaviour asks for a sample of `sensor`, and takes the request.
     async fn requested(&self, sensor: SensorId) {
         poll_fn(|cx| {
-            let asked = self.shared.lock(|s| {
+            self.poll_sensing(cx, |s| {
                 let requests = s.requests.get();
                 s.requests.set(requests.without(sensor));
-                requests.contains(sensor)
-            });
-            if asked {
-                return Poll::Ready(());
-            }
-            self.register_sensing(cx);
-            Poll::Pending
+                requests.contains(sensor).then_some(())
+            })
         })
         .await;
     }
@@ -349,61 +338,44 @@ impl<
 
     /// After a delivery: compares the watched action's `pre(a)` with the beliefs and traces a
     /// change. The deciding side fails the state once a violation has lasted
-    /// [`Config::max_violation`](crate::exec::Config::max_violation).
+    /// [`Config::max_violation`](crate::exec::Config::max_violation). Reads and updates the
+    /// violation in one lock: the two sides both call it.
     pub(crate) fn check_precondition(&self) {
-        let (watch, beliefs, before) = self
-            .shared
-            .lock(|s| (s.command.get().watch, s.beliefs.get(), s.violation.get()));
-        let Some((action, pre)) = watch else {
-            return;
-        };
-        let missing = pre.difference(beliefs);
-        let now = Instant::now();
-        let after = match (missing.is_empty(), before) {
-            (true, None) => return,
-            (true, Some(_)) => None,
-            (false, None) => {
-                let seen = self.evidence(missing).unwrap_or(now);
-                Some(Violation {
+        let domain = &self.mission.domain;
+        let change = self.shared.lock(|s| {
+            let (action, pre) = s.command.get().watch?;
+            let missing = pre.difference(s.beliefs.get());
+            let before = s.violation.get();
+            let after = match (missing.is_empty(), before) {
+                (true, None) => return None,
+                (true, Some(_)) => None,
+                (false, None) => {
+                    let seen = evidence(s, domain, missing).unwrap_or_else(Instant::now);
+                    Some(Violation {
+                        missing,
+                        since: seen,
+                        last_seen: seen,
+                    })
+                }
+                (false, Some(v)) => Some(Violation {
                     missing,
-                    since: seen,
-                    last_seen: seen,
-                })
-            }
-            (false, Some(v)) => Some(Violation {
-                missing,
-                last_seen: self.evidence(missing).unwrap_or(v.last_seen),
-                ..v
-            }),
-        };
-        self.shared.lock(|s| s.violation.set(after));
-        match (after, before) {
-            (None, _) => self.trace(TraceEvent::PreconditionRestored { action }),
-            (Some(a), b) if b.is_none_or(|b| b.missing != a.missing) => {
-                self.trace(TraceEvent::PreconditionViolated { action, missing });
+                    last_seen: evidence(s, domain, missing).unwrap_or(v.last_seen),
+                    ..v
+                }),
+            };
+            s.violation.set(after);
+            Some((action, before, after))
+        });
+        match change {
+            Some((action, _, None)) => self.trace(TraceEvent::PreconditionRestored { action }),
+            Some((action, b, Some(a))) if b.is_none_or(|b| b.missing != a.missing) => {
+                self.trace(TraceEvent::PreconditionViolated {
+                    action,
+                    missing: a.missing,
+                });
             }
             _ => {}
         }
-    }
-
-    /// When the latest sample was taken that says one of `missing` does not hold: the newest
-    /// evidence of a violation. Samples of other sensors that only repeat the fused verdict are
-    /// not evidence.
-    fn evidence(&self, missing: FactSet) -> Option<Instant> {
-        let domain = &self.mission.domain;
-        self.shared.lock(|s| {
-            let sampled = SensorSet::from_bits(s.running.get().bits() & s.fresh.get().bits());
-            sampled
-                .iter()
-                .filter(|t| {
-                    let per_t = domain.sensor(*t).map_or(FactSet::EMPTY, |t| t.per);
-                    let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, |h| h.get());
-                    per_t.difference(holds_t).intersects(missing)
-                })
-                .filter_map(|t| s.percepts.get(t.index()).and_then(|p| p.get()))
-                .map(|e| e.at)
-                .max()
-        })
     }
 
     /// A sensor failed: it is out of service until [`clear_faults`](Self::clear_faults), and
@@ -425,6 +397,27 @@ impl<
         });
         self.notify();
     }
+}
+
+/// When the latest sample was taken that says one of `missing` does not hold: the newest
+/// evidence of a violation. Samples of other sensors that only repeat the fused verdict are not
+/// evidence. O(NS).
+fn evidence<const NS: usize, const NA: usize>(
+    s: &Shared<NS>,
+    domain: &Domain<'_, NS, NA>,
+    missing: FactSet,
+) -> Option<Instant> {
+    let sampled = SensorSet::from_bits(s.running.get().bits() & s.fresh.get().bits());
+    sampled
+        .iter()
+        .filter(|t| {
+            let per_t = domain.sensor(*t).map_or(FactSet::EMPTY, |t| t.per);
+            let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, |h| h.get());
+            per_t.difference(holds_t).intersects(missing)
+        })
+        .filter_map(|t| s.percepts.get(t.index()).and_then(|p| p.get()))
+        .map(|e| e.at)
+        .max()
 }
 
 #[cfg(test)]

@@ -231,7 +231,9 @@ impl<'s> MutualStore<'s> {
 
     /// `a_i.get(d_mutual(s_j, a_i), k')` (line 8): what linked sensor `s_j` put under `key`;
     /// `None` for a sensor that is not running beside the action. Two sensors may use the same
-    /// key for different things, so a read always names the sensor. One store lookup.
+    /// key for different things, so a read always names the sensor. A key stays until the
+    /// sensor puts it again: its entry's instant says which sample it came from. One store
+    /// lookup.
     pub fn get(&self, sensor: SensorId, key: Key) -> Option<Entry> {
         if !self.linked.contains(sensor) {
             return None;

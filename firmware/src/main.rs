@@ -82,12 +82,13 @@ mod firmware {
     struct SensingFirst;
 
     impl Sides for SensingFirst {
-        async fn beside<S: core::future::Future, D: core::future::Future>(
+        async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
             &self,
             sensing: S,
             deciding: D,
         ) -> D::Output {
-            Beside::new(&executor::SensingSlot, sensing, deciding).await
+            // SAFETY: the caller's contract, the same as `Beside::new`'s.
+            unsafe { Beside::new(&executor::SensingSlot, sensing, deciding) }.await
         }
     }
 
@@ -156,16 +157,19 @@ mod firmware {
                 embassy_futures::yield_now().await;
                 executor::take_polls();
                 time_driver::take_isr_max_cycles();
-                let (s, (), _) = psmpa_sim::run::run_robot(
-                    &SensingFirst,
-                    robot,
-                    scenario,
-                    arch,
-                    space,
-                    (),
-                    Steps,
-                )
-                .await;
+                // SAFETY: the task awaits the run to its end; nothing leaks or moves it.
+                let run = unsafe {
+                    psmpa_sim::run::run_robot(
+                        &SensingFirst,
+                        robot,
+                        scenario,
+                        arch,
+                        space,
+                        (),
+                        Steps,
+                    )
+                };
+                let (s, (), _) = run.await;
                 let polls = executor::take_polls();
                 info!(
                     "polls scenario={=str} arch={=str} count={=u32} max_cycles={=u32} max_at_ms={=u64} total_cycles={=u64}",

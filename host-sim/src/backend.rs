@@ -270,8 +270,18 @@ unsafe impl HighSlot for ThreadSlot {
 /// [`simulate`]d future, and returns what `deciding` returns: whenever `sensing` has work it
 /// is polled before `deciding` (see the module doc). `sensing` is dropped with the returned
 /// future. One at a time: while another `beside` runs, `sensing` is not run (see [`Beside`]).
-pub fn beside<S: Future, D: Future>(sensing: S, deciding: D) -> Beside<'static, ThreadSlot, S, D> {
-    Beside::new(&ThreadSlot, sensing, deciding)
+/// [`simulate_split`] is the safe way to use it.
+///
+/// # Safety
+///
+/// As [`Beside::new`]: the returned future must not be leaked while anything `sensing` borrows
+/// is alive.
+pub unsafe fn beside<S: Future, D: Future>(
+    sensing: S,
+    deciding: D,
+) -> Beside<'static, ThreadSlot, S, D> {
+    // SAFETY: the caller's contract.
+    unsafe { Beside::new(&ThreadSlot, sensing, deciding) }
 }
 
 /// [`simulate`] with `sensing` at the higher priority beside `deciding` ([`beside`]).
@@ -280,7 +290,9 @@ pub fn simulate_split<S: Future, D: Future>(
     deciding: D,
     limit: Duration,
 ) -> Result<Completed<D::Output>, SimError> {
-    simulate(beside(sensing, deciding), limit)
+    // SAFETY: `simulate` pins the future on its own stack and drops it, on this thread, before
+    // it returns (and on unwind): it cannot be leaked.
+    simulate(unsafe { beside(sensing, deciding) }, limit)
 }
 
 /// Moves the clock to the earliest alarm and wakes every alarm due by then, in

@@ -22,7 +22,8 @@ use psmpa_core::planner::{Planner, Search, Strategy};
 use psmpa_core::timing::{Blocking, Job, Response, TimingError};
 use psmpa_core::{
     ActionId, ActionIo, Actuator, Config, DomainError, Entry, FactId, FactSet, Key, Mission,
-    Outcome, Policy, Reading, Runtime, Sensor, SensorFault, SensorId, SensorMode, Value,
+    Outcome, Policy, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode,
+    Value,
 };
 
 use crate::scenario::Scenario;
@@ -335,12 +336,15 @@ pub fn latency_bounds(
     Ok(bounds)
 }
 
-/// The planner the robot uses when no library plan applies: shortest plans, 64 nodes (the
-/// Fetch Tea domain needs a handful; 64 keep the search space at about 2 KiB).
-pub const PLANNER: Planner<64> = Planner::new(Strategy::BreadthFirst);
+/// The planner the robot uses when no library plan applies: shortest plans, 32 nodes. The
+/// Fetch Tea actions add and delete five facts (`at_door`, `door_open`, `at_back_door`,
+/// `back_door_open`, `in_kitchen`; what the sensors perceive no action changes), so at most
+/// 2⁵ = 32 states are reachable and a breadth-first search, which stores each state once,
+/// cannot run out.
+pub const PLANNER: Planner<32> = Planner::new(Strategy::BreadthFirst);
 
-/// The space [`PLANNER`] searches in.
-pub type PlannerSpace = Search<64>;
+/// The space [`PLANNER`] searches in (about 1 KiB).
+pub type PlannerSpace = Search<32>;
 
 /// Application-defined trace codes of the robot's behaviours.
 pub mod codes {
@@ -375,6 +379,8 @@ pub struct Nao<'w, 's, L: WorldLog> {
     /// The sonar and the bumper of the mission, if it has them.
     sonar: Option<SensorId>,
     bumper: Option<SensorId>,
+    /// Their sample timeouts: a read at least this long never answers.
+    timeouts: [Duration; 2],
 }
 
 impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
@@ -385,13 +391,19 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
                 .filter_map(SensorId::new)
                 .find(|s| robot.bindings.sensor(*s) == Some(which))
         };
+        let timeout = |id: Option<SensorId>| {
+            id.and_then(|id| robot.mission.domain.sensor(id))
+                .map_or(SensorAction::DEFAULT_TIMEOUT, |s| s.timeout)
+        };
+        let (sonar, bumper) = (find(NaoSensor::Sonar), find(NaoSensor::Bumper));
         Self {
             world,
             bindings: robot.bindings.clone(),
             percepts: robot.percepts,
             echo: core::cell::Cell::new(None),
-            sonar: find(NaoSensor::Sonar),
-            bumper: find(NaoSensor::Bumper),
+            sonar,
+            bumper,
+            timeouts: [timeout(sonar), timeout(bumper)],
         }
     }
 
@@ -549,11 +561,12 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
                 }
                 let echo = self.world.sonar_read();
                 // The ping's round trip: only this sensor waits.
-                read_latency(sc.sonar.latency_ms).await;
+                read_latency(read_time(sc.sonar.latency_ms, self.timeouts[0])).await;
                 let Some(mm) = self.world.sonar_deliver(echo) else {
                     return Ok(None);
                 };
                 self.check_sonar(mm, echo.pos_um)?;
+                self.world.sample_delivered(Device::Sonar);
                 let max_mm = crate::scenario::to_mm(sc.sonar.max_um);
                 let mm = i32::try_from(mm).map_err(|_| SensorFault::OutOfRange)?;
                 // The rule the world registers obstacles by.
@@ -562,23 +575,21 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
                 } else {
                     clear
                 };
-                if i64::from(mm) == max_mm {
-                    Some(Reading::new(Value::NoEcho, holds))
+                // Sound at about 343 m/s: 5.83 µs per mm, there and back. No echo, no time:
+                // the pair is put either way, so the store never keeps an earlier echo's.
+                let (value, echo_us) = if i64::from(mm) == max_mm {
+                    (Value::NoEcho, Value::NoEcho)
                 } else {
-                    // Sound at about 343 m/s: 5.83 µs per mm, there and back.
-                    let echo_us = mm.saturating_mul(583) / 100;
-                    let reading = Reading::new(Value::Mm(mm), holds);
-                    Some(
-                        reading
-                            .with(ECHO_US, Value::Int(echo_us))
-                            .map_err(|_| SensorFault::Device(2))?,
-                    )
-                }
+                    (Value::Mm(mm), Value::Int(mm.saturating_mul(583) / 100))
+                };
+                let reading = Reading::new(value, holds).with(ECHO_US, echo_us);
+                Some(reading.map_err(|_| SensorFault::Device(2))?)
             }
             Device::Bumper => {
                 let touch = self.world.bumper_read();
-                read_latency(sc.bumper_latency_ms).await;
+                read_latency(read_time(sc.bumper_latency_ms, self.timeouts[1])).await;
                 let level = self.world.bumper_deliver(touch);
+                self.world.sample_delivered(Device::Bumper);
                 let holds = if level == 2 { FactSet::EMPTY } else { clear };
                 Some(Reading::new(Value::Level(level), holds))
             }
@@ -597,10 +608,21 @@ impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
     }
 }
 
-/// Waits out a sensor's read latency; no await at all when there is none.
-async fn read_latency(ms: u64) {
-    if ms > 0 {
-        Timer::after(Duration::from_millis(ms)).await;
+/// How long a read takes: `None` when it never answers, as a read at least as long as the
+/// sensor's timeout must not (the contract: every such sample times out; an answer due on the
+/// very tick of the timeout would otherwise win).
+fn read_time(latency_ms: u64, timeout: Duration) -> Option<Duration> {
+    let latency = Duration::from_millis(latency_ms);
+    (latency < timeout).then_some(latency)
+}
+
+/// Waits out a read of `read_time`; no await at all for an instant one. Only the timer lives
+/// across the await: this future is in every sampler's.
+async fn read_latency(read: Option<Duration>) {
+    match read {
+        Some(d) if d.as_ticks() == 0 => {}
+        Some(d) => Timer::after(d).await,
+        None => core::future::pending().await,
     }
 }
 

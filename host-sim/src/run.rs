@@ -6,7 +6,7 @@
 //! through [`Sides`]: the host on its higher-priority executor, the firmware on its own.
 
 use core::future::Future;
-use core::marker::PhantomPinned;
+use core::marker::{PhantomData, PhantomPinned};
 use core::pin::Pin;
 use core::task::{Context, Poll};
 
@@ -53,7 +53,14 @@ pub struct Summary {
 pub trait Sides {
     /// Runs `sensing` at a higher priority than `deciding` for as long as `deciding` runs, and
     /// returns what `deciding` returns. `sensing` is dropped when `deciding` ends.
-    async fn beside<S: Future, D: Future>(&self, sensing: S, deciding: D) -> D::Output;
+    ///
+    /// # Safety
+    ///
+    /// An implementation may hand `sensing` to a task that polls it from elsewhere, so the
+    /// returned future must not be leaked (`mem::forget`) while anything `sensing` borrows is
+    /// alive, and must be dropped on the thread that polled it: run it to completion, or drop
+    /// it.
+    async unsafe fn beside<S: Future, D: Future>(&self, sensing: S, deciding: D) -> D::Output;
 }
 
 /// A pinned future with its type and lifetime erased: its address and the function that polls
@@ -95,8 +102,9 @@ impl Erased {
 ///
 /// The task that polls the slot polls the future only between [`install`](Self::install)
 /// and [`uninstall`](Self::uninstall), never re-entrantly, and never while the code that
-/// uninstalls is running in the middle of a poll of it (the poller runs on the same thread
-/// and is not re-entered, or at a priority that preempts the uninstalling code).
+/// uninstalls is running in the middle of a poll of it: the poller runs on the same thread
+/// and is not re-entered. (A poller that preempts from an interrupt polls the future from
+/// another context: it would need the future to be `Send`, which this slot does not ask.)
 pub unsafe trait HighSlot {
     /// Makes `future` the one the higher-priority task polls and wakes that task; `false` when
     /// another future is installed.
@@ -108,7 +116,8 @@ pub unsafe trait HighSlot {
 /// Runs `sensing` from `slot` for as long as `deciding` runs: the future of
 /// [`Sides::beside`] on a platform with a higher-priority task polling `slot`. One at a time:
 /// while the slot holds another sensing side, this one is not run (a runtime's deciding side
-/// then fails with [`Failure::SensingStalled`](psmpa_core::Failure::SensingStalled)).
+/// then fails with [`Failure::SensingStalled`](psmpa_core::Failure::SensingStalled)). Neither
+/// `Send` nor `Sync`: it must be dropped where it was polled.
 pub struct Beside<'h, H: HighSlot, S, D> {
     slot: &'h H,
     sensing: S,
@@ -117,11 +126,18 @@ pub struct Beside<'h, H: HighSlot, S, D> {
     first: bool,
     installed: bool,
     _pinned: PhantomPinned,
+    _here: PhantomData<*const ()>,
 }
 
 impl<'h, H: HighSlot, S: Future, D: Future> Beside<'h, H, S, D> {
     /// `sensing` beside `deciding`, through `slot`.
-    pub fn new(slot: &'h H, sensing: S, deciding: D) -> Self {
+    ///
+    /// # Safety
+    ///
+    /// Once polled, the future hands a pointer to `sensing` to `slot`'s poller, taken back only
+    /// when it ends or is dropped: it must not be leaked (`mem::forget`) while anything
+    /// `sensing` borrows is alive. Run it to completion, or drop it.
+    pub unsafe fn new(slot: &'h H, sensing: S, deciding: D) -> Self {
         Self {
             slot,
             sensing,
@@ -129,6 +145,7 @@ impl<'h, H: HighSlot, S: Future, D: Future> Beside<'h, H, S, D> {
             first: true,
             installed: false,
             _pinned: PhantomPinned,
+            _here: PhantomData,
         }
     }
 }
@@ -167,7 +184,12 @@ impl<H: HighSlot, S, D> Drop for Beside<'_, H, S, D> {
 
 /// Runs `scenario` under `arch`, logging the world into `log` and tracing the runtime into
 /// `sink`; returns the summary and gives the log and the sink back.
-pub async fn run<L: WorldLog, T: TraceSink>(
+///
+/// # Safety
+///
+/// As [`Sides::beside`]: the future must not be leaked, and must be dropped where it was
+/// polled. [`crate::sim`] runs it safely.
+pub async unsafe fn run<L: WorldLog, T: TraceSink>(
     sides: &impl Sides,
     scenario: &Scenario,
     arch: Arch,
@@ -176,13 +198,19 @@ pub async fn run<L: WorldLog, T: TraceSink>(
 ) -> Result<(Summary, L, T), MissionError> {
     let robot = robot::fetch_tea(scenario)?;
     let mut space = robot::PlannerSpace::new();
-    Ok(run_robot(sides, &robot, scenario, arch, &mut space, log, sink).await)
+    // SAFETY: this future is not leaked and stays where it is polled: the caller's contract.
+    Ok(unsafe { run_robot(sides, &robot, scenario, arch, &mut space, log, sink) }.await)
 }
 
 /// Runs a mission already loaded for `scenario` ([`robot::fetch_tea`]), planning in `space`
 /// when it must. The run starts at the current instant; the host and the firmware start it at
 /// tick 0 so their traces agree.
-pub async fn run_robot<L: WorldLog, T: TraceSink>(
+///
+/// # Safety
+///
+/// As [`Sides::beside`]: the future must not be leaked, and must be dropped where it was
+/// polled.
+pub async unsafe fn run_robot<L: WorldLog, T: TraceSink>(
     sides: &impl Sides,
     robot: &Robot<'_>,
     scenario: &Scenario,
@@ -202,7 +230,8 @@ pub async fn run_robot<L: WorldLog, T: TraceSink>(
     );
     let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
     let deciding = select(runtime.run_planning(&robot::PLANNER, space), deadline);
-    let ending = match sides.beside(runtime.sensing(), deciding).await {
+    // SAFETY: this future is not leaked and stays where it is polled: the caller's contract.
+    let ending = match unsafe { sides.beside(runtime.sensing(), deciding) }.await {
         Either::First(Ok(report)) => Ending::Goal(report),
         Either::First(Err(error)) => Ending::Error(error),
         Either::Second(()) => {

@@ -66,12 +66,13 @@ pub struct Recorded {
 pub struct Prioritized;
 
 impl Sides for Prioritized {
-    async fn beside<S: core::future::Future, D: core::future::Future>(
+    async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
         &self,
         sensing: S,
         deciding: D,
     ) -> D::Output {
-        beside(sensing, deciding).await
+        // SAFETY: the caller's contract, the same as `beside`'s.
+        unsafe { beside(sensing, deciding) }.await
     }
 }
 
@@ -81,24 +82,26 @@ const SLACK: Duration = Duration::from_secs(1);
 /// Runs `scenario` under `arch` with nothing recorded (fast path for sweeps and benchmarks).
 pub fn run_summary(scenario: &Scenario, arch: Arch) -> Result<Summary, RunError> {
     let limit = Duration::from_millis(scenario.max_ms) + SLACK;
-    let done = simulate(run(&Prioritized, scenario, arch, (), ()), limit).map_err(RunError::Sim)?;
+    // SAFETY: `simulate` pins the run on its own stack and drops it before it returns.
+    let run = unsafe { run(&Prioritized, scenario, arch, (), ()) };
+    let done = simulate(run, limit).map_err(RunError::Sim)?;
     done.output.map(|(s, (), ())| s).map_err(RunError::Mission)
 }
 
 /// Runs `scenario` under `arch` recording the world and the trace.
 pub fn run_recorded(scenario: &Scenario, arch: Arch) -> Result<Recorded, RunError> {
     let limit = Duration::from_millis(scenario.max_ms) + SLACK;
-    let done = simulate(
+    // SAFETY: `simulate` pins the run on its own stack and drops it before it returns.
+    let run = unsafe {
         run(
             &Prioritized,
             scenario,
             arch,
             WorldRecord::default(),
             TraceRecord::default(),
-        ),
-        limit,
-    )
-    .map_err(RunError::Sim)?;
+        )
+    };
+    let done = simulate(run, limit).map_err(RunError::Sim)?;
     let (summary, world, trace) = done.output.map_err(RunError::Mission)?;
     Ok(Recorded {
         summary,

@@ -394,7 +394,7 @@ impl<L: WorldLog> State<L> {
         scaled.max(sc.speed_um_per_ms.min(1))
     }
 
-    /// A sample of `device` was delivered now.
+    /// A sample of `device` was delivered now (and accepted by the robot).
     fn delivered(&mut self, device: Device) {
         let now = self.now;
         if let Some(g) = self.gaps.get_mut(device.slot()) {
@@ -960,7 +960,6 @@ impl<'s, L: WorldLog> World<'s, L> {
                 }
             }
             s.emit(WorldEvent::Sample(Device::Sonar, mm));
-            s.delivered(Device::Sonar);
             Some(mm)
         })
     }
@@ -995,19 +994,31 @@ impl<'s, L: WorldLog> World<'s, L> {
                 s.register(i, Device::Bumper);
             }
             s.emit(WorldEvent::Sample(Device::Bumper, u32::from(level)));
-            s.delivered(Device::Bumper);
             level
         })
     }
 
-    /// A sonar read that starts and completes now.
-    pub fn sonar(&self) -> Option<u32> {
-        self.sonar_deliver(self.sonar_read())
+    /// The robot accepted a delivered sample of `device` (its driver found it plausible):
+    /// counted for the largest gap between samples. The camera and the handle count theirs
+    /// themselves.
+    pub fn sample_delivered(&self, device: Device) {
+        self.with(|s, _| s.delivered(device));
     }
 
-    /// A bumper read that starts and completes now.
+    /// A sonar read that starts and completes now, accepted.
+    pub fn sonar(&self) -> Option<u32> {
+        let mm = self.sonar_deliver(self.sonar_read());
+        if mm.is_some() {
+            self.sample_delivered(Device::Sonar);
+        }
+        mm
+    }
+
+    /// A bumper read that starts and completes now, accepted.
     pub fn bumper(&self) -> u8 {
-        self.bumper_deliver(self.bumper_read())
+        let level = self.bumper_deliver(self.bumper_read());
+        self.sample_delivered(Device::Bumper);
+        level
     }
 
     /// Sets the walking speed, in thousandths of the scenario's `speed_mps` (1 to 1000).

@@ -290,6 +290,32 @@ fn in_a_slow_zone_the_walk_slows_down_as_the_sonar_distance_falls() {
     assert_eq!(far.slow_um, 0);
 }
 
+/// The contract: with a read latency at least as long as the sensor's timeout (the mission's:
+/// sonar 50 ms, bumper 10 ms) every sample of that sensor times out, even one that would
+/// answer on the very tick of the timeout; the robot stops before it moves. A read 1 ms
+/// shorter answers.
+#[test]
+fn a_read_as_long_as_the_sensors_timeout_always_times_out() {
+    for (sensor, timeout_ms) in [("sonar", 50), ("bumper", 10)] {
+        let with = |latency: u64| {
+            inline(&format!(
+                r#"{{"name":"slow","{sensor}":{{"latency_ms":{latency}}},"interferences":[]}}"#
+            ))
+        };
+        let s = run_summary(&with(timeout_ms), Arch::PSmpa).unwrap();
+        match s.ending {
+            Ending::Error(psmpa_core::ControlError::InitialModel {
+                failure: psmpa_core::Failure::SensorFault { fault, .. },
+            }) => assert_eq!(fault, psmpa_core::SensorFault::Timeout, "{sensor}"),
+            other => panic!("{sensor}: {other:?}"),
+        }
+        assert_eq!(s.time_cost_ms, timeout_ms, "{sensor}");
+        assert!(!s.tally.reached_door);
+        let ok = run_summary(&with(timeout_ms - 1), Arch::PSmpa).unwrap();
+        assert!(ok.tally.reached_door, "{sensor}: {:?}", ok.ending);
+    }
+}
+
 /// A read delivers what the world was when it started, and registers only obstacles still
 /// there: a box taken away while a slow echo travelled is not counted as detected by it.
 #[test]
@@ -484,6 +510,39 @@ fn the_sweep_psmpa_misses_nothing_detectable_and_smpa_misses_much() {
         .install(|| sweep::sweep(7, 300, &Arch::ALL, false).unwrap());
     assert_eq!(again.psmpa, stats.psmpa);
     assert_eq!(again.smpa, stats.smpa);
+}
+
+/// The robot's planner has 32 nodes because its actions change five facts: from any of the
+/// 32 states over them, a search for a goal no action reaches explores everything reachable
+/// and answers "unsolvable", never "out of budget".
+#[test]
+fn the_robots_planner_cannot_run_out_in_its_domain() {
+    use psmpa_core::planner::PlanningError;
+    let robot = psmpa_sim::robot::Robot::load(psmpa_sim::robot::FETCH_TEA).unwrap();
+    let d = &robot.mission.domain;
+    let changed = d
+        .actions()
+        .iter()
+        .fold(psmpa_core::FactSet::EMPTY, |acc, a| {
+            acc.union(a.add).union(a.del)
+        });
+    assert_eq!(changed.len(), 5);
+    // `handle_seen` only the camera decides: no action adds it.
+    let goal = psmpa_core::FactSet::single(d.fact_id("handle_seen").unwrap());
+    let facts: Vec<_> = changed.iter().collect();
+    let perceived = d.facts(&["path_clear", "door_unlocked"]).unwrap();
+    for bits in 0u32..32 {
+        let init = facts
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| bits & (1 << i) != 0)
+            .fold(perceived, |acc, (_, f)| acc.with(*f));
+        let result = psmpa_sim::robot::PLANNER.plan::<6>(d.actions(), init, goal);
+        assert!(
+            matches!(result, Err(PlanningError::Unsolvable { .. })),
+            "from {bits:05b}: {result:?}"
+        );
+    }
 }
 
 /// The kitchen door is locked: "open door" presses the handle (an on-demand sample), the

@@ -394,19 +394,33 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     let world = TinyWorld::new(ids, &[]);
     world.camera_answers.set(false);
     let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
-    let (broken, repaired) = simulate_split(
+    let planner =
+        psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
+    let mut space = psmpa_core::planner::Search::<64>::new();
+    let (broken, planned, repaired) = simulate_split(
         rt.sensing(),
         async {
             let broken = (rt.run().await, rt.faulty_sensors(), Instant::now());
+            // The planner cannot count on the camera either: no action needing it applies.
+            let planned = rt.run_planning(&planner, &mut space).await;
             // The camera is repaired.
             world.camera_answers.set(true);
             rt.clear_faults();
-            (broken, rt.run().await)
+            (broken, planned, rt.run().await)
         },
         LIMIT,
     )
     .unwrap()
     .output;
+    assert!(
+        matches!(
+            planned,
+            Err(ControlError::Planning {
+                error: psmpa_core::planner::PlanningError::Unsolvable { .. }
+            })
+        ),
+        "{planned:?}"
+    );
     let (result, faulty, ended) = broken;
     assert!(result.is_err(), "{result:?}");
     assert_eq!(faulty, SensorSet::EMPTY.with(ids.camera));
@@ -439,7 +453,7 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     assert_eq!(
         camera_on.len(),
         2,
-        "once before the fault, once after the repair"
+        "once before the fault, once after the repair, never while it is out of service"
     );
     assert!(camera_on[0] < failures[0].0 && camera_on[1] >= ended);
     // After the repair the same library plan runs to the goal.

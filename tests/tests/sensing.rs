@@ -22,7 +22,7 @@ const TOF_PERIOD: Duration = Duration::from_millis(100);
 const STRENGTH: Key = Key(1);
 const LIMIT: Duration = Duration::from_secs(60);
 
-type Pair = Mission<'static, 2, 1, 1, 1>;
+type Pair = Mission<'static, 2, 2, 1, 2>;
 
 struct Ids {
     tof: SensorId,
@@ -30,7 +30,12 @@ struct Ids {
 }
 
 fn mission() -> (Pair, Ids) {
-    let mut d: Domain<'static, 2, 1> = Domain::new();
+    two_states(false)
+}
+
+/// The mission; with `park`, the plan drives and then parks, both beside the two sensors.
+fn two_states(park: bool) -> (Pair, Ids) {
+    let mut d: Domain<'static, 2, 2> = Domain::new();
     let clear = d.add_fact("clear").unwrap();
     let arrived = d.add_fact("arrived").unwrap();
     let go = d.add_event("go").unwrap();
@@ -56,14 +61,28 @@ fn mission() -> (Pair, Ids) {
             FactSet::EMPTY,
         ))
         .unwrap();
-    let mut library: PlanLibrary<'static, 1, 1> = PlanLibrary::new();
+    let parked = d.add_fact("parked").unwrap();
+    let park_action = d
+        .add_action(ActuatorAction::new(
+            "park",
+            FactSet::single(clear),
+            FactSet::single(parked),
+            FactSet::EMPTY,
+        ))
+        .unwrap();
+    let mut library: PlanLibrary<'static, 1, 2> = PlanLibrary::new();
+    let (body, goal): (&[ActionId], _) = if park {
+        (&[drive, park_action], FactSet::single(parked))
+    } else {
+        (&[drive], FactSet::single(arrived))
+    };
     library
-        .add(Plan::new("drive", go, FactSet::EMPTY, &[drive]).unwrap())
+        .add(Plan::new("drive", go, FactSet::EMPTY, body).unwrap())
         .unwrap();
     let task = Task {
         event: go,
         init: FactSet::EMPTY,
-        goal: FactSet::single(arrived),
+        goal,
     };
     let mission = Mission {
         name: "pair",
@@ -82,13 +101,15 @@ struct Read {
     end: Instant,
 }
 
-/// What the drive saw when it woke.
+/// What a behaviour saw when it woke.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Seen {
     at: Instant,
     cliff: Option<Entry>,
     tof: Option<Entry>,
     strength: Option<Entry>,
+    /// The ranger's key, asked of the cliff sensor.
+    cliff_strength: Option<Entry>,
 }
 
 struct Robot {
@@ -98,6 +119,8 @@ struct Robot {
     drive: Duration,
     reads: RefCell<Vec<Read>>,
     seen: Cell<Option<Seen>>,
+    /// When each behaviour started and what it saw then.
+    started: RefCell<Vec<Seen>>,
 }
 
 impl Robot {
@@ -108,6 +131,7 @@ impl Robot {
             drive: Duration::from_millis(drive_ms),
             reads: RefCell::new(Vec::new()),
             seen: Cell::new(None),
+            started: RefCell::new(Vec::new()),
         }
     }
 
@@ -149,24 +173,35 @@ impl Sensor for Robot {
     }
 }
 
-impl Actuator for Robot {
-    async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
-        Timer::after(self.drive).await;
-        self.seen.set(Some(Seen {
+impl Robot {
+    fn look(&self, io: &ActionIo<'_>) -> Seen {
+        Seen {
             at: Instant::now(),
             cliff: io.sample(self.ids.cliff),
             tof: io.sample(self.ids.tof),
             strength: io.get(self.ids.tof, STRENGTH),
-        }));
+            cliff_strength: io.get(self.ids.cliff, STRENGTH),
+        }
+    }
+}
+
+impl Actuator for Robot {
+    async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
+        self.started.borrow_mut().push(self.look(io));
+        Timer::after(self.drive).await;
+        self.seen.set(Some(self.look(io)));
         Outcome::Success
     }
 }
 
-type PairRuntime<'r> = Runtime<'r, 'static, NoopRawMutex, Robot, Robot, Recorder, 2, 1, 1, 1, 4>;
+type PairRuntime<'r> = Runtime<'r, 'static, NoopRawMutex, Robot, Robot, Recorder, 2, 2, 1, 2, 4>;
 
 /// Runs the mission; returns the trace and when the drive state started.
 fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
-    let (mission, _) = mission();
+    run_mission(robot, mission().0)
+}
+
+fn run_mission(robot: &Robot, mission: Pair) -> (Vec<(Instant, TraceEvent)>, Instant) {
     let rt: PairRuntime<'_> = Runtime::new(
         &mission,
         robot,
@@ -292,8 +327,34 @@ fn a_behaviour_reads_every_pair_a_sensor_put_by_sensor() {
     assert_eq!(seen.at, start + Duration::from_millis(240));
     assert_eq!(tof.at, start + Duration::from_millis(200));
     assert_eq!(seen.strength.unwrap().at, tof.at);
-    // The cliff sensor's store has no such key.
+    // The cliff sensor's store has no such key: a read names its sensor.
     assert_eq!(seen.cliff.unwrap().value, Value::Bool(false));
+    assert_eq!(seen.cliff_strength, None);
+}
+
+/// A state that ends on a due instant of a sensor whose read takes time cancels that read: the
+/// next state, starting at the same instant with the same sensor, reads afresh there, and its
+/// behaviour starts when that read is in.
+#[test]
+fn a_read_cancelled_by_the_end_of_a_state_is_taken_again_by_the_next() {
+    // The first read of the drive state ends 40 ms after it starts; the drive then lasts
+    // 960 ms, ending on the ranger's due instant +1000 ms, with that read in flight.
+    let robot = Robot::new(40, 960);
+    let (_, start) = run_mission(&robot, two_states(true).0);
+    let ends = start + Duration::from_millis(1_000);
+    let started = robot.started.borrow();
+    assert_eq!(started.len(), 2, "drive, then park");
+    let park = started[1];
+    assert_eq!(park.at, ends + Duration::from_millis(40));
+    assert_eq!(park.tof.unwrap().at, ends, "a fresh read of that instant");
+    // Two reads started at that instant: the one cancelled, the one that delivered.
+    let reads = robot.reads.borrow();
+    let at_end: Vec<&Read> = reads
+        .iter()
+        .filter(|r| r.sensor == robot.ids.tof && r.start == ends)
+        .collect();
+    assert_eq!(at_end.len(), 1, "only completed reads are recorded");
+    assert_eq!(at_end[0].end, ends + Duration::from_millis(40));
 }
 
 #[test]
@@ -319,11 +380,11 @@ fn a_control_loop_without_its_sensing_side_fails_clearly_instead_of_hanging() {
     assert_eq!(done.elapsed, Duration::from_millis(1_001));
 }
 
-/// With a critical-section mutex and a platform that is `Sync`, the runtime can be shared by
-/// tasks at two priorities: it is `Sync`, and its sensing side is a `Send` future, as an
-/// `InterruptExecutor`'s spawner requires.
+/// With a critical-section mutex and a platform that is `Sync`, the runtime is `Sync` and its
+/// sensing side a `Send` future, as sharing it with a task of an `InterruptExecutor` needs.
+/// A compile-time property: it says nothing of how the two sides behave under preemption.
 #[test]
-fn a_runtime_with_a_critical_section_mutex_can_be_shared_across_priorities() {
+fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send() {
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
     /// A platform whose state would live in atomics or critical-section mutexes.
@@ -347,7 +408,7 @@ fn a_runtime_with_a_critical_section_mutex_can_be_shared_across_priorities() {
     fn sendable<F: core::future::Future + Send>(_: &F) {}
 
     let (mission, _) = mission();
-    let rt: Runtime<'_, '_, CriticalSectionRawMutex, Stateless, Stateless, (), 2, 1, 1, 1, 4> =
+    let rt: Runtime<'_, '_, CriticalSectionRawMutex, Stateless, Stateless, (), 2, 2, 1, 2, 4> =
         Runtime::new(&mission, &Stateless, &Stateless, (), Config::default());
     shared(&rt);
     sendable(&rt.sensing());
