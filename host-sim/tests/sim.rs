@@ -488,11 +488,11 @@ fn the_sweep_psmpa_misses_nothing_detectable_and_smpa_misses_much() {
     let s = stats.smpa.unwrap();
     assert_eq!(p.scenarios, 300);
     assert!(
-        p.detectable > 500,
-        "enough detectable obstacles: {}",
+        p.detectable.unwrap() > 500,
+        "enough detectable obstacles: {:?}",
         p.detectable
     );
-    assert_eq!(p.missed_detectable, 0);
+    assert_eq!(p.missed_detectable, Some(0));
     assert_eq!(p.collisions, 0);
     assert!(
         s.detection_rate() < 0.5 * p.detection_rate(),
@@ -543,6 +543,17 @@ fn the_robots_planner_cannot_run_out_in_its_domain() {
             "from {bits:05b}: {result:?}"
         );
     }
+}
+
+/// Detectability is measured on the P-SMPA run: a sweep of SMPA alone does not know it, and
+/// says so rather than reporting none.
+#[test]
+fn a_sweep_without_psmpa_does_not_claim_that_nothing_was_detectable() {
+    let stats = sweep::sweep(7, 20, &[Arch::Smpa], false).unwrap();
+    let s = stats.smpa.unwrap();
+    assert_eq!((s.detectable, s.missed_detectable), (None, None));
+    assert!(stats.psmpa.is_none());
+    assert!(sweep::render(&stats).contains("        -         -"));
 }
 
 /// The kitchen door is locked: "open door" presses the handle (an on-demand sample), the

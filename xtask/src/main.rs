@@ -47,7 +47,8 @@ enum Task {
         bless: bool,
     },
     /// Bounds the firmware's worst-case stack from its binary and checks the bound against
-    /// the high-water mark measured in QEMU (needs the nightly toolchain).
+    /// the high-water mark measured in QEMU (LLVM's frame sizes, unlocked on the stable
+    /// compiler with RUSTC_BOOTSTRAP).
     Stack,
     /// Every benchmark in one run (psmpa and its peers, stores, simulator, a 10,000-scenario
     /// sweep); writes bench/RESULTS.md and the README's table.

@@ -183,15 +183,17 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
             ),
             Fate::Collided => "collision".to_owned(),
         };
+        // From the integer milliseconds: a float would round 3.55 down and 18.55 up.
         let _ = writeln!(
             out,
-            "  #{:<2} {:<4} at {:>6.1} s: {what}",
+            "  #{:<2} {:<4} at {:>4}.{:03} s: {what}",
             i + 1,
             match item.kind {
                 crate::scenario::Kind::Box => "box",
                 crate::scenario::Kind::Ball => "ball",
             },
-            seconds(u64::from(item.at_ms)),
+            item.at_ms / 1000,
+            item.at_ms % 1000,
         );
     }
     out

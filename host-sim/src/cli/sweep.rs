@@ -104,10 +104,12 @@ pub struct ArchStats {
     pub interferences: u64,
     /// Detected.
     pub detected: u64,
-    /// Physically detectable (certain to register in a P-SMPA sample; see `world`).
-    pub detectable: u64,
-    /// Detectable obstacles this architecture did not detect, counted obstacle by obstacle.
-    pub missed_detectable: u64,
+    /// Physically detectable (certain to register in a P-SMPA sample; see `world`); `None`
+    /// when the sweep ran no P-SMPA, which is what tells.
+    pub detectable: Option<u64>,
+    /// Detectable obstacles this architecture did not detect, counted obstacle by obstacle;
+    /// `None` without P-SMPA runs.
+    pub missed_detectable: Option<u64>,
     /// Collisions.
     pub collisions: u64,
     /// Runs that reached the door.
@@ -123,21 +125,23 @@ pub struct ArchStats {
 }
 
 impl ArchStats {
-    fn add(&mut self, s: &Summary, detectable: &[bool]) {
-        let detectable_count = detectable.iter().filter(|d| **d).count() as u32;
-        // Obstacle by obstacle: detectable (in the P-SMPA run) but not detected here.
-        let missed = s
-            .obstacles
-            .iter()
-            .zip(detectable)
-            .filter(|(o, d)| **d && !matches!(o.fate, crate::world::Fate::Detected(_)))
-            .count() as u32;
+    fn add(&mut self, s: &Summary, detectable: Option<&[bool]>) {
+        if let Some(detectable) = detectable {
+            let count = detectable.iter().filter(|d| **d).count() as u64;
+            // Obstacle by obstacle: detectable (in the P-SMPA run) but not detected here.
+            let missed = s
+                .obstacles
+                .iter()
+                .zip(detectable)
+                .filter(|(o, d)| **d && !matches!(o.fate, crate::world::Fate::Detected(_)))
+                .count() as u64;
+            self.detectable = Some(self.detectable.unwrap_or(0) + count);
+            self.missed_detectable = Some(self.missed_detectable.unwrap_or(0) + missed);
+        }
         let t = &s.tally;
         self.scenarios += 1;
         self.interferences += u64::from(t.interferences);
         self.detected += u64::from(t.detected);
-        self.detectable += u64::from(detectable_count);
-        self.missed_detectable += u64::from(missed);
         self.collisions += u64::from(t.collisions);
         self.reached_door += u64::from(t.reached_door);
         self.goal += u64::from(matches!(s.ending, crate::run::Ending::Goal(_)));
@@ -218,11 +222,10 @@ pub fn sweep(
         let summaries = result?;
         // Detectability is a property of each obstacle of the scenario, measured on the
         // P-SMPA run (whose sensors run for the whole walk).
-        let detectable: Vec<bool> = summaries
+        let detectable: Option<Vec<bool>> = summaries
             .iter()
             .find(|s| s.arch == Arch::PSmpa)
-            .map(|s| s.obstacles.iter().map(|o| o.detectable).collect())
-            .unwrap_or_default();
+            .map(|s| s.obstacles.iter().map(|o| o.detectable).collect());
         let mut times = [None, None];
         for s in &summaries {
             let slot = match s.arch {
@@ -230,7 +233,7 @@ pub fn sweep(
                 Arch::Smpa => &mut stats.smpa,
             };
             slot.get_or_insert_with(ArchStats::default)
-                .add(s, &detectable);
+                .add(s, detectable.as_deref());
             times[usize::from(s.arch == Arch::Smpa)] = Some(s.time_cost_ms);
         }
         if let [Some(p), Some(s)] = times {
@@ -279,8 +282,8 @@ pub fn render(stats: &SweepStats) -> String {
             s.interferences,
             s.detected,
             100.0 * s.detection_rate(),
-            s.detectable,
-            s.missed_detectable,
+            s.detectable.map_or("-".to_owned(), |d| d.to_string()),
+            s.missed_detectable.map_or("-".to_owned(), |m| m.to_string()),
             s.collisions,
             s.reached_door,
             s.max_reaction_ms.map_or("-".to_owned(), |m| m.to_string()),
