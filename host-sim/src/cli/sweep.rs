@@ -283,7 +283,8 @@ pub fn render(stats: &SweepStats) -> String {
             s.detected,
             100.0 * s.detection_rate(),
             s.detectable.map_or("-".to_owned(), |d| d.to_string()),
-            s.missed_detectable.map_or("-".to_owned(), |m| m.to_string()),
+            s.missed_detectable
+                .map_or("-".to_owned(), |m| m.to_string()),
             s.collisions,
             s.reached_door,
             s.max_reaction_ms.map_or("-".to_owned(), |m| m.to_string()),
