@@ -82,6 +82,8 @@ mod firmware {
     struct SensingFirst;
 
     impl Sides for SensingFirst {
+        type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
+
         async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
             &self,
             sensing: S,

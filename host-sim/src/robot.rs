@@ -15,7 +15,8 @@
 //!   robot now believes and takes the back door.
 
 use embassy_futures::select::{Either, select};
-use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::{NoopRawMutex, RawMutex};
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::mission::{self, Bindings, LoadError, Registry};
 use psmpa_core::planner::{Planner, Search, Strategy};
@@ -369,23 +370,27 @@ pub const SLOWEST_PERMILLE: u16 = 250;
 /// before the sonar counts as stuck: walking towards an object must bring its echo closer.
 pub const STUCK_AFTER_UM: i64 = 50_000;
 
-/// The robot: the platform implementation of the mission's sensors and behaviours.
-pub struct Nao<'w, 's, L: WorldLog> {
-    world: &'w World<'s, L>,
+/// The robot: the platform implementation of the mission's sensors and behaviours. Its
+/// sensors and its behaviours run on the two sides of the runtime; what they share sits behind
+/// the mutex `M`, as the world's state does.
+pub struct Nao<'w, 's, L: WorldLog, M: RawMutex = NoopRawMutex> {
+    world: &'w World<'s, L, M>,
     bindings: Bindings<NaoSensor, NaoAction, 4, 8>,
     percepts: Percepts,
     /// The sonar's last echo in range and the odometry when it was first read.
-    echo: core::cell::Cell<Option<(u32, i64)>>,
+    echo: Mutex<M, core::cell::Cell<Option<(u32, i64)>>>,
     /// The sonar and the bumper of the mission, if it has them.
     sonar: Option<SensorId>,
     bumper: Option<SensorId>,
     /// Their sample timeouts: a read at least this long never answers.
     timeouts: [Duration; 2],
+    /// Spends processor time ([`Sides::compute`](crate::run::Sides::compute)).
+    compute: fn(u32),
 }
 
-impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
+impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
     /// The robot in `world`, running `robot`'s behaviours.
-    pub fn new(world: &'w World<'s, L>, robot: &Robot<'_>) -> Self {
+    pub fn new(world: &'w World<'s, L, M>, robot: &Robot<'_>) -> Self {
         let find = |which: NaoSensor| {
             (0..robot.mission.domain.sensors().len())
                 .filter_map(SensorId::new)
@@ -400,11 +405,20 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
             world,
             bindings: robot.bindings.clone(),
             percepts: robot.percepts,
-            echo: core::cell::Cell::new(None),
+            echo: Mutex::new(core::cell::Cell::new(None)),
             sonar,
             bumper,
             timeouts: [timeout(sonar), timeout(bumper)],
+            compute: |_| {},
         }
+    }
+
+    /// The robot, spending the scenario's `compute_us` of processor time on each walk step
+    /// through `compute`.
+    #[must_use]
+    pub fn with_compute(mut self, compute: fn(u32)) -> Self {
+        self.compute = compute;
+        self
     }
 
     /// Whether a sample read from the mutual store shows an obstacle in the way: a sonar echo
@@ -450,7 +464,13 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
         let mut handled = Instant::now();
         let mut stepping = false;
         let mut version = io.version();
+        let compute_us = world.scenario().compute_us;
         loop {
+            if compute_us > 0 {
+                // Planning the next step takes processor time: on a microcontroller, this
+                // poll of the deciding side is that long; sensing goes on meanwhile.
+                (self.compute)(compute_us);
+            }
             let motion = world.motion();
             if !matches!(motion, Motion::Avoiding { .. }) {
                 if stepping {
@@ -529,7 +549,7 @@ impl<'w, 's, L: WorldLog> Nao<'w, 's, L> {
     }
 }
 
-impl<L: WorldLog> Sensor for Nao<'_, '_, L> {
+impl<L: WorldLog, M: RawMutex> Sensor for Nao<'_, '_, L, M> {
     async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault> {
         let device = self.device(sensor).ok_or(SensorFault::Device(1))?;
         self.world.power(device, true);
@@ -626,7 +646,7 @@ async fn read_latency(read: Option<Duration>) {
     }
 }
 
-impl<L: WorldLog> Nao<'_, '_, L> {
+impl<L: WorldLog, M: RawMutex> Nao<'_, '_, L, M> {
     /// The sonar driver's plausibility checks: a reading outside the sonar's range is a device
     /// fault; an echo in range that keeps the same distance while the robot walks on is stuck.
     /// (A sonar stuck at its maximum, "nothing in range", cannot be told from an empty path.)
@@ -640,16 +660,16 @@ impl<L: WorldLog> Nao<'_, '_, L> {
             return Err(SensorFault::OutOfRange);
         }
         if i64::from(mm) == max {
-            self.echo.set(None);
+            self.echo.lock(|e| e.set(None));
             return Ok(());
         }
-        match self.echo.get() {
+        match self.echo.lock(core::cell::Cell::get) {
             Some((last, since)) if last == mm => {
                 if at - since >= STUCK_AFTER_UM {
                     return Err(SensorFault::Stuck);
                 }
             }
-            _ => self.echo.set(Some((mm, at))),
+            _ => self.echo.lock(|e| e.set(Some((mm, at)))),
         }
         Ok(())
     }
@@ -664,7 +684,7 @@ impl<L: WorldLog> Nao<'_, '_, L> {
     }
 }
 
-impl<L: WorldLog> Actuator for Nao<'_, '_, L> {
+impl<L: WorldLog, M: RawMutex> Actuator for Nao<'_, '_, L, M> {
     async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
         let Some(behaviour) = self.bindings.action(action) else {
             return Outcome::Failure;
@@ -695,6 +715,6 @@ impl<L: WorldLog> Actuator for Nao<'_, '_, L> {
     }
 }
 
-/// The runtime type of a Fetch Tea run.
-pub type NaoRuntime<'r, 'a, 'w, 's, L, T> =
-    Runtime<'r, 'a, NoopRawMutex, Nao<'w, 's, L>, Nao<'w, 's, L>, T, 4, 8, 4, 6, 4>;
+/// The runtime type of a Fetch Tea run, its two sides sharing state through `M`.
+pub type NaoRuntime<'r, 'a, 'w, 's, L, T, M = NoopRawMutex> =
+    Runtime<'r, 'a, M, Nao<'w, 's, L, M>, Nao<'w, 's, L, M>, T, 4, 8, 4, 6, 4>;

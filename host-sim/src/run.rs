@@ -11,6 +11,7 @@ use core::pin::Pin;
 use core::task::{Context, Poll};
 
 use embassy_futures::select::{Either, select};
+use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, Timer};
 use psmpa_core::{ControlError, Report, Runtime, TraceSink};
 
@@ -51,6 +52,10 @@ pub struct Summary {
 /// Where the two sides of a runtime run: the platform's choice.
 #[allow(async_fn_in_trait)] // Single-threaded executors: no `Send` bound wanted.
 pub trait Sides {
+    /// The mutex through which the two sides share state: a `NoopRawMutex` where they take
+    /// turns on one thread, a `CriticalSectionRawMutex` where sensing preempts deciding.
+    type Mutex: RawMutex;
+
     /// Runs `sensing` at a higher priority than `deciding` for as long as `deciding` runs, and
     /// returns what `deciding` returns. `sensing` is dropped when `deciding` ends.
     ///
@@ -59,8 +64,15 @@ pub trait Sides {
     /// An implementation may hand `sensing` to a task that polls it from elsewhere, so the
     /// returned future must not be leaked (`mem::forget`) while anything `sensing` borrows is
     /// alive, and must be dropped on the thread that polled it: run it to completion, or drop
-    /// it.
+    /// it. Where that task preempts this one, `sensing` must be safe to poll from there: `Send`,
+    /// its shared state behind [`Mutex`](Self::Mutex).
     async unsafe fn beside<S: Future, D: Future>(&self, sensing: S, deciding: D) -> D::Output;
+
+    /// Spends `us` microseconds of processor time (a behaviour's computation): nothing in
+    /// virtual time, where computing takes none; busy cycles on a microcontroller.
+    fn compute(us: u32) {
+        let _ = us;
+    }
 }
 
 /// A pinned future with its type and lifetime erased: its address and the function that polls
@@ -150,6 +162,27 @@ impl<'h, H: HighSlot, S: Future, D: Future> Beside<'h, H, S, D> {
     }
 }
 
+/// A [`HighSlot`] whose poller preempts the code that installs into it (an interrupt
+/// executor): what it polls is touched from another context, so it must be `Send`.
+///
+/// # Safety
+///
+/// As [`HighSlot`], and the poller runs only at a priority that preempts the installing code.
+pub unsafe trait PreemptingSlot: HighSlot {}
+
+impl<'h, H: PreemptingSlot, S: Future + Send, D: Future> Beside<'h, H, S, D> {
+    /// `sensing` beside `deciding`, through a slot whose poller preempts this one: `sensing`
+    /// must be `Send`.
+    ///
+    /// # Safety
+    ///
+    /// As [`Beside::new`].
+    pub unsafe fn preempting(slot: &'h H, sensing: S, deciding: D) -> Self {
+        // SAFETY: the caller's contract; `Send` is what the preempting poller needs besides.
+        unsafe { Self::new(slot, sensing, deciding) }
+    }
+}
+
 impl<H: HighSlot, S: Future, D: Future> Future for Beside<'_, H, S, D> {
     type Output = D::Output;
 
@@ -189,8 +222,8 @@ impl<H: HighSlot, S, D> Drop for Beside<'_, H, S, D> {
 ///
 /// As [`Sides::beside`]: the future must not be leaked, and must be dropped where it was
 /// polled. [`crate::sim`] runs it safely.
-pub async unsafe fn run<L: WorldLog, T: TraceSink>(
-    sides: &impl Sides,
+pub async unsafe fn run<P: Sides, L: WorldLog, T: TraceSink>(
+    sides: &P,
     scenario: &Scenario,
     arch: Arch,
     log: L,
@@ -210,8 +243,8 @@ pub async unsafe fn run<L: WorldLog, T: TraceSink>(
 ///
 /// As [`Sides::beside`]: the future must not be leaked, and must be dropped where it was
 /// polled.
-pub async unsafe fn run_robot<L: WorldLog, T: TraceSink>(
-    sides: &impl Sides,
+pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
+    sides: &P,
     robot: &Robot<'_>,
     scenario: &Scenario,
     arch: Arch,
@@ -219,9 +252,9 @@ pub async unsafe fn run_robot<L: WorldLog, T: TraceSink>(
     log: L,
     sink: T,
 ) -> (Summary, L, T) {
-    let world = World::new(scenario, log);
-    let nao = Nao::new(&world, robot);
-    let runtime: robot::NaoRuntime<'_, '_, '_, '_, L, T> = Runtime::new(
+    let world: World<'_, L, P::Mutex> = World::new(scenario, log);
+    let nao = Nao::new(&world, robot).with_compute(P::compute);
+    let runtime: robot::NaoRuntime<'_, '_, '_, '_, L, T, P::Mutex> = Runtime::new(
         &robot.mission,
         &nao,
         &nao,

@@ -55,6 +55,10 @@ pub struct RobotFile {
     /// 0 (the default) walks at `speed_mps` throughout.
     #[serde(default, deserialize_with = "number")]
     pub slow_m: Option<f64>,
+    /// Extension: processor time the walk spends on each of its steps (planning a path, say),
+    /// µs; none in the simulator's virtual time, real cycles on a microcontroller.
+    #[serde(default, deserialize_with = "number")]
+    pub compute_us: Option<f64>,
 }
 
 /// `sonar` as written in the file.
@@ -301,6 +305,8 @@ pub struct Scenario {
     pub avoid_ms: u64,
     /// The walk slows down while the sonar reads an obstacle nearer than this, µm; 0: never.
     pub slow_um: i64,
+    /// Processor time the walk spends on each step, µs (on a microcontroller).
+    pub compute_us: u32,
     /// The sonar.
     pub sonar: Sonar,
     /// Bumper period, ms.
@@ -375,6 +381,7 @@ impl Serialize for Scenario {
         t.serialize_element(&self.speed_um_per_ms)?;
         t.serialize_element(&self.avoid_ms)?;
         t.serialize_element(&self.slow_um)?;
+        t.serialize_element(&self.compute_us)?;
         t.serialize_element(&sonar)?;
         t.serialize_element(&self.bumper_period_ms)?;
         t.serialize_element(&self.bumper_latency_ms)?;
@@ -402,7 +409,7 @@ impl Serialize for Rows<'_> {
 }
 
 /// Elements of the canonical array.
-const CANONICAL_FIELDS: usize = 16;
+const CANONICAL_FIELDS: usize = 17;
 
 /// Fills a scenario from its canonical form, element by element.
 struct Fill<'s>(&'s mut Scenario);
@@ -437,8 +444,9 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
         s.speed_um_per_ms = element(&mut seq, 4)?;
         s.avoid_ms = element(&mut seq, 5)?;
         s.slow_um = element(&mut seq, 6)?;
+        s.compute_us = element(&mut seq, 7)?;
         let (period_ms, min_um, max_um, threshold_um, noise_um, dropout, latency_ms): SonarRow =
-            element(&mut seq, 7)?;
+            element(&mut seq, 8)?;
         s.sonar = Sonar {
             period_ms,
             min_um,
@@ -448,13 +456,13 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
             dropout,
             latency_ms,
         };
-        s.bumper_period_ms = element(&mut seq, 8)?;
-        s.bumper_latency_ms = element(&mut seq, 9)?;
-        s.sense_ms = element(&mut seq, 10)?;
-        s.act_ms = element(&mut seq, 11)?;
-        s.door_locked = element(&mut seq, 12)?;
-        s.back_door_um = element(&mut seq, 13)?;
-        let fault: Option<(u8, u32)> = element(&mut seq, 14)?;
+        s.bumper_period_ms = element(&mut seq, 9)?;
+        s.bumper_latency_ms = element(&mut seq, 10)?;
+        s.sense_ms = element(&mut seq, 11)?;
+        s.act_ms = element(&mut seq, 12)?;
+        s.door_locked = element(&mut seq, 13)?;
+        s.back_door_um = element(&mut seq, 14)?;
+        let fault: Option<(u8, u32)> = element(&mut seq, 15)?;
         s.fault = match fault {
             Some((code, at)) => Some((
                 FaultKind::from_code(code).ok_or_else(|| {
@@ -466,10 +474,10 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
         };
         s.interferences.clear();
         seq.next_element_seed(Items(&mut s.interferences))?
-            .ok_or_else(|| serde::de::Error::invalid_length(15, &"a canonical scenario"))?;
+            .ok_or_else(|| serde::de::Error::invalid_length(16, &"a canonical scenario"))?;
         if seq.next_element::<serde::de::IgnoredAny>()?.is_some() {
             return Err(serde::de::Error::invalid_length(
-                17,
+                18,
                 &"a canonical scenario",
             ));
         }
@@ -604,6 +612,13 @@ pub enum Problem {
     },
     /// The name is empty or only spaces.
     Empty,
+    /// Must be a whole number of microseconds from 0 to `max`.
+    NotWholeMicros {
+        /// The value.
+        value: f64,
+        /// The largest allowed.
+        max: u32,
+    },
     /// Must be a whole number of milliseconds from 0 to `max`.
     NotWholeMillis {
         /// The value.
@@ -627,6 +642,10 @@ impl fmt::Display for Problem {
                 write!(f, "must lie between {min} and {max}, got {value}")
             }
             Self::Empty => f.write_str("must not be empty"),
+            Self::NotWholeMicros { value, max } => write!(
+                f,
+                "must be a whole number of microseconds from 0 to {max}, got {value}"
+            ),
             Self::NotWholeMillis { value, max } => write!(
                 f,
                 "must be a whole number of milliseconds from 0 to {max}, got {value}"
@@ -730,6 +749,9 @@ fn millis(field: Field, value: f64) -> Result<u64, ScenarioError> {
     Ok(whole)
 }
 
+/// Most processor time a walk step may take, µs (`robot.compute_us`): a tenth of a second.
+pub const MAX_COMPUTE_US: u32 = 100_000;
+
 /// Longest sensor read latency accepted, ms.
 pub const MAX_LATENCY_MS: u64 = 1_000;
 
@@ -816,6 +838,7 @@ impl Scenario {
             speed_mps: Some(0.1),
             avoid_s: Some(2.0),
             slow_m: Some(0.0),
+            compute_us: Some(0.0),
         }),
         sonar: Some(SonarFile {
             period_ms: Some(100.0),
@@ -866,6 +889,7 @@ impl Scenario {
             speed_um_per_ms: 0,
             avoid_ms: 0,
             slow_um: 0,
+            compute_us: 0,
             sonar: Sonar {
                 period_ms: 0,
                 min_um: 0,
@@ -1011,6 +1035,17 @@ impl Scenario {
             pick(b.latency_ms, db.latency_ms),
         )?;
         let slow_um = metres(Field::of("robot", "slow_m"), pick(r.slow_m, dr.slow_m))?;
+        let compute_us = {
+            let us = pick(r.compute_us, dr.compute_us);
+            if !(0.0..=f64::from(MAX_COMPUTE_US)).contains(&us) || f64::from(us as u32) != us {
+                let problem = Problem::NotWholeMicros {
+                    value: us,
+                    max: MAX_COMPUTE_US,
+                };
+                return Err(invalid(Field::of("robot", "compute_us"), problem));
+            }
+            us as u32
+        };
         let sense_ms = millis(Field::of("smpa", "sense_ms"), pick(p.sense_ms, dp.sense_ms))?;
         let act_ms = millis(Field::of("smpa", "act_ms"), pick(p.act_ms, dp.act_ms))?;
         let doors = file.doors.unwrap_or_default();
@@ -1051,6 +1086,7 @@ impl Scenario {
             speed_um_per_ms,
             avoid_ms,
             slow_um,
+            compute_us,
             sonar,
             bumper_period_ms,
             bumper_latency_ms,
@@ -1182,23 +1218,45 @@ mod tests {
             e.to_string(),
             "robot.slow_m: must not be negative, got -0.5"
         );
+        for us in ["-1", "0.5", "100001", "1e300"] {
+            let json =
+                std::format!(r#"{{"name":"x","robot":{{"compute_us":{us}}},"interferences":[]}}"#);
+            let shown: f64 = us.parse().unwrap();
+            assert_eq!(
+                err(&json).to_string(),
+                std::format!(
+                    "robot.compute_us: must be a whole number of microseconds from 0 to 100000, \
+                     got {shown}"
+                )
+            );
+        }
     }
 
     #[test]
     fn read_latencies_default_to_none_and_take_whole_milliseconds() {
         let s = Scenario::parse(br#"{"name":"x","interferences":[]}"#).unwrap();
         assert_eq!(
-            (s.sonar.latency_ms, s.bumper_latency_ms, s.slow_um),
-            (0, 0, 0)
+            (
+                s.sonar.latency_ms,
+                s.bumper_latency_ms,
+                s.slow_um,
+                s.compute_us
+            ),
+            (0, 0, 0, 0)
         );
         let s = Scenario::parse(
             br#"{"name":"x","sonar":{"latency_ms":40},"bumper":{"latency_ms":1000},
-                "robot":{"slow_m":1.2},"interferences":[]}"#,
+                "robot":{"slow_m":1.2,"compute_us":100000},"interferences":[]}"#,
         )
         .unwrap();
         assert_eq!(
-            (s.sonar.latency_ms, s.bumper_latency_ms, s.slow_um),
-            (40, 1000, 1_200_000)
+            (
+                s.sonar.latency_ms,
+                s.bumper_latency_ms,
+                s.slow_um,
+                s.compute_us
+            ),
+            (40, 1000, 1_200_000, 100_000)
         );
         let mut buf = [0u8; 4096];
         let len = s.to_canonical(&mut buf).unwrap();

@@ -66,6 +66,9 @@ pub struct Recorded {
 pub struct Prioritized;
 
 impl Sides for Prioritized {
+    // The host polls the two sides in turns on one thread.
+    type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
+
     async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
         &self,
         sensing: S,

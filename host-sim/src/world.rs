@@ -29,6 +29,8 @@
 
 use core::cell::RefCell;
 
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::{NoopRawMutex, RawMutex};
 use embassy_time::Instant;
 use heapless::Vec;
 use rand_core::{Rng, SeedableRng};
@@ -188,6 +190,12 @@ impl WorldEvent {
 pub trait WorldLog {
     /// One event.
     fn log(&mut self, at_ms: u64, pos_um: i64, event: WorldEvent);
+
+    /// A read of `device` starts now (not an event of the world: not hashed). A platform can
+    /// stamp it, to measure how long the reaction to what the read finds takes.
+    fn read_started(&mut self, device: Device) {
+        let _ = device;
+    }
 }
 
 /// Discards the events.
@@ -325,9 +333,14 @@ struct State<L> {
 }
 
 /// The world of one run: the scenario's robot, sensors and interferences.
-pub struct World<'s, L: WorldLog> {
+///
+/// Both sides of the runtime act on it (the sensing side reads, the deciding side walks), so
+/// its state is behind a mutex: `NoopRawMutex` where they take turns on one thread, a
+/// `CriticalSectionRawMutex` where sensing preempts (each access then runs in a critical
+/// section: the simulated physics stands still while it is computed).
+pub struct World<'s, L: WorldLog, M: RawMutex = NoopRawMutex> {
     scenario: &'s Scenario,
-    state: RefCell<State<L>>,
+    state: Mutex<M, RefCell<State<L>>>,
 }
 
 /// How one interference ended.
@@ -644,7 +657,7 @@ impl<L: WorldLog> State<L> {
     }
 }
 
-impl<'s, L: WorldLog> World<'s, L> {
+impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// The world at time 0 of `scenario`, logging into `log`.
     pub fn new(scenario: &'s Scenario, log: L) -> Self {
         let obstacles = scenario
@@ -666,7 +679,7 @@ impl<'s, L: WorldLog> World<'s, L> {
             .collect();
         Self {
             scenario,
-            state: RefCell::new(State {
+            state: Mutex::new(RefCell::new(State {
                 now: 0,
                 pos_um: 0,
                 target_um: scenario.door_um,
@@ -685,7 +698,7 @@ impl<'s, L: WorldLog> World<'s, L> {
                 dirty: true,
                 hash: TraceHash::new(),
                 log,
-            }),
+            })),
         }
     }
 
@@ -697,19 +710,24 @@ impl<'s, L: WorldLog> World<'s, L> {
     /// Brings the world to the current `embassy-time` instant and runs `f` on it.
     fn with<R>(&self, f: impl FnOnce(&mut State<L>, &Scenario) -> R) -> R {
         let now = Instant::now().as_millis();
-        let mut s = self.state.borrow_mut();
-        s.advance_to(now, self.scenario);
-        let r = f(&mut s, self.scenario);
-        s.dirty = true;
-        r
+        self.state.lock(|cell| {
+            // Never borrowed twice: no world method calls another inside its closure.
+            let mut s = cell.borrow_mut();
+            s.advance_to(now, self.scenario);
+            let r = f(&mut s, self.scenario);
+            s.dirty = true;
+            r
+        })
     }
 
     /// [`with`](Self::with) for queries that change nothing.
     fn view<R>(&self, f: impl FnOnce(&State<L>, &Scenario) -> R) -> R {
         let now = Instant::now().as_millis();
-        let mut s = self.state.borrow_mut();
-        s.advance_to(now, self.scenario);
-        f(&s, self.scenario)
+        self.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            s.advance_to(now, self.scenario);
+            f(&s, self.scenario)
+        })
     }
 
     /// The robot's position, µm.
@@ -875,6 +893,7 @@ impl<'s, L: WorldLog> World<'s, L> {
     pub fn sonar_read(&self) -> Echo {
         let fault = self.sonar_fault();
         self.with(|s, sc| {
+            s.log.read_started(Device::Sonar);
             let sonar = sc.sonar;
             let mut echo = Echo {
                 mm: None,
@@ -966,13 +985,16 @@ impl<'s, L: WorldLog> World<'s, L> {
 
     /// Starts a bumper read: what the robot touches now.
     pub fn bumper_read(&self) -> Touch {
-        self.with(|s, _| Touch {
-            touching: s
-                .obstacles
-                .iter()
-                .enumerate()
-                .filter(|(_, o)| s.touching(o))
-                .fold(0, |acc, (i, _)| acc | 1 << i),
+        self.with(|s, _| {
+            s.log.read_started(Device::Bumper);
+            Touch {
+                touching: s
+                    .obstacles
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, o)| s.touching(o))
+                    .fold(0, |acc, (i, _)| acc | 1 << i),
+            }
         })
     }
 
@@ -1095,11 +1117,11 @@ impl<'s, L: WorldLog> World<'s, L> {
 
     /// Hash of every world event so far.
     pub fn hash(&self) -> TraceHash {
-        self.state.borrow().hash
+        self.state.lock(|cell| cell.borrow().hash)
     }
 
     /// Gives the world up and returns its log.
     pub fn into_log(self) -> L {
-        self.state.into_inner().log
+        self.state.into_inner().into_inner().log
     }
 }
