@@ -29,12 +29,15 @@
 //! once (O(NS)).
 
 use core::convert::Infallible;
-use core::future::{pending, poll_fn};
+use core::future::{Future, pending, poll_fn};
+use core::pin::Pin;
+use core::task::{Context, Poll};
 
 use embassy_futures::join::join_array;
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, TimeoutError, with_timeout};
+use pin_project_lite::pin_project;
 
 use crate::action::{SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::Domain;
@@ -58,6 +61,26 @@ pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
     )
 }
 
+pin_project! {
+    /// The sensing side of a runtime ([`Runtime::sensing`]): its samplers, each polled in
+    /// place. Never ends.
+    #[must_use = "futures do nothing unless polled"]
+    pub struct Sensing<F> {
+        #[pin]
+        samplers: F,
+    }
+}
+
+impl<F: Future> Future for Sensing<F> {
+    type Output = Infallible;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Infallible> {
+        // Samplers never end.
+        let _ = self.project().samplers.poll(cx);
+        Poll::Pending
+    }
+}
+
 impl<
     M: RawMutex,
     S: Sensor,
@@ -74,11 +97,17 @@ impl<
     /// sensing. Place it on an executor of higher priority than the deciding side, or run it
     /// beside the control loop on one executor (`select(rt.sensing(), rt.run())`, which polls
     /// sensing first).
-    pub async fn sensing(&self) -> Infallible {
+    ///
+    /// The samplers are built here, out of line, not in the first poll: the temporaries of
+    /// building `NS` of them stay off the stack of whatever polls them (an interrupt, on a
+    /// microcontroller, on top of the deciding side's stack). Pin the result where it is made
+    /// (`pin!(rt.sensing())`) and it is never copied again.
+    #[inline(never)]
+    pub fn sensing(&self) -> Sensing<impl Future<Output = [(); NS]> + '_> {
         let samplers: [_; NS] = core::array::from_fn(|index| self.sampler(index));
-        join_array(samplers).await;
-        // Samplers never end.
-        pending().await
+        Sensing {
+            samplers: join_array(samplers),
+        }
     }
 
     /// The sampler of sensor `index`: serves every command that includes it, forever. One flat

@@ -5,27 +5,32 @@
 //! sensor `i` is a periodic job: released every `Tᵢ`, it costs `Cᵢ` of processor time on the
 //! sensing side (starting the read, then delivering it: store, fuse, check, wake) and waits
 //! `Lᵢ` for its read between the two (an echo, a conversion: no processor time; other work
-//! runs meanwhile). The deciding side then reacts in one behaviour step of cost `C_b`. The
-//! worst response time, from release to the behaviour having reacted, is the least fixed point
-//! of
+//! runs meanwhile). Interrupt handlers that release work (a timer's alarm) are jobs too, of
+//! the highest priority. The deciding side then reacts in one behaviour step of cost `C_b`.
+//! The worst response, from release to the behaviour having reacted, has two parts, each the
+//! least fixed point of its equation:
 //!
-//! `Rᵢ = nᵢ·b + a + Lᵢ + Cᵢ + C_b + Σⱼ≠ᵢ ⌈Rᵢ / Tⱼ⌉ · Cⱼ`
+//! * the sample, from release to delivery, which sees only the other sensing jobs and the
+//!   interrupts (sensing jobs share a priority, so any released meanwhile may run first):
+//!   `Sᵢ = nᵢ·b + Lᵢ + Cᵢ + Σⱼ≠ᵢ ⌈Sᵢ / Tⱼ⌉ · Cⱼ`
+//! * the reaction, from delivery to the end of the behaviour step, which sees everything,
+//!   this sensor's next samples included: `Aᵢ = a + C_b + Σⱼ ⌈Aᵢ / Tⱼ⌉ · Cⱼ`
 //!
-//! where `nᵢ` is the number of processor segments of a sample (1 without a read latency, 2
-//! with one) and the blocking comes from where the two sides run ([`Blocking`]):
+//! and `Rᵢ = Sᵢ + Aᵢ`. `nᵢ` is the number of processor segments of a sample (1 without a read
+//! latency, 2 with one); the blocking terms `b` (per segment) and `a` (before the reaction)
+//! come from where the two sides run ([`Blocking`]):
 //!
 //! * one executor, sensing polled first ([`Blocking::one_executor`]): each segment may wait
 //!   for the deciding poll in progress, `b = B`; the behaviour step is the next deciding poll,
 //!   `a = 0`;
-//! * sensing on an executor that preempts deciding ([`Blocking::preemptive`]): a sample never
-//!   waits for deciding, `b = 0`; the behaviour step waits for the deciding poll in progress,
-//!   `a = B`.
+//! * sensing on an executor that preempts deciding ([`Blocking::preemptive`]): a segment waits
+//!   at most for a critical section the deciding side is in, `b = B_cs`; the behaviour step
+//!   waits for the deciding poll in progress, `a = B`.
 //!
-//! Every other sampling job released meanwhile may run first (sensing jobs share a priority).
 //! The set is unschedulable when the utilisation `Σ Cⱼ / Tⱼ` reaches 1, and overloaded when a
-//! job's processor time and blocking, `Rᵢ − Lᵢ`, exceed its period. A read longer than the
-//! period is not an overload: the sampler skips the instants it overran, so samples start at
-//! most [`Response::gap_ns`] apart.
+//! sample's processor time, blocking and interference, `Sᵢ − Lᵢ`, exceed its period. A read
+//! longer than the period is not an overload: the sampler skips the instants it overran, so
+//! samples start at most [`Response::gap_ns`] apart.
 //!
 //! The reaction latency to an obstacle seen by sensor `i` adds the wait for the sample that
 //! sees it: [`latency_bound`].
@@ -71,10 +76,12 @@ impl Blocking {
         }
     }
 
-    /// Sensing on an executor that preempts the deciding side.
-    pub const fn preemptive(longest_deciding_ns: u64) -> Self {
+    /// Sensing on an executor that preempts the deciding side: a sample waits at most for the
+    /// longest critical section entered below its priority, the reaction for the longest
+    /// deciding poll.
+    pub const fn preemptive(longest_deciding_ns: u64, longest_critical_ns: u64) -> Self {
         Self {
-            per_segment_ns: 0,
+            per_segment_ns: longest_critical_ns,
             before_reaction_ns: longest_deciding_ns,
         }
     }
@@ -84,7 +91,9 @@ impl Blocking {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Response {
-    /// From a release to the behaviour step it wakes having run, ns.
+    /// From a release to the sample's delivery, ns: `Sᵢ`.
+    pub sample_ns: u64,
+    /// From a release to the behaviour step it wakes having run, ns: `Rᵢ = Sᵢ + Aᵢ`.
     pub response_ns: u64,
     /// The longest time between the starts of two samples, ns: the period, or a multiple of it
     /// when a sample can outlast the period.
@@ -152,11 +161,41 @@ pub fn utilisation_ppm(jobs: &[Job]) -> Result<u64, TimingError> {
     })
 }
 
-/// The worst response of job `i`: from its release to the end of the behaviour step of cost
-/// `reaction_ns` it wakes, and the longest gap between the starts of two of its samples.
+/// The least fixed point of `R = base + Σ ⌈R / Tⱼ⌉ · Cⱼ` over the jobs `interferes` keeps,
+/// or the first `R` that `overrun` refuses. The utilisation is below 1, so it exists.
+fn fixed_point(
+    jobs: &[Job],
+    base: u64,
+    interferes: impl Fn(usize) -> bool,
+    overrun: impl Fn(u64) -> Result<(), TimingError>,
+) -> Result<u64, TimingError> {
+    let mut r = base;
+    loop {
+        overrun(r)?;
+        let interference = jobs
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| interferes(*j))
+            .fold(0u64, |acc, (_, other)| {
+                // Periods are not zero: `utilisation_ppm` checked them.
+                let releases = r.div_ceil(other.period_ns.max(1));
+                acc.saturating_add(releases.saturating_mul(other.cost_ns))
+            });
+        let next = base.saturating_add(interference);
+        if next == r {
+            return Ok(r);
+        }
+        r = next;
+    }
+}
+
+/// The worst response of job `i`: from its release to its delivery, and on to the end of the
+/// behaviour step of cost `reaction_ns` it wakes; and the longest gap between the starts of
+/// two of its samples. Every other job interferes with the sample; every job, `i` included,
+/// with the reaction.
 ///
-/// Errors when the set needs the whole processor, or when the job's processor time and
-/// blocking exceed its period.
+/// Errors when the set needs the whole processor, or when the sample's processor time,
+/// blocking and interference exceed its period.
 pub fn response(
     jobs: &[Job],
     i: usize,
@@ -169,42 +208,33 @@ pub fn response(
         return Err(TimingError::Unschedulable { utilisation_ppm });
     }
     let segments = if job.latency_ns > 0 { 2 } else { 1 };
-    let base = blocking
+    let sample_base = blocking
         .per_segment_ns
         .saturating_mul(segments)
-        .saturating_add(blocking.before_reaction_ns)
         .saturating_add(job.latency_ns)
-        .saturating_add(job.cost_ns)
-        .saturating_add(reaction_ns);
-    let mut r = base;
-    loop {
-        if r.saturating_sub(job.latency_ns) > job.period_ns {
-            return Err(TimingError::Overrun {
+        .saturating_add(job.cost_ns);
+    let sample = fixed_point(
+        jobs,
+        sample_base,
+        |j| j != i,
+        |r| match r.saturating_sub(job.latency_ns) > job.period_ns {
+            true => Err(TimingError::Overrun {
                 job: i,
                 response_ns: r,
                 period_ns: job.period_ns,
-            });
-        }
-        let interference =
-            jobs.iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .fold(0u64, |acc, (_, other)| {
-                    // Periods are not zero: `utilisation_ppm` checked them.
-                    let releases = r.div_ceil(other.period_ns.max(1));
-                    acc.saturating_add(releases.saturating_mul(other.cost_ns))
-                });
-        let next = base.saturating_add(interference);
-        if next == r {
-            // A sample that can outlast its period skips the instants it overran.
-            let periods = r.div_ceil(job.period_ns.max(1)).max(1);
-            return Ok(Response {
-                response_ns: r,
-                gap_ns: periods.saturating_mul(job.period_ns),
-            });
-        }
-        r = next;
-    }
+            }),
+            false => Ok(()),
+        },
+    )?;
+    let reaction_base = blocking.before_reaction_ns.saturating_add(reaction_ns);
+    let reaction = fixed_point(jobs, reaction_base, |_| true, |_| Ok(()))?;
+    // A sample that can outlast its period skips the instants it overran.
+    let periods = sample.div_ceil(job.period_ns.max(1)).max(1);
+    Ok(Response {
+        sample_ns: sample,
+        response_ns: sample.saturating_add(reaction),
+        gap_ns: periods.saturating_mul(job.period_ns),
+    })
 }
 
 /// The longest time from an obstacle becoming certain to register (its distance beyond
@@ -243,11 +273,13 @@ mod tests {
         // behaviour step of 0 ms.
         let jobs = [job(4, MS / 2, 0), job(6, MS, 0), job(10, MS, 0)];
         let one = Blocking::one_executor(MS / 2);
-        // R = 0.5 + 0.5 = 1 → 1 + ⌈1/6⌉·1 + ⌈1/10⌉·1 = 3 → 3 (⌈3/6⌉ = ⌈3/10⌉ = 1).
+        // S = 0.5 + 0.5 = 1 → 1 + ⌈1/6⌉·1 + ⌈1/10⌉·1 = 3 → 3 (⌈3/6⌉ = ⌈3/10⌉ = 1); a
+        // reaction of 0 sees no release: A = 0.
         let r = response(&jobs, 0, one, 0).unwrap();
         assert_eq!(
             r,
             Response {
+                sample_ns: 3 * MS,
                 response_ns: 3 * MS,
                 gap_ns: 4 * MS
             }
@@ -272,22 +304,35 @@ mod tests {
         let jobs = [job(100, 300_000, 40), job(20, 300_000, 0)];
         let reaction = 200_000;
         // One executor: the sonar's read start and its delivery may each wait for a deciding
-        // poll. R = 2·1 + 40 + 0.3 + 0.2 = 42.5 → + ⌈42.5/20⌉·0.3 = 43.4 → 43.4.
+        // poll. S = 2·1 + 40 + 0.3 = 42.3 → + ⌈42.3/20⌉·0.3 = 43.2 → 43.2. The reaction sees
+        // both sensors: A = 0.2 → + 0.3 + 0.3 = 0.8 → 0.8. R = 44.
         let r = response(&jobs, 0, Blocking::one_executor(MS), reaction).unwrap();
-        assert_eq!(r.response_ns, 43_400_000);
+        assert_eq!((r.sample_ns, r.response_ns), (43_200_000, 44 * MS));
         assert_eq!(r.gap_ns, 100 * MS);
-        // The bumper reads at once: one segment, one blocking. R = 1 + 0.3 + 0.2 = 1.5 → + 0.3.
+        // The bumper reads at once: one segment, one blocking. S = 1 + 0.3 → + 0.3 = 1.6.
         let b = response(&jobs, 1, Blocking::one_executor(MS), reaction).unwrap();
-        assert_eq!(b.response_ns, 1_800_000);
-        // Sensing preempting deciding: only the behaviour step waits for a deciding poll.
-        let p = response(&jobs, 0, Blocking::preemptive(MS), reaction).unwrap();
-        assert_eq!(p.response_ns, 42_400_000);
+        assert_eq!((b.sample_ns, b.response_ns), (1_600_000, 2_400_000));
+        // Sensing preempting deciding, critical sections of 0.05 ms: a segment waits for one,
+        // the behaviour step for a deciding poll. S = 2·0.05 + 40 + 0.3 = 40.4 → + 0.9 = 41.3;
+        // A = 1 + 0.2 = 1.2 → + 0.3 + 0.3 = 1.8. R = 43.1.
+        let p = response(&jobs, 0, Blocking::preemptive(MS, 50_000), reaction).unwrap();
+        assert_eq!((p.sample_ns, p.response_ns), (41_300_000, 43_100_000));
+        // A long deciding poll no longer overruns a sample: 30 ms beside a 20 ms bumper is an
+        // overrun on one executor, a slower reaction when sensing preempts.
+        assert!(matches!(
+            response(&jobs, 1, Blocking::one_executor(30 * MS), reaction),
+            Err(TimingError::Overrun { job: 1, .. })
+        ));
+        let long = response(&jobs, 1, Blocking::preemptive(30 * MS, 0), reaction).unwrap();
+        // S = 0.3 → + 0.3 = 0.6. A = 30.2 → + ⌈30.2/100⌉·0.3 + ⌈30.2/20⌉·0.3 = 31.1 → 31.1.
+        assert_eq!((long.sample_ns, long.response_ns), (600_000, 31_700_000));
         // A read longer than the period is no overload: every second instant is skipped.
         let slow = [job(100, 300_000, 150)];
         let s = response(&slow, 0, Blocking::NONE, 0).unwrap();
         assert_eq!(
             s,
             Response {
+                sample_ns: 150_300_000,
                 response_ns: 150_300_000,
                 gap_ns: 200 * MS
             }
@@ -342,12 +387,14 @@ mod tests {
     fn latency_adds_the_wait_for_the_detecting_sample() {
         // 100 ms gap, up to 9 lost samples tolerated, 2 ms response, 30 ms margin.
         let r = Response {
+            sample_ns: MS,
             response_ns: 2 * MS,
             gap_ns: 100 * MS,
         };
         assert_eq!(latency_bound(r, 10, 30 * MS), 1032 * MS);
         // max_lost 0 still waits for one sample.
         let r = Response {
+            sample_ns: 0,
             response_ns: 0,
             gap_ns: 100 * MS,
         };

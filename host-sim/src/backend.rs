@@ -22,7 +22,7 @@
 use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::future::Future;
-use std::pin::Pin;
+use std::pin::{Pin, pin};
 use std::task::{Context, Poll, Waker};
 
 use embassy_executor::raw::{Executor, TaskStorage};
@@ -276,10 +276,10 @@ unsafe impl HighSlot for ThreadSlot {
 ///
 /// As [`Beside::new`]: the returned future must not be leaked while anything `sensing` borrows
 /// is alive.
-pub unsafe fn beside<S: Future, D: Future>(
-    sensing: S,
-    deciding: D,
-) -> Beside<'static, ThreadSlot, S, D> {
+pub unsafe fn beside<'p, S: Future, D: Future>(
+    sensing: Pin<&'p mut S>,
+    deciding: Pin<&'p mut D>,
+) -> Beside<'static, 'p, ThreadSlot, S, D> {
     // SAFETY: the caller's contract.
     unsafe { Beside::new(&ThreadSlot, sensing, deciding) }
 }
@@ -290,6 +290,7 @@ pub fn simulate_split<S: Future, D: Future>(
     deciding: D,
     limit: Duration,
 ) -> Result<Completed<D::Output>, SimError> {
+    let (sensing, deciding) = (pin!(sensing), pin!(deciding));
     // SAFETY: `simulate` pins the future on its own stack and drops it, on this thread, before
     // it returns (and on unwind): it cannot be leaked.
     simulate(unsafe { beside(sensing, deciding) }, limit)

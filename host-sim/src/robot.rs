@@ -293,20 +293,22 @@ impl Robot<'_> {
 /// The reaction-latency bound of every cyclic sensor of `robot`'s mission (after
 /// [`Robot::apply`]) under P-SMPA: the response-time analysis of [`psmpa_core::timing`] with
 /// the scenario's read latencies, the sample step `cost_ns` of each sensor, the behaviour step
-/// `reaction_ns` and the `blocking` of the platform. In virtual time, where computing takes no
-/// time, costs and blocking are 0 and only the read latencies remain. Latencies count from the
-/// instant a sensor is certain to register the obstacle (see [`crate::world`]), so no margin
-/// for noise is needed.
+/// `reaction_ns`, the `blocking` of the platform and its `interrupts` (jobs that only
+/// interfere: a timer's alarm). In virtual time, where computing takes no time, costs and
+/// blocking are 0 and only the read latencies remain. Latencies count from the instant a
+/// sensor is certain to register the obstacle (see [`crate::world`]), so no margin for noise
+/// is needed.
 pub fn latency_bounds(
     robot: &Robot<'_>,
     scenario: &Scenario,
     blocking: Blocking,
     reaction_ns: u64,
     cost_ns: impl Fn(SensorId) -> u64,
+    interrupts: &[Job],
 ) -> Result<heapless::Vec<LatencyBound, 4>, TimingError> {
     let max_lost = config(scenario, Arch::PSmpa).max_lost;
     let domain = &robot.mission.domain;
-    let jobs: heapless::Vec<(SensorId, Job), 4> = (0..domain.sensors().len())
+    let sensors: heapless::Vec<(SensorId, Job), 4> = (0..domain.sensors().len())
         .filter_map(SensorId::new)
         .filter_map(|id| match domain.sensor(id)?.mode {
             SensorMode::Cyclic { period } => Some((
@@ -322,10 +324,15 @@ pub fn latency_bounds(
             _ => None,
         })
         .collect();
-    let only: heapless::Vec<Job, 4> = jobs.iter().map(|(_, j)| *j).collect();
+    // The sensors first, then the interrupts: at most 4 of each count.
+    let jobs: heapless::Vec<Job, 8> = sensors
+        .iter()
+        .map(|(_, j)| *j)
+        .chain(interrupts.iter().take(4).copied())
+        .collect();
     let mut bounds = heapless::Vec::new();
-    for (i, (sensor, job)) in jobs.iter().enumerate() {
-        let response = psmpa_core::timing::response(&only, i, blocking, reaction_ns)?;
+    for (i, (sensor, job)) in sensors.iter().enumerate() {
+        let response = psmpa_core::timing::response(&jobs, i, blocking, reaction_ns)?;
         // At most 4 cyclic sensors: room for each.
         let _ = bounds.push(LatencyBound {
             sensor: *sensor,
@@ -413,8 +420,8 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
         }
     }
 
-    /// The robot, spending the scenario's `compute_us` of processor time on each walk step
-    /// through `compute`.
+    /// The robot, spending the scenario's `plan_us` of processor time through `compute` each
+    /// time its walk starts or resumes.
     #[must_use]
     pub fn with_compute(mut self, compute: fn(u32)) -> Self {
         self.compute = compute;
@@ -458,26 +465,32 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
     /// was taken at or after the end of the last side step (or the start of the walk): the
     /// world settles a step before a sample at that instant, and under SMPA the store keeps
     /// the sense phase's samples, stale, through the act phase. A violation of the
-    /// precondition seen since then stops it too (a sensor this walk does not read).
+    /// precondition seen since then stops it too (a sensor this walk does not read). Each time
+    /// it starts or resumes, it first plans its path: the scenario's `plan_us` of processor
+    /// time on a microcontroller, none in virtual time.
     async fn walk(&self, place: Place, io: &ActionIo<'_>) -> Outcome {
         let world = self.world;
         let mut handled = Instant::now();
         let mut stepping = false;
         let mut version = io.version();
-        let compute_us = world.scenario().compute_us;
-        loop {
-            if compute_us > 0 {
-                // Planning the next step takes processor time: on a microcontroller, this
-                // poll of the deciding side is that long; sensing goes on meanwhile.
-                (self.compute)(compute_us);
+        // Planning the path takes processor time: on a microcontroller this poll of the
+        // deciding side is that long, and sensing goes on meanwhile.
+        let plan = || {
+            let us = world.scenario().plan_us;
+            if us > 0 {
+                (self.compute)(us);
             }
+        };
+        plan();
+        loop {
             let motion = world.motion();
             if !matches!(motion, Motion::Avoiding { .. }) {
                 if stepping {
-                    // The side step ended.
+                    // The side step ended: samples from now on count; plan the way on.
                     stepping = false;
                     handled = Instant::now();
                     io.trace(codes::RESUME, 0);
+                    plan();
                 }
                 if world.at(place) {
                     world.stop();

@@ -6,8 +6,8 @@
 //! through [`Sides`]: the host on its higher-priority executor, the firmware on its own.
 
 use core::future::Future;
-use core::marker::{PhantomData, PhantomPinned};
-use core::pin::Pin;
+use core::marker::PhantomData;
+use core::pin::{Pin, pin};
 use core::task::{Context, Poll};
 
 use embassy_futures::select::{Either, select};
@@ -57,16 +57,22 @@ pub trait Sides {
     type Mutex: RawMutex;
 
     /// Runs `sensing` at a higher priority than `deciding` for as long as `deciding` runs, and
-    /// returns what `deciding` returns. `sensing` is dropped when `deciding` ends.
+    /// returns what `deciding` returns; `sensing` is not polled afterwards. Both are pinned
+    /// where the caller built them: nothing moves them (a run's futures are large, and every
+    /// move is a copy on the stack of the task that makes it).
     ///
     /// # Safety
     ///
     /// An implementation may hand `sensing` to a task that polls it from elsewhere, so the
-    /// returned future must not be leaked (`mem::forget`) while anything `sensing` borrows is
-    /// alive, and must be dropped on the thread that polled it: run it to completion, or drop
-    /// it. Where that task preempts this one, `sensing` must be safe to poll from there: `Send`,
-    /// its shared state behind [`Mutex`](Self::Mutex).
-    async unsafe fn beside<S: Future, D: Future>(&self, sensing: S, deciding: D) -> D::Output;
+    /// returned future must not be leaked (`mem::forget`) while `sensing` is alive, and must be
+    /// dropped on the thread that polled it: run it to completion, or drop it. Where that task
+    /// preempts this one, `sensing` must be safe to poll from there: `Send`, its shared state
+    /// behind [`Mutex`](Self::Mutex).
+    async unsafe fn beside<S: Future, D: Future>(
+        &self,
+        sensing: Pin<&mut S>,
+        deciding: Pin<&mut D>,
+    ) -> D::Output;
 
     /// Spends `us` microseconds of processor time (a behaviour's computation): nothing in
     /// virtual time, where computing takes none; busy cycles on a microcontroller.
@@ -130,33 +136,31 @@ pub unsafe trait HighSlot {
 /// while the slot holds another sensing side, this one is not run (a runtime's deciding side
 /// then fails with [`Failure::SensingStalled`](psmpa_core::Failure::SensingStalled)). Neither
 /// `Send` nor `Sync`: it must be dropped where it was polled.
-pub struct Beside<'h, H: HighSlot, S, D> {
+pub struct Beside<'h, 'p, H: HighSlot, S, D> {
     slot: &'h H,
-    sensing: S,
-    deciding: D,
+    sensing: Pin<&'p mut S>,
+    deciding: Pin<&'p mut D>,
     /// Not yet offered to the slot.
     first: bool,
     installed: bool,
-    _pinned: PhantomPinned,
     _here: PhantomData<*const ()>,
 }
 
-impl<'h, H: HighSlot, S: Future, D: Future> Beside<'h, H, S, D> {
+impl<'h, 'p, H: HighSlot, S: Future, D: Future> Beside<'h, 'p, H, S, D> {
     /// `sensing` beside `deciding`, through `slot`.
     ///
     /// # Safety
     ///
     /// Once polled, the future hands a pointer to `sensing` to `slot`'s poller, taken back only
-    /// when it ends or is dropped: it must not be leaked (`mem::forget`) while anything
-    /// `sensing` borrows is alive. Run it to completion, or drop it.
-    pub unsafe fn new(slot: &'h H, sensing: S, deciding: D) -> Self {
+    /// when it ends or is dropped: it must not be leaked (`mem::forget`) while `sensing` is
+    /// alive. Run it to completion, or drop it.
+    pub unsafe fn new(slot: &'h H, sensing: Pin<&'p mut S>, deciding: Pin<&'p mut D>) -> Self {
         Self {
             slot,
             sensing,
             deciding,
             first: true,
             installed: false,
-            _pinned: PhantomPinned,
             _here: PhantomData,
         }
     }
@@ -170,36 +174,40 @@ impl<'h, H: HighSlot, S: Future, D: Future> Beside<'h, H, S, D> {
 /// As [`HighSlot`], and the poller runs only at a priority that preempts the installing code.
 pub unsafe trait PreemptingSlot: HighSlot {}
 
-impl<'h, H: PreemptingSlot, S: Future + Send, D: Future> Beside<'h, H, S, D> {
+impl<'h, 'p, H: PreemptingSlot, S: Future + Send, D: Future> Beside<'h, 'p, H, S, D> {
     /// `sensing` beside `deciding`, through a slot whose poller preempts this one: `sensing`
     /// must be `Send`.
     ///
     /// # Safety
     ///
     /// As [`Beside::new`].
-    pub unsafe fn preempting(slot: &'h H, sensing: S, deciding: D) -> Self {
+    pub unsafe fn preempting(
+        slot: &'h H,
+        sensing: Pin<&'p mut S>,
+        deciding: Pin<&'p mut D>,
+    ) -> Self {
         // SAFETY: the caller's contract; `Send` is what the preempting poller needs besides.
         unsafe { Self::new(slot, sensing, deciding) }
     }
 }
 
-impl<H: HighSlot, S: Future, D: Future> Future for Beside<'_, H, S, D> {
+impl<H: HighSlot, S: Future, D: Future> Future for Beside<'_, '_, H, S, D> {
     type Output = D::Output;
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<D::Output> {
-        // SAFETY: nothing is moved out of the pinned fields.
-        let this = unsafe { self.get_unchecked_mut() };
+        let this = self.get_mut();
         if core::mem::take(&mut this.first) {
-            // `Drop` uninstalls before `sensing` ends, and `HighSlot`'s contract keeps the
-            // poller from using it afterwards.
+            // `Drop` uninstalls before `sensing` can end, and `HighSlot`'s contract keeps the
+            // poller from using it afterwards. From here on only the poller touches `sensing`.
             let erased = Erased {
-                data: core::ptr::addr_of_mut!(this.sensing).cast(),
+                // SAFETY: the pointer is only polled, in place: `sensing` stays pinned.
+                data: core::ptr::from_mut(unsafe { this.sensing.as_mut().get_unchecked_mut() })
+                    .cast(),
                 poll: poll_erased::<S>,
             };
             this.installed = this.slot.install(erased);
         }
-        // SAFETY: `deciding` is pinned with `self`.
-        let out = unsafe { Pin::new_unchecked(&mut this.deciding) }.poll(cx);
+        let out = this.deciding.as_mut().poll(cx);
         if out.is_ready() && core::mem::take(&mut this.installed) {
             this.slot.uninstall();
         }
@@ -207,7 +215,7 @@ impl<H: HighSlot, S: Future, D: Future> Future for Beside<'_, H, S, D> {
     }
 }
 
-impl<H: HighSlot, S, D> Drop for Beside<'_, H, S, D> {
+impl<H: HighSlot, S, D> Drop for Beside<'_, '_, H, S, D> {
     fn drop(&mut self) {
         if core::mem::take(&mut self.installed) {
             self.slot.uninstall();
@@ -261,15 +269,23 @@ pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
         sink,
         robot::config(scenario, arch),
     );
-    let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
-    let deciding = select(runtime.run_planning(&robot::PLANNER, space), deadline);
-    // SAFETY: this future is not leaked and stays where it is polled: the caller's contract.
-    let ending = match unsafe { sides.beside(runtime.sensing(), deciding) }.await {
-        Either::First(Ok(report)) => Ending::Goal(report),
-        Either::First(Err(error)) => Ending::Error(error),
-        Either::Second(()) => {
-            world.halt();
-            Ending::TimeLimit
+    let ending = {
+        let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
+        // Built where they stay: neither side is ever copied.
+        let sensing = pin!(runtime.sensing());
+        let deciding = pin!(select(
+            runtime.run_planning(&robot::PLANNER, space),
+            deadline
+        ));
+        // SAFETY: this future is not leaked and stays where it is polled: the caller's
+        // contract.
+        match unsafe { sides.beside(sensing, deciding) }.await {
+            Either::First(Ok(report)) => Ending::Goal(report),
+            Either::First(Err(error)) => Ending::Error(error),
+            Either::Second(()) => {
+                world.halt();
+                Ending::TimeLimit
+            }
         }
     };
     let summary = Summary {

@@ -55,10 +55,11 @@ pub struct RobotFile {
     /// 0 (the default) walks at `speed_mps` throughout.
     #[serde(default, deserialize_with = "number")]
     pub slow_m: Option<f64>,
-    /// Extension: processor time the walk spends on each of its steps (planning a path, say),
-    /// µs; none in the simulator's virtual time, real cycles on a microcontroller.
+    /// Extension: processor time the walk spends planning its path each time it starts or
+    /// resumes walking, µs; none in the simulator's virtual time, real cycles on a
+    /// microcontroller (a long poll of the deciding side).
     #[serde(default, deserialize_with = "number")]
-    pub compute_us: Option<f64>,
+    pub plan_us: Option<f64>,
 }
 
 /// `sonar` as written in the file.
@@ -305,8 +306,9 @@ pub struct Scenario {
     pub avoid_ms: u64,
     /// The walk slows down while the sonar reads an obstacle nearer than this, µm; 0: never.
     pub slow_um: i64,
-    /// Processor time the walk spends on each step, µs (on a microcontroller).
-    pub compute_us: u32,
+    /// Processor time the walk spends planning whenever it starts or resumes, µs (on a
+    /// microcontroller).
+    pub plan_us: u32,
     /// The sonar.
     pub sonar: Sonar,
     /// Bumper period, ms.
@@ -381,7 +383,7 @@ impl Serialize for Scenario {
         t.serialize_element(&self.speed_um_per_ms)?;
         t.serialize_element(&self.avoid_ms)?;
         t.serialize_element(&self.slow_um)?;
-        t.serialize_element(&self.compute_us)?;
+        t.serialize_element(&self.plan_us)?;
         t.serialize_element(&sonar)?;
         t.serialize_element(&self.bumper_period_ms)?;
         t.serialize_element(&self.bumper_latency_ms)?;
@@ -444,7 +446,7 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
         s.speed_um_per_ms = element(&mut seq, 4)?;
         s.avoid_ms = element(&mut seq, 5)?;
         s.slow_um = element(&mut seq, 6)?;
-        s.compute_us = element(&mut seq, 7)?;
+        s.plan_us = element(&mut seq, 7)?;
         let (period_ms, min_um, max_um, threshold_um, noise_um, dropout, latency_ms): SonarRow =
             element(&mut seq, 8)?;
         s.sonar = Sonar {
@@ -749,8 +751,9 @@ fn millis(field: Field, value: f64) -> Result<u64, ScenarioError> {
     Ok(whole)
 }
 
-/// Most processor time a walk step may take, µs (`robot.compute_us`): a tenth of a second.
-pub const MAX_COMPUTE_US: u32 = 100_000;
+/// Most processor time the walk's planning may take, µs (`robot.plan_us`): a tenth of a
+/// second.
+pub const MAX_PLAN_US: u32 = 100_000;
 
 /// Longest sensor read latency accepted, ms.
 pub const MAX_LATENCY_MS: u64 = 1_000;
@@ -838,7 +841,7 @@ impl Scenario {
             speed_mps: Some(0.1),
             avoid_s: Some(2.0),
             slow_m: Some(0.0),
-            compute_us: Some(0.0),
+            plan_us: Some(0.0),
         }),
         sonar: Some(SonarFile {
             period_ms: Some(100.0),
@@ -889,7 +892,7 @@ impl Scenario {
             speed_um_per_ms: 0,
             avoid_ms: 0,
             slow_um: 0,
-            compute_us: 0,
+            plan_us: 0,
             sonar: Sonar {
                 period_ms: 0,
                 min_um: 0,
@@ -1035,14 +1038,14 @@ impl Scenario {
             pick(b.latency_ms, db.latency_ms),
         )?;
         let slow_um = metres(Field::of("robot", "slow_m"), pick(r.slow_m, dr.slow_m))?;
-        let compute_us = {
-            let us = pick(r.compute_us, dr.compute_us);
-            if !(0.0..=f64::from(MAX_COMPUTE_US)).contains(&us) || f64::from(us as u32) != us {
+        let plan_us = {
+            let us = pick(r.plan_us, dr.plan_us);
+            if !(0.0..=f64::from(MAX_PLAN_US)).contains(&us) || f64::from(us as u32) != us {
                 let problem = Problem::NotWholeMicros {
                     value: us,
-                    max: MAX_COMPUTE_US,
+                    max: MAX_PLAN_US,
                 };
-                return Err(invalid(Field::of("robot", "compute_us"), problem));
+                return Err(invalid(Field::of("robot", "plan_us"), problem));
             }
             us as u32
         };
@@ -1086,7 +1089,7 @@ impl Scenario {
             speed_um_per_ms,
             avoid_ms,
             slow_um,
-            compute_us,
+            plan_us,
             sonar,
             bumper_period_ms,
             bumper_latency_ms,
@@ -1220,12 +1223,12 @@ mod tests {
         );
         for us in ["-1", "0.5", "100001", "1e300"] {
             let json =
-                std::format!(r#"{{"name":"x","robot":{{"compute_us":{us}}},"interferences":[]}}"#);
+                std::format!(r#"{{"name":"x","robot":{{"plan_us":{us}}},"interferences":[]}}"#);
             let shown: f64 = us.parse().unwrap();
             assert_eq!(
                 err(&json).to_string(),
                 std::format!(
-                    "robot.compute_us: must be a whole number of microseconds from 0 to 100000, \
+                    "robot.plan_us: must be a whole number of microseconds from 0 to 100000, \
                      got {shown}"
                 )
             );
@@ -1240,13 +1243,13 @@ mod tests {
                 s.sonar.latency_ms,
                 s.bumper_latency_ms,
                 s.slow_um,
-                s.compute_us
+                s.plan_us
             ),
             (0, 0, 0, 0)
         );
         let s = Scenario::parse(
             br#"{"name":"x","sonar":{"latency_ms":40},"bumper":{"latency_ms":1000},
-                "robot":{"slow_m":1.2,"compute_us":100000},"interferences":[]}"#,
+                "robot":{"slow_m":1.2,"plan_us":100000},"interferences":[]}"#,
         )
         .unwrap();
         assert_eq!(
@@ -1254,7 +1257,7 @@ mod tests {
                 s.sonar.latency_ms,
                 s.bumper_latency_ms,
                 s.slow_um,
-                s.compute_us
+                s.plan_us
             ),
             (40, 1000, 1_200_000, 100_000)
         );

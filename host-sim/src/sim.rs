@@ -71,8 +71,8 @@ impl Sides for Prioritized {
 
     async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
         &self,
-        sensing: S,
-        deciding: D,
+        sensing: core::pin::Pin<&mut S>,
+        deciding: core::pin::Pin<&mut D>,
     ) -> D::Output {
         // SAFETY: the caller's contract, the same as `beside`'s.
         unsafe { beside(sensing, deciding) }.await

@@ -243,8 +243,10 @@ struct Obstacle {
 
 /// A box at `d` µm in range registers whatever the noise: both ends of the noise band do.
 fn certain_at(sonar: &crate::scenario::Sonar, d: i64) -> bool {
+    // `max`/`min`, not `clamp`: the range is valid (the scenario is), and `clamp`'s panic
+    // would bring integer formatting into the firmware.
     [d - sonar.noise_um, d + sonar.noise_um]
-        .map(|x| to_mm(x.clamp(sonar.min_um, sonar.max_um)))
+        .map(|x| to_mm(x.max(sonar.min_um).min(sonar.max_um)))
         .iter()
         .all(|&r| sonar.registers(r))
 }
@@ -659,6 +661,7 @@ impl<L: WorldLog> State<L> {
 
 impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// The world at time 0 of `scenario`, logging into `log`.
+    #[inline(never)] // Its temporaries stay out of the frame of the task polling a run.
     pub fn new(scenario: &'s Scenario, log: L) -> Self {
         let obstacles = scenario
             .interferences
@@ -929,7 +932,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                     } else {
                         0
                     };
-                    (d + noise).clamp(sonar.min_um, sonar.max_um)
+                    (d + noise).max(sonar.min_um).min(sonar.max_um)
                 }
                 None => sonar.max_um,
             };
@@ -1065,6 +1068,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     }
 
     /// The outcome so far.
+    #[inline(never)] // Its temporaries stay out of the frame of the task polling a run.
     pub fn tally(&self) -> Tally {
         self.view(|s, _| {
             // One pass, no closures through pointers: the firmware's stack bound stays tight.
@@ -1101,6 +1105,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     }
 
     /// How each interference ended, in scenario order.
+    #[inline(never)] // Its temporaries stay out of the frame of the task polling a run.
     pub fn obstacles(&self) -> Vec<ObstacleReport, MAX_INTERFERENCES> {
         self.view(|s, _| {
             s.obstacles

@@ -75,7 +75,7 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
         speed_um_per_ms,
         avoid_ms,
         slow_um: 0,
-        compute_us: 0,
+        plan_us: 0,
         sonar: Sonar {
             period_ms: sonar_period_ms,
             min_um: 250_000,
