@@ -1,11 +1,16 @@
-//! Two thread-mode embassy executors, one per side of the runtime, that sleep with WFI between
-//! polls (QEMU treats WFE as a no-op, so an executor waiting with WFE would spin). No
-//! `platform-*` feature of embassy-executor: this module provides `__pender`.
+//! Two priorities: the runtime's sensing side on an embassy `InterruptExecutor`, the deciding
+//! side on a raw executor polled in thread mode.
 //!
-//! The sensing executor has the higher priority: whenever it has work it is polled before the
-//! next poll of the deciding executor, the rule the host simulator follows, so both give the
-//! same trace. Polls are not preempted (one thread); a sample can wait for the deciding poll in
-//! progress, which `cargo xtask timing` measures and the response-time analysis charges.
+//! * Sensing: interrupt 14 (spare on mps2-an386) at priority [`SENSING_PRIORITY`], below
+//!   the clock's alarm only. A sample preempts whatever the deciding side is computing.
+//! * Deciding: the executor's pender pends interrupt 15 (lowest priority), whose handler only
+//!   sets a flag; thread mode polls when the flag is set and sleeps with WFI otherwise (QEMU
+//!   treats WFE as a no-op, so embassy's thread executor would spin). embassy's
+//!   `platform-cortex-m` `__pender` serves both.
+//!
+//! Polls are timed in cycles of the clock, without the time of the handlers that preempted
+//! them: a deciding poll's cost is its own processor time. Critical sections entered below the
+//! sensing priority are timed too: they are the one way the deciding side can delay a sample.
 
 use core::cell::{Cell, RefCell};
 use core::future::poll_fn;
@@ -13,15 +18,42 @@ use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use core::task::{Poll, Waker};
 
+use cortex_m::interrupt::InterruptNumber;
 use critical_section::Mutex;
-use embassy_executor::{Spawner, raw};
-use psmpa_sim::run::{Erased, HighSlot};
+use embassy_executor::{InterruptExecutor, SendSpawner, Spawner, raw};
+use psmpa_sim::run::{Erased, HighSlot, PreemptingSlot};
 
-static PENDING: AtomicBool = AtomicBool::new(false);
-static PENDING_SENSING: AtomicBool = AtomicBool::new(false);
+use crate::time_driver::counter;
 
-/// The pender context of the sensing executor (the deciding one's is null).
-const SENSING: *mut () = core::ptr::without_provenance_mut(1);
+/// The interrupts the firmware uses.
+#[derive(Clone, Copy)]
+#[repr(u16)]
+pub enum Irq {
+    /// The clock's alarm: TIMER1 reaching 0.
+    Alarm = 9,
+    /// Runs the sensing executor.
+    Sensing = 14,
+    /// Wakes thread mode for the deciding executor.
+    Deciding = 15,
+}
+
+// SAFETY: 9 is TIMER1's interrupt on mps2-an386; 14 and 15 are interrupts that nothing else
+// raises.
+unsafe impl InterruptNumber for Irq {
+    fn number(self) -> u16 {
+        self as u16
+    }
+}
+
+/// NVIC priorities (upper bits of a byte; lower is more urgent). The alarm has 0.
+const SENSING_PRIORITY: u8 = 0x40;
+const DECIDING_PRIORITY: u8 = 0xE0;
+
+static SENSING: InterruptExecutor = InterruptExecutor::new();
+/// Set by interrupt 15: the deciding executor has work.
+static WOKEN: AtomicBool = AtomicBool::new(false);
+/// Set while the sensing executor polls: the trace events it emits are sensing steps.
+static IN_SENSING: AtomicBool = AtomicBool::new(false);
 
 /// What a poll did, from the trace events it emitted ([`note`]): a sample, a switch or a fault
 /// of sensor `i` sets bit `i`; planning, plan and state changes set [`CONTROL`]; a deciding
@@ -31,7 +63,7 @@ pub const CONTROL: u32 = 1 << 8;
 /// Sensors whose sample steps are told apart.
 pub const SENSORS: usize = 4;
 
-/// How long polls took, in core cycles.
+/// How long polls took, in core cycles of their own (preempting handlers excluded).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Polls {
     /// Polls run, of both executors.
@@ -48,8 +80,11 @@ pub struct Polls {
     pub max_control: u32,
     /// The longest deciding poll that did none of that: a behaviour step.
     pub max_behaviour: u32,
-    /// The longest deciding poll of any kind: what a released sample may wait for.
+    /// The longest deciding poll of any kind: what a reaction may wait for.
     pub max_deciding: u32,
+    /// The longest critical section entered below the sensing priority: what a sample may
+    /// wait for.
+    pub max_critical: u32,
 }
 
 static POLLS: Mutex<Cell<Polls>> = Mutex::new(Cell::new(Polls {
@@ -61,24 +96,48 @@ static POLLS: Mutex<Cell<Polls>> = Mutex::new(Cell::new(Polls {
     max_control: 0,
     max_behaviour: 0,
     max_deciding: 0,
+    max_critical: 0,
 }));
 
-/// Steps of the running poll.
-static STEPS: AtomicU32 = AtomicU32::new(0);
+/// Steps of the running sensing poll, and of the running deciding poll.
+static SENSING_STEPS: AtomicU32 = AtomicU32::new(0);
+static DECIDING_STEPS: AtomicU32 = AtomicU32::new(0);
+
+/// Cycles spent in preempting handlers so far (wrapping): a poll subtracts what grew while it
+/// ran.
+static PREEMPTED: AtomicU32 = AtomicU32::new(0);
+
+/// The longest critical section entered below the sensing priority, cycles.
+static MAX_CRITICAL: AtomicU32 = AtomicU32::new(0);
 
 /// Records that the running poll did `steps`.
 pub fn note(steps: u32) {
-    STEPS.fetch_or(steps, Ordering::Relaxed);
+    if IN_SENSING.load(Ordering::Relaxed) {
+        SENSING_STEPS.fetch_or(steps, Ordering::Relaxed);
+    } else {
+        DECIDING_STEPS.fetch_or(steps, Ordering::Relaxed);
+    }
+}
+
+/// A handler that preempted whatever ran took `cycles` of its own.
+pub fn handler_ran(cycles: u32) {
+    PREEMPTED.fetch_add(cycles, Ordering::Relaxed);
 }
 
 /// The poll statistics since the last call, which starts them again.
 pub fn take_polls() -> Polls {
-    critical_section::with(|cs| POLLS.borrow(cs).replace(Polls::default()))
+    let critical = MAX_CRITICAL.swap(0, Ordering::Relaxed);
+    let mut p = critical_section::with(|cs| POLLS.borrow(cs).replace(Polls::default()));
+    p.max_critical = critical;
+    p
 }
 
-fn record(sensing: bool, begin: u64, end: u64, tick: u64) {
-    let cycles = u32::try_from(end.saturating_sub(begin)).unwrap_or(u32::MAX);
-    let steps = STEPS.swap(0, Ordering::Relaxed);
+fn record(sensing: bool, cycles: u32, tick: u64) {
+    let steps = if sensing {
+        SENSING_STEPS.swap(0, Ordering::Relaxed)
+    } else {
+        DECIDING_STEPS.swap(0, Ordering::Relaxed)
+    };
     critical_section::with(|cs| {
         let cell = POLLS.borrow(cs);
         let mut p = cell.get();
@@ -106,71 +165,81 @@ fn record(sensing: bool, begin: u64, end: u64, tick: u64) {
     });
 }
 
-#[unsafe(export_name = "__pender")]
-fn pender(context: *mut ()) {
-    if context == SENSING {
-        PENDING_SENSING.store(true, Ordering::Release);
-    } else {
-        PENDING.store(true, Ordering::Release);
-    }
+/// Runs `poll`, returning the cycles it took of its own: its span less the handlers that
+/// preempted it (whose own entry and exit, a dozen cycles each, stay in the span).
+fn timed(poll: impl FnOnce()) -> u32 {
+    let (begin, preempted) = (counter(), PREEMPTED.load(Ordering::Relaxed));
+    poll();
+    let span = begin.wrapping_sub(counter());
+    span.wrapping_sub(PREEMPTED.load(Ordering::Relaxed).wrapping_sub(preempted))
 }
 
-/// Where the two executors live.
-pub struct Slots {
-    deciding: MaybeUninit<raw::Executor>,
-    sensing: MaybeUninit<raw::Executor>,
-}
-
-impl Slots {
-    /// Room for both executors.
-    pub const fn new() -> Self {
-        Self {
-            deciding: MaybeUninit::uninit(),
-            sensing: MaybeUninit::uninit(),
-        }
-    }
-}
-
-/// Polls `executor` once, timed.
-fn poll(executor: &'static raw::Executor, sensing: bool) {
-    let (begin, tick) = (
-        crate::time_driver::cycles(),
-        embassy_time::Instant::now().as_ticks(),
-    );
-    // SAFETY: only the loop of `run` polls the executors; the pender never calls `poll`.
-    unsafe { executor.poll() };
-    record(sensing, begin, crate::time_driver::cycles(), tick);
-}
-
-/// Creates both executors in `slots`, lets `init` spawn on them (deciding, sensing), then polls
-/// whatever is pending, sensing first, and sleeps otherwise. Never returns: the firmware ends
-/// with a semihosting exit.
-pub fn run(slots: &'static mut Slots, init: impl FnOnce(Spawner, Spawner)) -> ! {
-    let deciding: &'static raw::Executor = slots
-        .deciding
-        .write(raw::Executor::new(core::ptr::null_mut()));
-    let sensing: &'static raw::Executor = slots.sensing.write(raw::Executor::new(SENSING));
-    init(deciding.spawner(), sensing.spawner());
-    PENDING.store(true, Ordering::Release);
-    PENDING_SENSING.store(true, Ordering::Release);
+/// Spends `cycles` of processor time of its own (what preempts it does not count): a
+/// behaviour's computation.
+pub fn compute(cycles: u32) {
+    let (begin, preempted) = (counter(), PREEMPTED.load(Ordering::Relaxed));
     loop {
-        if PENDING_SENSING.swap(false, Ordering::AcqRel) {
-            poll(sensing, true);
-            continue;
+        let span = begin.wrapping_sub(counter());
+        let other = PREEMPTED.load(Ordering::Relaxed).wrapping_sub(preempted);
+        if span.wrapping_sub(other) >= cycles {
+            return;
         }
-        if PENDING.swap(false, Ordering::AcqRel) {
-            poll(deciding, false);
-            continue;
-        }
-        // Both idle: time moves on to the next deadline, if it has come.
-        if crate::time_driver::advance() {
+    }
+}
+
+/// Interrupt 14: polls the sensing executor.
+pub unsafe extern "C" fn sensing_interrupt() {
+    let tick = embassy_time::Instant::now().as_ticks();
+    let (begin, preempted) = (counter(), PREEMPTED.load(Ordering::Relaxed));
+    IN_SENSING.store(true, Ordering::Relaxed);
+    // SAFETY: the handler of the interrupt `SENSING` was started on, called from nowhere else.
+    let own = timed(|| unsafe { SENSING.on_interrupt() });
+    IN_SENSING.store(false, Ordering::Relaxed);
+    // What the deciding side sees: this whole span, nested handlers included.
+    let span = begin.wrapping_sub(counter());
+    let nested = PREEMPTED.load(Ordering::Relaxed).wrapping_sub(preempted);
+    PREEMPTED.fetch_add(span.wrapping_sub(nested), Ordering::Relaxed);
+    record(true, own, tick);
+}
+
+/// Interrupt 15: the deciding executor has work; thread mode polls it.
+pub unsafe extern "C" fn deciding_interrupt() {
+    WOKEN.store(true, Ordering::Release);
+}
+
+/// Where the deciding executor lives.
+pub type Slot = MaybeUninit<raw::Executor>;
+
+/// Starts the sensing executor, creates the deciding one in `slot`, lets `init` spawn on them
+/// (deciding, sensing), then polls the deciding side whenever it has work and sleeps
+/// otherwise. Never returns: the firmware ends with a semihosting exit or a reset.
+pub fn run(slot: &'static mut Slot, init: impl FnOnce(Spawner, SendSpawner)) -> ! {
+    // SAFETY: priorities are set once, before either interrupt is unmasked; nothing else
+    // writes them.
+    unsafe {
+        let mut core = cortex_m::Peripherals::steal();
+        core.NVIC.set_priority(Irq::Sensing, SENSING_PRIORITY);
+        core.NVIC.set_priority(Irq::Deciding, DECIDING_PRIORITY);
+    }
+    let sensing = SENSING.start(Irq::Sensing);
+    let deciding: &'static raw::Executor =
+        slot.write(raw::Executor::new(Irq::Deciding as usize as *mut ()));
+    // SAFETY: its handler only sets a flag.
+    unsafe { cortex_m::peripheral::NVIC::unmask(Irq::Deciding) };
+    init(deciding.spawner(), sensing);
+    WOKEN.store(true, Ordering::Release);
+    loop {
+        if WOKEN.swap(false, Ordering::AcqRel) {
+            let tick = embassy_time::Instant::now().as_ticks();
+            // SAFETY: only this loop polls the deciding executor; its pender never does.
+            let own = timed(|| unsafe { deciding.poll() });
+            record(false, own, tick);
             continue;
         }
         // Interrupts off between the check and WFI, so a wake cannot slip in unseen; a pending
-        // interrupt still ends WFI.
+        // interrupt still ends WFI, and is taken when they are back on.
         cortex_m::interrupt::disable();
-        let idle = !PENDING.load(Ordering::Acquire) && !PENDING_SENSING.load(Ordering::Acquire);
-        if idle && !crate::time_driver::advance() {
+        if !WOKEN.load(Ordering::Acquire) {
             cortex_m::asm::wfi();
         }
         // SAFETY: not inside a critical section.
@@ -178,10 +247,51 @@ pub fn run(slots: &'static mut Slots, init: impl FnOnce(Spawner, Spawner)) -> ! 
     }
 }
 
+/// The critical-section implementation: cortex-m's single-core one (mask interrupts), which
+/// also times each outermost section entered below the sensing priority.
+struct Timed;
+critical_section::set_impl!(Timed);
+
+/// When the current outermost critical section began (TIMER0's count).
+static SECTION_BEGIN: AtomicU32 = AtomicU32::new(0);
+
+/// Whether the code running is below the sensing priority: thread mode or interrupt 15.
+fn below_sensing() -> bool {
+    // ICSR.VECTACTIVE: 0 in thread mode, 16 + n in interrupt n.
+    // SAFETY: a read of a system register that is always there.
+    let active = unsafe { (*cortex_m::peripheral::SCB::PTR).icsr.read() } & 0x1FF;
+    active == 0 || active == 16 + Irq::Deciding as u32
+}
+
+// SAFETY: masks interrupts for the section and restores the previous state: single core.
+unsafe impl critical_section::Impl for Timed {
+    unsafe fn acquire() -> bool {
+        let was_enabled = cortex_m::register::primask::read().is_active();
+        cortex_m::interrupt::disable();
+        if was_enabled {
+            SECTION_BEGIN.store(counter(), Ordering::Relaxed);
+        }
+        was_enabled
+    }
+
+    unsafe fn release(was_enabled: bool) {
+        if was_enabled {
+            if below_sensing() {
+                let cycles = SECTION_BEGIN
+                    .load(Ordering::Relaxed)
+                    .wrapping_sub(counter());
+                MAX_CRITICAL.fetch_max(cycles, Ordering::Relaxed);
+            }
+            // SAFETY: interrupts were enabled when the section began.
+            unsafe { cortex_m::interrupt::enable() };
+        }
+    }
+}
+
 /// The installed sensing side, with its type and lifetime erased ([`HighSlot`]).
 struct Installed(Erased);
 
-// SAFETY: the pointer is only used in thread mode, by the sensing trampoline.
+// SAFETY: a `Beside::preempting` installs it: the future is `Send`.
 unsafe impl Send for Installed {}
 
 static INSTALLED: Mutex<Cell<Option<Installed>>> = Mutex::new(Cell::new(None));
@@ -190,9 +300,9 @@ static TRAMPOLINE: Mutex<RefCell<Option<Waker>>> = Mutex::new(RefCell::new(None)
 /// The sensing executor's slot: a run's sensing side is installed here while it runs.
 pub struct SensingSlot;
 
-// SAFETY: `trampoline` takes the pointer out for the duration of its poll; it runs in thread
-// mode from `run`'s loop, never re-entered, and a `Beside` uninstalls from a deciding poll of
-// the same loop, so never in the middle of that poll.
+// SAFETY: `trampoline` takes the pointer out for the duration of its poll, at interrupt 14's
+// priority, never re-entered. Install and uninstall run below it (thread mode), so never in
+// the middle of that poll: while interrupt 14's handler runs, thread mode does not.
 unsafe impl HighSlot for SensingSlot {
     fn install(&self, future: Erased) -> bool {
         critical_section::with(|cs| {
@@ -214,6 +324,9 @@ unsafe impl HighSlot for SensingSlot {
         critical_section::with(|cs| INSTALLED.borrow(cs).set(None));
     }
 }
+
+// SAFETY: its poller, interrupt 14, preempts thread mode, which installs.
+unsafe impl PreemptingSlot for SensingSlot {}
 
 /// The one task of the sensing executor: polls the installed sensing side, forever.
 #[embassy_executor::task]

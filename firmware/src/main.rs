@@ -1,8 +1,9 @@
 //! psmpa on a Cortex-M4F (QEMU mps2-an386): the same core, the same Fetch Tea mission and the
 //! same simulated world as the host simulator. Every embedded scenario runs under both
-//! architectures from tick 0; each run logs the summary fields of `psmpa-sim run --json`,
-//! which `cargo xtask qemu` compares with the host. The runtime's sensing side runs on an
-//! executor of its own, polled before the deciding side's whenever it has work.
+//! architectures, one run per boot, from tick 0 of a fresh clock; each run logs the summary
+//! fields of `psmpa-sim run --json`, which `cargo xtask qemu` compares with the host, and what
+//! it measured in cycles. The runtime's sensing side runs on an interrupt executor that
+//! preempts the deciding side.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -20,16 +21,21 @@ mod time_driver;
 
 #[cfg(target_os = "none")]
 mod firmware {
+    use core::mem::MaybeUninit;
+
     use cortex_m_rt::{ExceptionFrame, entry, exception};
     use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
     use defmt::{error, info};
     use defmt_semihosting as _;
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use psmpa_core::{TraceEvent, TraceSink};
-    use psmpa_sim::robot::{Arch, Robot};
+    use psmpa_sim::robot::{Arch, PlannerSpace, Robot};
     use psmpa_sim::run::{Beside, Sides};
     use psmpa_sim::scenario::Scenario;
+    use psmpa_sim::world::{Device, Fate, WorldEvent, WorldLog};
 
-    use crate::{executor, time_driver};
+    use crate::executor::{self, Irq};
+    use crate::time_driver;
 
     include!(concat!(env!("OUT_DIR"), "/scenarios.rs"));
 
@@ -42,35 +48,90 @@ mod firmware {
         fn DefaultHandler();
     }
 
-    /// The device part of the vector table: no device interrupt is ever enabled, so 16 entries
-    /// to the default handler do (cortex-m-rt's default has 240, 960 bytes of flash).
+    /// The device part of the vector table: 16 entries (cortex-m-rt's default has 240, 960
+    /// bytes of flash): the alarm and the two executors' interrupts, the rest to the default
+    /// handler.
     #[unsafe(link_section = ".vector_table.interrupts")]
     #[unsafe(no_mangle)]
-    static __INTERRUPTS: [unsafe extern "C" fn(); 16] = [DefaultHandler; 16];
+    static __INTERRUPTS: [unsafe extern "C" fn(); 16] = {
+        let mut table: [unsafe extern "C" fn(); 16] = [DefaultHandler; 16];
+        table[Irq::Alarm as usize] = time_driver::alarm_interrupt;
+        table[Irq::Sensing as usize] = executor::sensing_interrupt;
+        table[Irq::Deciding as usize] = executor::deciding_interrupt;
+        table
+    };
+
+    /// Marks [`NEXT_RUN`] as written by a previous boot.
+    const MAGIC: u32 = 0x7053_4d50;
+
+    /// The run the next boot performs, and [`MAGIC`]: kept across the reset between runs (not
+    /// initialised at boot), so that every run starts on a fresh clock at tick 0.
+    #[unsafe(link_section = ".uninit.NEXT_RUN")]
+    static mut NEXT_RUN: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
+
+    /// The run this boot performs: 0 after power-on.
+    fn this_run() -> u32 {
+        // SAFETY: read at boot, before anything else runs; any bit pattern is a valid
+        // `[u32; 2]` (what power-on leaves is told apart by the magic).
+        let [magic, run] = unsafe { (&raw const NEXT_RUN).cast::<[u32; 2]>().read_volatile() };
+        if magic == MAGIC { run } else { 0 }
+    }
+
+    /// Boots again for run `run`, or, with `None`, forgets the runs and exits.
+    fn next(run: Option<u32>) -> ! {
+        let word = run.map_or([0, 0], |r| [MAGIC, r]);
+        // SAFETY: only this boot's one task writes it, right before resetting or exiting.
+        unsafe { (&raw mut NEXT_RUN).cast::<[u32; 2]>().write_volatile(word) };
+        if run.is_some() {
+            cortex_m::peripheral::SCB::sys_reset();
+        }
+        debug::exit(EXIT_SUCCESS);
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
 
     #[entry]
     fn main() -> ! {
-        // `#[entry]` makes these `&'static mut`, safely: main runs once.
-        static mut EXECUTORS: executor::Slots = executor::Slots::new();
-        static mut ROBOT: Robot<'static> = Robot::empty();
-        static mut SCENARIO: Scenario = Scenario::empty();
-        static mut SPACE: psmpa_sim::robot::PlannerSpace = psmpa_sim::robot::PlannerSpace::new();
-        let Some(mut core) = cortex_m::Peripherals::take() else {
-            fail("peripherals already taken")
+        // `#[entry]` makes these `&'static mut`, safely: main runs once. Uninitialised (`.bss`)
+        // until written here: no initial values in flash.
+        static mut DECIDING: executor::Slot = MaybeUninit::uninit();
+        static mut ROBOT: MaybeUninit<Robot<'static>> = MaybeUninit::uninit();
+        static mut SCENARIO: MaybeUninit<Scenario> = MaybeUninit::uninit();
+        static mut SPACE: PlannerSpace = PlannerSpace::new();
+        let run = this_run();
+        let runs = (SCENARIOS.len() * Arch::ALL.len()) as u32;
+        let (Some((file, json)), Some(&arch)) = (
+            SCENARIOS.get((run / 2) as usize),
+            Arch::ALL.get((run % 2) as usize),
+        ) else {
+            fail("no such run")
         };
-        time_driver::start(&mut core.SYST);
-        info!(
-            "psmpa firmware: {=usize} scenarios, core clock {=u32} Hz, tick {=u64} Hz",
-            SCENARIOS.len(),
-            time_driver::CORE_HZ,
-            embassy_time_driver::TICK_HZ
-        );
-        load_robot(ROBOT);
-        let (robot, scenario, space) = (ROBOT, SCENARIO, SPACE);
-        executor::run(EXECUTORS, |deciding, sensing| {
-            match (missions(robot, scenario, space), executor::trampoline()) {
-                (Ok(missions), Ok(trampoline)) => {
-                    deciding.spawn(missions);
+        if run == 0 {
+            info!(
+                "psmpa firmware: {=usize} scenarios, core clock {=u32} Hz, tick {=u64} Hz; one run per boot",
+                SCENARIOS.len(),
+                time_driver::CORE_HZ,
+                embassy_time_driver::TICK_HZ
+            );
+        }
+        let robot = load_robot(ROBOT);
+        let scenario = SCENARIO.write(Scenario::empty());
+        if !parse(scenario, json, run) {
+            error!("{=str}: invalid scenario", file);
+            fail("invalid scenario");
+        }
+        if robot.apply(scenario).is_err() {
+            fail("the scenario's sensor periods do not apply");
+        }
+        let (robot, scenario) = (&*robot, &*scenario);
+        // Everything is prepared: the clock starts, and the run with it, at tick 0.
+        time_driver::start();
+        executor::run(DECIDING, |deciding, sensing| {
+            let task = one_run(robot, scenario, SPACE, arch, run, runs);
+            match (task, executor::trampoline()) {
+                (Ok(task), Ok(trampoline)) => {
+                    deciding.spawn(task);
                     sensing.spawn(trampoline);
                 }
                 _ => fail("a task is already running"),
@@ -78,43 +139,71 @@ mod firmware {
         })
     }
 
-    /// Each run's sensing side on the sensing executor.
-    struct SensingFirst;
+    /// The sensing side on the interrupt executor, preempting the deciding side; what they
+    /// share behind critical sections.
+    struct Preempting;
 
-    impl Sides for SensingFirst {
-        type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
+    impl Sides for Preempting {
+        type Mutex = CriticalSectionRawMutex;
 
         async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
             &self,
-            sensing: S,
-            deciding: D,
+            sensing: core::pin::Pin<&mut S>,
+            deciding: core::pin::Pin<&mut D>,
         ) -> D::Output {
-            // SAFETY: the caller's contract, the same as `Beside::new`'s.
+            // SAFETY: the caller's contract, the same as `Beside::new`'s; `sensing` is safe to
+            // poll from the interrupt: everything it shares is `Sync` (checked below).
             unsafe { Beside::new(&executor::SensingSlot, sensing, deciding) }.await
+        }
+
+        fn compute(us: u32) {
+            executor::compute(us.saturating_mul(time_driver::CORE_HZ / 1_000_000));
         }
     }
 
+    /// What the interrupt executor polls shares only these with thread mode: each is `Sync`
+    /// with the firmware's log, sink and mutex, or this does not compile.
+    const _: () = {
+        const fn sync<T: Sync>() {}
+        sync::<psmpa_sim::world::World<'static, Reactions, CriticalSectionRawMutex>>();
+        sync::<psmpa_sim::robot::Nao<'static, 'static, Reactions, CriticalSectionRawMutex>>();
+        sync::<
+            psmpa_sim::robot::NaoRuntime<
+                'static,
+                'static,
+                'static,
+                'static,
+                Reactions,
+                Steps,
+                CriticalSectionRawMutex,
+            >,
+        >();
+    };
+
     /// Reads a scenario's canonical form in place, out of line: no copy of it on the stack.
     #[inline(never)]
-    fn parse(slot: &mut Scenario, json: &[u8], index: usize) -> bool {
+    fn parse(slot: &mut Scenario, json: &[u8], run: u32) -> bool {
         let ok = slot.read_canonical(json).is_ok();
         // A test build breaks the first embedded scenario on purpose: xtask qemu must notice.
         if let Some(first) = slot
             .interferences
             .first_mut()
-            .filter(|_| cfg!(feature = "inject-fault") && index == 0)
+            .filter(|_| cfg!(feature = "inject-fault") && run / 2 == 0)
         {
-            first.at_ms += 37;
+            // A minute late: the robot has passed by then, so it never meets it.
+            first.at_ms += 60_000;
         }
         ok
     }
 
-    /// Loads the mission once, in place, out of line.
+    /// Loads the mission in place, out of line.
     #[inline(never)]
-    fn load_robot(robot: &mut Robot<'static>) {
+    fn load_robot(slot: &'static mut MaybeUninit<Robot<'static>>) -> &'static mut Robot<'static> {
+        let robot = slot.write(Robot::empty());
         if robot.load_into(FETCH_TEA).is_err() {
             fail("the Fetch Tea mission does not load");
         }
+        robot
     }
 
     /// Tells the executor what each poll did, for the cost of each kind of step.
@@ -139,84 +228,149 @@ mod firmware {
         }
     }
 
-    #[embassy_executor::task]
-    async fn missions(
-        robot: &'static mut Robot<'static>,
-        scenario: &'static mut Scenario,
-        space: &'static mut psmpa_sim::robot::PlannerSpace,
-    ) {
-        for (index, (file, json)) in SCENARIOS.iter().enumerate() {
-            if !parse(scenario, json, index) {
-                error!("{=str}: invalid scenario", file);
-                fail("invalid scenario");
-            }
-            if robot.apply(scenario).is_err() {
-                fail("the scenario's sensor periods do not apply");
-            }
-            for arch in Arch::ALL {
-                // Everything is prepared: the run starts at tick 0, in a poll of its own.
-                time_driver::restart();
-                embassy_futures::yield_now().await;
-                executor::take_polls();
-                time_driver::take_isr_max_cycles();
-                // SAFETY: the task awaits the run to its end; nothing leaks or moves it.
-                let run = unsafe {
-                    psmpa_sim::run::run_robot(
-                        &SensingFirst,
-                        robot,
-                        scenario,
-                        arch,
-                        space,
-                        (),
-                        Steps,
-                    )
-                };
-                let (s, (), _) = run.await;
-                let polls = executor::take_polls();
-                info!(
-                    "polls scenario={=str} arch={=str} count={=u32} max_cycles={=u32} max_at_ms={=u64} total_cycles={=u64}",
-                    scenario.name.as_str(),
-                    arch.name(),
-                    polls.count,
-                    polls.max_cycles,
-                    polls.max_at,
-                    polls.total_cycles
-                );
-                info!(
-                    "steps scenario={=str} arch={=str} sample0={=u32} sample1={=u32} sample2={=u32} sample3={=u32} control={=u32} behaviour={=u32} deciding={=u32} isr={=u32}",
-                    scenario.name.as_str(),
-                    arch.name(),
-                    polls.max_sample[0],
-                    polls.max_sample[1],
-                    polls.max_sample[2],
-                    polls.max_sample[3],
-                    polls.max_control,
-                    polls.max_behaviour,
-                    polls.max_deciding,
-                    time_driver::take_isr_max_cycles()
-                );
-                let t = s.tally;
-                info!(
-                    "result scenario={=str} arch={=str} interferences={=u32} detected={=u32} collisions={=u32} reached_door={=bool} time_cost_ms={=u64} max_reaction_ms={=i64} sonar_on_ms={=u64} bumper_on_ms={=u64} sonar_gap_ms={=i64} bumper_gap_ms={=i64} trace_hash={=u64:016x}",
-                    scenario.name.as_str(),
-                    arch.name(),
-                    t.interferences,
-                    t.detected,
-                    t.collisions,
-                    t.reached_door,
-                    s.time_cost_ms,
-                    t.max_reaction_ms.map_or(-1, |ms| ms as i64),
-                    t.on_ms[0],
-                    t.on_ms[1],
-                    t.sample_gap_max_ms[0].map_or(-1, |ms| ms as i64),
-                    t.sample_gap_max_ms[1].map_or(-1, |ms| ms as i64),
-                    s.trace_hash
-                );
+    /// Measures reactions in cycles from the world's events: from the release of the sample
+    /// that registers an obstacle while the robot walks to the stop that follows. A sample is
+    /// released at the start of the tick its read starts in: reads start in the tick they are
+    /// due (the sample gaps equal the host's, which `cargo xtask qemu` checks).
+    #[derive(Default)]
+    struct Reactions {
+        /// The release of each device's latest read (sonar, bumper), cycles.
+        release: [u64; 2],
+        walking: bool,
+        /// The device and release of the registering sample awaiting the stop.
+        pending: Option<(usize, u64)>,
+        /// The longest reaction per device, cycles.
+        worst: [u64; 2],
+    }
+
+    fn slot(device: Device) -> Option<usize> {
+        match device {
+            Device::Sonar => Some(0),
+            Device::Bumper => Some(1),
+            _ => None,
+        }
+    }
+
+    impl WorldLog for Reactions {
+        fn log(&mut self, _at_ms: u64, _pos_um: i64, event: WorldEvent) {
+            match event {
+                WorldEvent::Walk | WorldEvent::AvoidDone(_) => self.walking = true,
+                WorldEvent::Detected(_, device) if self.walking && self.pending.is_none() => {
+                    self.pending = slot(device).and_then(|i| Some((i, *self.release.get(i)?)));
+                }
+                WorldEvent::Stop | WorldEvent::AvoidStarted(_) | WorldEvent::Arrived(_) => {
+                    self.walking = false;
+                    if let Some((i, release)) = self.pending.take() {
+                        let cycles = time_driver::cycles().saturating_sub(release);
+                        if let Some(worst) = self.worst.get_mut(i) {
+                            *worst = (*worst).max(cycles);
+                        }
+                    }
+                }
+                _ => {}
             }
         }
+
+        fn read_started(&mut self, device: Device) {
+            let tick = time_driver::cycles() / time_driver::CYCLES_PER_TICK;
+            if let Some(r) = slot(device).and_then(|i| self.release.get_mut(i)) {
+                *r = tick * time_driver::CYCLES_PER_TICK;
+            }
+        }
+    }
+
+    #[embassy_executor::task]
+    async fn one_run(
+        robot: &'static Robot<'static>,
+        scenario: &'static Scenario,
+        space: &'static mut PlannerSpace,
+        arch: Arch,
+        run: u32,
+        runs: u32,
+    ) {
+        // SAFETY: the task awaits the run to its end; nothing leaks or moves it.
+        let go = unsafe {
+            psmpa_sim::run::run_robot(
+                &Preempting,
+                robot,
+                scenario,
+                arch,
+                space,
+                Reactions::default(),
+                Steps,
+            )
+        };
+        let (s, reactions, _) = go.await;
+        let (ticks, reference) = (
+            embassy_time::Instant::now().as_ticks(),
+            time_driver::reference_cycles(),
+        );
+        let polls = executor::take_polls();
+        let name = scenario.name.as_str();
+        info!(
+            "polls scenario={=str} arch={=str} count={=u32} max_cycles={=u32} max_at_ms={=u64} total_cycles={=u64}",
+            name,
+            arch.name(),
+            polls.count,
+            polls.max_cycles,
+            polls.max_at,
+            polls.total_cycles
+        );
+        info!(
+            "steps scenario={=str} arch={=str} sample0={=u32} sample1={=u32} sample2={=u32} sample3={=u32} control={=u32} behaviour={=u32} deciding={=u32} critical={=u32} isr={=u32}",
+            name,
+            arch.name(),
+            polls.max_sample[0],
+            polls.max_sample[1],
+            polls.max_sample[2],
+            polls.max_sample[3],
+            polls.max_control,
+            polls.max_behaviour,
+            polls.max_deciding,
+            polls.max_critical,
+            time_driver::take_isr_max_cycles()
+        );
+        info!(
+            "clock scenario={=str} arch={=str} ticks={=u64} reference_cycles={=u64} reaction_sonar_cycles={=u64} reaction_bumper_cycles={=u64}",
+            name,
+            arch.name(),
+            ticks,
+            reference,
+            reactions.worst[0],
+            reactions.worst[1]
+        );
+        let t = s.tally;
+        // One letter per interference: detected by the Sonar or the Bumper, Collided, or `-`.
+        let mut fates = [0u8; psmpa_sim::scenario::MAX_INTERFERENCES];
+        for (letter, o) in fates.iter_mut().zip(&s.obstacles) {
+            *letter = match o.fate {
+                Fate::Detected(Device::Sonar) => b'S',
+                Fate::Detected(Device::Bumper) => b'B',
+                Fate::Detected(_) => b'D',
+                Fate::Collided => b'C',
+                Fate::Unmet => b'-',
+            };
+        }
+        let fates = fates.get(..s.obstacles.len()).unwrap_or_default();
+        let fates = core::str::from_utf8(fates).unwrap_or("?");
+        info!(
+            "result scenario={=str} arch={=str} interferences={=u32} detected={=u32} collisions={=u32} reached_door={=bool} fates={=str} time_cost_ms={=u64} max_reaction_ms={=i64} sonar_gap_ms={=i64} bumper_gap_ms={=i64} trace_hash={=u64:016x}",
+            name,
+            arch.name(),
+            t.interferences,
+            t.detected,
+            t.collisions,
+            t.reached_door,
+            fates,
+            s.time_cost_ms,
+            t.max_reaction_ms.map_or(-1, |ms| ms as i64),
+            t.sample_gap_max_ms[0].map_or(-1, |ms| ms as i64),
+            t.sample_gap_max_ms[1].map_or(-1, |ms| ms as i64),
+            s.trace_hash
+        );
         let (used, size) = stack_high_water();
         info!("stack high-water {=u32} of {=u32} bytes", used, size);
-        debug::exit(EXIT_SUCCESS);
+        next((run + 1 < runs).then_some(run + 1))
     }
 
     /// cortex-m-rt's `paint-stack` fills the stack region with a pattern at reset: the

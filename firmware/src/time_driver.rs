@@ -1,210 +1,188 @@
-//! The embassy-time driver on SysTick, tickless: a SysTick period runs from the current tick to
-//! the next deadline, in whole ticks of the tick rate (1 kHz, the host's, so that `Duration`
-//! rounding and therefore traces agree). The interrupt comes at the deadline tick itself, and
-//! only then: a run with a sample every 20 ms takes 50 interrupts a second, not 1000.
+//! The embassy-time driver: a free-running timer is the clock, a second one the alarm.
 //!
-//! `now = base + elapsed cycles / cycles per tick`. Starting a new period at the current tick
-//! keeps time continuous and monotonic; the fraction of the tick in progress is stretched,
-//! which shifts the tick grid against the core clock by less than a tick and is not observable
-//! by the program. Under QEMU's `-icount` all of it is deterministic.
+//! * Clock: the CMSDK APB TIMER0 of mps2-an386 counts down at the core clock, reloading
+//!   2³² − 1 when it reaches 0, and nothing writes it after [`start`]: no cycle is ever lost.
+//!   [`cycles`] extends it to 64 bits from the value read last (under a critical section); the
+//!   alarm fires at least every 0.67 s and reads it, far more often than it wraps (171.8 s).
+//!   `now() = cycles / 25,000`: 1 kHz ticks, the host's rate, so `Duration` rounding agrees.
+//!   Monotonic by construction.
+//! * Alarm: TIMER1 is loaded with the exact number of cycles left to the earliest deadline
+//!   (at most 2²⁴, 0.67 s) and interrupts when it reaches 0; the handler wakes what is due and
+//!   loads the next. An alarm that comes before a far deadline only loads the next one.
+//!   (SysTick would do on silicon, but QEMU 7.2 restarts it a whole period late after a write
+//!   of its current value, so its alarms came twice as late as asked.)
+//! * Reference: the dual timer, 32 bits counting every 256 cycles from [`start`], is never
+//!   read by the driver: [`reference_cycles`] lets `cargo xtask qemu` check every run's ticks
+//!   against a count the driver's arithmetic does not touch.
 //!
-//! Logical time: `now()` answers the instant of the deadline the executors last woke for, and
-//! moves on only when both executors are idle ([`advance`], called from the executor loop):
-//! the SysTick interrupt just ends the WFI at a deadline, and the loop then wakes the timers
-//! due. This is the host simulator's rule (time jumps to the next deadline once every task
-//! waits), so a burst of work at one instant is stamped with that instant however many polls
-//! it takes, and the firmware's trace equals the host's. What a task observes depends on what
-//! happened, not on how fast the core ran it; how long polls take is measured in cycles
-//! ([`cycles`]). A burst that outlasts the time to the next deadline delays that deadline's
-//! work in real time, not in the trace: `cargo xtask timing` bounds the bursts.
+//! TIMER0 starts 2²⁴ cycles before a wrap, so every run longer than 0.67 s crosses one and the
+//! check covers the extension.
 
 use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Waker;
 
-use cortex_m::peripheral::syst::SystClkSource;
-use cortex_m::peripheral::{SCB, SYST};
-use cortex_m_rt::exception;
+use crate::executor::Irq;
+
+use cortex_m::peripheral::NVIC;
 use critical_section::{CriticalSection, Mutex};
 use embassy_time_driver::Driver;
 use embassy_time_queue_utils::Queue;
 
-/// Core clock of mps2-an386 in QEMU; SysTick counts it.
+/// Core clock of mps2-an386 in QEMU; the timers count it.
 pub const CORE_HZ: u32 = 25_000_000;
 /// Core cycles per tick.
-pub const CYCLES_PER_TICK: u32 = CORE_HZ / embassy_time_driver::TICK_HZ as u32;
-/// The longest SysTick period in whole ticks (the reload value has 24 bits).
-const MAX_PERIOD: u32 = 0x00FF_FFFF / CYCLES_PER_TICK;
+pub const CYCLES_PER_TICK: u64 = CORE_HZ as u64 / embassy_time_driver::TICK_HZ;
+/// The longest alarm, cycles.
+const MAX_ALARM: u64 = 1 << 24;
+/// TIMER0's value at [`start`]: it wraps 2²⁴ cycles later.
+const FIRST_VALUE: u32 = 1 << 24;
+/// The dual timer's prescaler: it counts every 256 cycles.
+pub const REFERENCE_PRESCALE: u64 = 256;
 
-struct SysTickDriver {
-    /// The tick at which the current SysTick period started.
-    base: Mutex<Cell<u64>>,
-    /// Core cycles counted before the current SysTick period (for measuring, not timing).
-    cycles_before: Mutex<Cell<u64>>,
-    /// Its length in ticks.
-    period: Mutex<Cell<u32>>,
-    /// The logical instant: the deadline the executors last woke for.
-    logical: Mutex<Cell<u64>>,
-    /// The earliest deadline in `queue`, `u64::MAX` when there is none.
+/// CMSDK APB timers: CTRL, VALUE, RELOAD, INTSTATUS/INTCLEAR. TIMER0 is the clock, TIMER1
+/// the alarm.
+const TIMER0: usize = 0x4000_0000;
+const TIMER1: usize = 0x4000_1000;
+/// CMSDK dual timer, timer 1: LOAD, VALUE, CONTROL.
+const DUALTIMER: usize = 0x4000_2000;
+
+fn write(address: usize, value: u32) {
+    // SAFETY: a register of a timer only this module touches, always mapped on mps2-an386.
+    unsafe { (address as *mut u32).write_volatile(value) }
+}
+
+fn read(address: usize) -> u32 {
+    // SAFETY: as `write`.
+    unsafe { (address as *const u32).read_volatile() }
+}
+
+/// TIMER0's count: falls by one every cycle, wrapping. A single load: usable anywhere, also
+/// inside the critical-section implementation, to time spans shorter than 171 s.
+#[inline(always)]
+pub fn counter() -> u32 {
+    read(TIMER0 + 4)
+}
+
+struct TimerDriver {
+    /// TIMER0's value when last read, and the cycles counted up to then.
+    clock: Mutex<Cell<(u32, u64)>>,
+    /// The tick the alarm is set for; 0 when none.
     alarm: Mutex<Cell<u64>>,
     queue: Mutex<RefCell<Queue>>,
 }
 
-/// SysTick's registers (the driver is their only user).
-fn syst() -> &'static cortex_m::peripheral::syst::RegisterBlock {
-    // SAFETY: a fixed, always-mapped system peripheral; only this module touches it.
-    unsafe { &*SYST::PTR }
-}
-
-impl SysTickDriver {
-    /// Core cycles since the current period started (a wrap not yet handled included).
-    fn elapsed(&self) -> u32 {
-        let reload = syst().rvr.read();
-        let before = syst().cvr.read();
-        if SCB::is_pendst_pending() {
-            reload + 1 + (reload - syst().cvr.read())
-        } else {
-            reload - before
-        }
+impl TimerDriver {
+    fn cycles_in(&self, cs: CriticalSection<'_>) -> u64 {
+        let cell = self.clock.borrow(cs);
+        let (last, total) = cell.get();
+        let value = counter();
+        // A down-counter with a period of 2³²: the wrapping difference is the cycles elapsed.
+        let total = total + u64::from(last.wrapping_sub(value));
+        cell.set((value, total));
+        total
     }
 
-    fn now_in(&self, cs: CriticalSection<'_>) -> u64 {
-        let (base, period) = (self.base.borrow(cs).get(), self.period.borrow(cs).get());
-        let reload = syst().rvr.read();
-        let before = syst().cvr.read();
-        // Interrupts are masked here, but the counter runs: it may have wrapped.
-        if SCB::is_pendst_pending() {
-            let after = syst().cvr.read();
-            base + u64::from(period) + u64::from((reload - after) / CYCLES_PER_TICK)
-        } else {
-            base + u64::from((reload - before) / CYCLES_PER_TICK)
+    /// Sets the alarm to interrupt at tick `at` (or within 0.67 s, whichever is first); pends
+    /// it at once when `at` has come.
+    fn arm(&self, cs: CriticalSection<'_>, at: u64) {
+        self.alarm.borrow(cs).set(at);
+        let now = self.cycles_in(cs);
+        let target = at.saturating_mul(CYCLES_PER_TICK);
+        if target <= now {
+            NVIC::pend(Irq::Alarm);
+            return;
         }
-    }
-
-    /// Starts a SysTick period at tick `now` that ends at the earliest deadline.
-    fn program(&self, cs: CriticalSection<'_>, now: u64) {
-        let alarm = self.alarm.borrow(cs).get();
-        let ticks = alarm.saturating_sub(now).clamp(1, u64::from(MAX_PERIOD)) as u32;
-        let counted = self.cycles_before.borrow(cs);
-        counted.set(counted.get() + u64::from(self.elapsed()));
-        let s = syst();
-        // SAFETY: SysTick is only driven from here; writing CVR makes the counter reload from
-        // RVR at the next clock (no interrupt: it did not count down to 0).
-        unsafe {
-            s.rvr.write(ticks * CYCLES_PER_TICK - 1);
-            s.cvr.write(0);
-        }
-        SCB::clear_pendst();
-        self.base.borrow(cs).set(now);
-        self.period.borrow(cs).set(ticks);
-    }
-
-    /// Wakes what is due at `now` and remembers the next deadline.
-    fn expire(&self, cs: CriticalSection<'_>, now: u64) {
-        let next = self.queue.borrow_ref_mut(cs).next_expiration(now);
-        self.alarm.borrow(cs).set(next);
+        // At least 1: a value of 0 would wait for a whole reload period.
+        let cycles = (target - now).clamp(1, MAX_ALARM) as u32;
+        // An earlier alarm's interrupt, not yet taken, is stale: the handler recomputes anyway.
+        write(TIMER1 + 0xC, 1);
+        NVIC::unpend(Irq::Alarm);
+        // The timer interrupts when it counts down from `cycles` to 0: `cycles` from now.
+        write(TIMER1 + 4, cycles);
     }
 }
 
-impl Driver for SysTickDriver {
+impl Driver for TimerDriver {
     fn now(&self) -> u64 {
-        critical_section::with(|cs| self.logical.borrow(cs).get())
+        critical_section::with(|cs| self.cycles_in(cs) / CYCLES_PER_TICK)
     }
 
     fn schedule_wake(&self, at: u64, waker: &Waker) {
         critical_section::with(|cs| {
-            // A deadline that has come is due now: the task is polled again at this instant.
-            if at <= self.logical.borrow(cs).get() {
-                waker.wake_by_ref();
-                return;
-            }
             if self.queue.borrow_ref_mut(cs).schedule_wake(at, waker) {
-                let alarm = self.alarm.borrow(cs);
-                alarm.set(alarm.get().min(at));
-                let end = self.base.borrow(cs).get() + u64::from(self.period.borrow(cs).get());
-                if at < end {
-                    let now = self.now_in(cs);
-                    self.program(cs, now);
+                let alarm = self.alarm.borrow(cs).get();
+                if alarm == 0 || at < alarm {
+                    self.arm(cs, at);
                 }
             }
         });
     }
 }
 
-embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver {
-    base: Mutex::new(Cell::new(0)),
-    cycles_before: Mutex::new(Cell::new(0)),
-    period: Mutex::new(Cell::new(MAX_PERIOD)),
-    logical: Mutex::new(Cell::new(0)),
-    alarm: Mutex::new(Cell::new(u64::MAX)),
+embassy_time_driver::time_driver_impl!(static DRIVER: TimerDriver = TimerDriver {
+    clock: Mutex::new(Cell::new((0, 0))),
+    alarm: Mutex::new(Cell::new(0)),
     queue: Mutex::new(RefCell::new(Queue::new())),
 });
 
-#[exception]
-fn SysTick() {
-    let begin = critical_section::with(|cs| {
-        // The period ran out and the counter reloaded (taking the exception cleared the pending
-        // flag, so `elapsed` now counts from the reload): count the whole period.
-        let counted = DRIVER.cycles_before.borrow(cs);
-        counted.set(counted.get() + u64::from(syst().rvr.read()) + 1);
-        counted.get() + u64::from(DRIVER.elapsed())
-    });
+/// TIMER1's interrupt: wakes what is due and sets the next alarm.
+pub unsafe extern "C" fn alarm_interrupt() {
+    let begin = counter();
+    write(TIMER1 + 0xC, 1);
     critical_section::with(|cs| {
-        // The period ended: this is its last tick. The executor loop, woken from WFI, wakes
-        // the timers due.
-        let now = DRIVER.base.borrow(cs).get() + u64::from(DRIVER.period.borrow(cs).get());
-        DRIVER.program(cs, now);
+        let now = DRIVER.cycles_in(cs) / CYCLES_PER_TICK;
+        let next = DRIVER.queue.borrow_ref_mut(cs).next_expiration(now);
+        // Nothing to wake: come back anyway, to keep reading the clock.
+        let keep_reading = now + MAX_ALARM / CYCLES_PER_TICK;
+        DRIVER.arm(cs, next.min(keep_reading));
     });
-    let cycles = cycles().saturating_sub(begin);
-    ISR_MAX_CYCLES.fetch_max(u32::try_from(cycles).unwrap_or(u32::MAX), Ordering::Relaxed);
+    let cycles = begin.wrapping_sub(counter());
+    crate::executor::handler_ran(cycles);
+    ISR_MAX_CYCLES.fetch_max(cycles, Ordering::Relaxed);
 }
 
-/// The longest SysTick handler so far, in cycles from its first statement to its last
+/// The longest alarm handler so far, in cycles from its first statement to its last
 /// (exception entry and exit, 12 cycles each on a Cortex-M4, come on top).
 static ISR_MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
 
-/// The longest SysTick handler since the last call, which starts again.
+/// The longest alarm handler since the last call, which starts again.
 pub fn take_isr_max_cycles() -> u32 {
     ISR_MAX_CYCLES.swap(0, Ordering::Relaxed)
 }
 
-/// Starts the clock at tick 0: SysTick from the core clock, interrupting at deadlines.
-pub fn start(syst: &mut SYST) {
-    syst.set_clock_source(SystClkSource::Core);
-    critical_section::with(|cs| DRIVER.program(cs, 0));
-    syst.enable_interrupt();
-    syst.enable_counter();
+/// Starts the clock at tick 0, the reference beside it, and the alarm. Call once, before the
+/// executors start.
+pub fn start() {
+    // The reference first, then the clock: they start a few cycles apart, which the check's
+    // tolerance of a tick covers many times over.
+    write(DUALTIMER, u32::MAX);
+    // Enabled, free-running, prescaler 256, 32 bits, no interrupt.
+    write(DUALTIMER + 8, 0x80 | 0b10 << 2 | 0x2);
+    // QEMU's CMSDK timer takes a RELOAD write as a VALUE write too: RELOAD first.
+    write(TIMER0 + 8, u32::MAX);
+    write(TIMER0 + 4, FIRST_VALUE);
+    critical_section::with(|cs| DRIVER.clock.borrow(cs).set((FIRST_VALUE, 0)));
+    write(TIMER0, 1);
+    // The alarm: enabled with its interrupt, reloading 2³² − 1 after it fires (the handler
+    // loads the next value long before that comes).
+    write(TIMER1 + 8, u32::MAX);
+    write(TIMER1, 1 | 1 << 3);
+    critical_section::with(|cs| DRIVER.arm(cs, MAX_ALARM / CYCLES_PER_TICK));
+    // SAFETY: set once, before the interrupt is unmasked; the alarm is the most urgent.
+    unsafe {
+        let mut nvic = cortex_m::Peripherals::steal().NVIC;
+        nvic.set_priority(Irq::Alarm, 0);
+        NVIC::unmask(Irq::Alarm);
+    }
 }
 
-/// Puts the clock back to tick 0 with no timer pending: every run starts at 0, as every host
-/// simulation does. Wakers of the previous run are dropped (their futures are gone).
-pub fn restart() {
-    critical_section::with(|cs| {
-        *DRIVER.queue.borrow_ref_mut(cs) = Queue::new();
-        DRIVER.alarm.borrow(cs).set(u64::MAX);
-        DRIVER.program(cs, 0);
-        DRIVER.logical.borrow(cs).set(0);
-    });
-}
-
-/// Called when both executors are idle: if the earliest deadline has come on the counter, moves
-/// the logical instant to it and wakes the timers due then; `true` when it did (there is work
-/// again), `false` when the loop may sleep until the next interrupt.
-pub fn advance() -> bool {
-    critical_section::with(|cs| {
-        let next = DRIVER.alarm.borrow(cs).get();
-        if next == u64::MAX || next > DRIVER.now_in(cs) {
-            return false;
-        }
-        let logical = DRIVER.logical.borrow(cs);
-        logical.set(logical.get().max(next));
-        DRIVER.expire(cs, logical.get());
-        true
-    })
-}
-
-/// Core cycles since the clock started, from SysTick's counter: a cycle stamp for measuring
-/// how long code runs (exact under QEMU's `-icount`, where each instruction is one cycle).
+/// Core cycles since [`start`]: the clock's count, for measuring how long code runs.
 pub fn cycles() -> u64 {
-    critical_section::with(|cs| DRIVER.cycles_before.borrow(cs).get() + u64::from(DRIVER.elapsed()))
+    critical_section::with(|cs| DRIVER.cycles_in(cs))
+}
+
+/// Core cycles since [`start`] by the reference timer, to within its prescaler (256 cycles).
+pub fn reference_cycles() -> u64 {
+    u64::from(u32::MAX - read(DUALTIMER + 4)) * REFERENCE_PRESCALE
 }

@@ -57,8 +57,13 @@ const BOUNDED_RECURSION: &[(&str, u64, &str)] = &[
 const ONLY_FROM: &[(&str, &str, &str)] = &[
     (
         "embassy_executor::raw::TaskStorage<",
-        "psmpa_firmware::executor::poll",
-        "the executors' poll loop is the only caller of a task's poll function",
+        "<embassy_executor::raw::Executor>::poll",
+        "embassy's poll loop is the only caller of a task's poll function",
+    ),
+    (
+        "as psmpa_sim::run::Sides>::compute",
+        "psmpa_sim::robot::Nao<",
+        "the robot's walk is the only user of the platform's computation hook",
     ),
     (
         " as core::fmt::",
@@ -67,9 +72,41 @@ const ONLY_FROM: &[(&str, &str, &str)] = &[
     ),
     (
         "psmpa_sim::run::poll_erased",
-        "psmpa_firmware::executor::trampoline",
+        "TaskStorage<psmpa_firmware::executor::__trampoline_task",
         "a run's sensing side is installed for the sensing executor's trampoline task only",
     ),
+];
+
+/// The levels of preemption, least urgent first: each may interrupt those before it, so the
+/// bound stacks them all. (label, entry symbol, a task the level never polls, why.) The two
+/// executors share embassy's poll loop, and their tasks' poll functions are stored at run
+/// time: which task a level polls follows from where it was spawned, not from the code.
+const LEVELS: &[(&str, &str, &str, &str)] = &[
+    (
+        "thread mode (main, deciding executor)",
+        "Reset",
+        "TaskStorage<psmpa_firmware::executor::__trampoline_task",
+        "the trampoline is spawned on the sensing executor, which interrupt 14 polls",
+    ),
+    (
+        "interrupt 15 (deciding wake)",
+        "psmpa_firmware::executor::deciding_interrupt",
+        "",
+        "",
+    ),
+    (
+        "interrupt 14 (sensing executor)",
+        "psmpa_firmware::executor::sensing_interrupt",
+        "TaskStorage<psmpa_firmware::firmware::__one_run_task",
+        "the run task is spawned on the deciding executor, which thread mode polls",
+    ),
+    (
+        "interrupt 9 (alarm, time driver)",
+        "psmpa_firmware::time_driver::alarm_interrupt",
+        "",
+        "",
+    ),
+    ("HardFault", "HardFault", "", ""),
 ];
 
 /// Hardware exception frame with the floating-point context, plus the alignment word.
@@ -163,8 +200,6 @@ fn build() -> Result<PathBuf, String> {
         firmware::rustflags().as_str(),
         "-Zemit-stack-sizes",
         "-Clink-arg=--emit-relocs",
-        "-Zunstable-options",
-        "-Csymbol-mangling-version=legacy",
     ]
     .join("\x1f");
     let status = firmware::cargo()
@@ -667,6 +702,8 @@ struct Analysis<'a> {
     unknown_frame: BTreeSet<String>,
     /// Calls through registers: caller, site, number of targets.
     indirect: BTreeMap<(String, Site), usize>,
+    /// Functions this level never calls through a pointer (a name pattern; "" for none).
+    excluded: &'static str,
 }
 
 impl Analysis<'_> {
@@ -682,9 +719,11 @@ impl Analysis<'_> {
         let p = self.program;
         let allowed = |t: &u64| {
             let name = self.name(*t);
-            ONLY_FROM
-                .iter()
-                .all(|(callee, only, _)| !name.contains(callee) || caller.contains(only))
+            let excluded = !self.excluded.is_empty() && name.contains(self.excluded);
+            !excluded
+                && ONLY_FROM
+                    .iter()
+                    .all(|(callee, only, _)| !name.contains(callee) || caller.contains(only))
         };
         let tables = p.table_words.iter().filter(|(at, _)| match site {
             Site::Slot(k) => at.checked_sub(k).is_some_and(|start| p.is_table(start, k)),
@@ -860,45 +899,52 @@ pub fn run() -> Result<(), String> {
     }
     let program = program(&elf)?;
     let funcs = &program.funcs;
-    let mut a = Analysis {
+    let analysis = |excluded: &'static str| Analysis {
         program: &program,
         memo: HashMap::new(),
         path: Vec::new(),
         recursion: BTreeSet::new(),
         unknown_frame: BTreeSet::new(),
         indirect: BTreeMap::new(),
-    };
-    let task = funcs
-        .iter()
-        .find(|(_, f)| f.name.contains("TaskStorage<") && f.name.ends_with("::poll"))
-        .map(|(a, _)| *a);
-    let mut entry = |label: &str, addr: Option<u64>| {
-        let w = addr.and_then(|addr| a.worst(addr).0);
-        println!("{label:<46} {:>10}", show(w));
-        w
+        excluded,
     };
     println!("{:<46} {:>10}", "entry", "worst stack");
-    entry("mission task (one poll)", task);
-    let thread = entry(
-        "Reset (main, executor, every task)",
-        by_name(funcs, "Reset"),
-    );
-    let systick = entry("SysTick (time driver)", by_name(funcs, "SysTick"));
-    let hardfault = entry("HardFault", by_name(funcs, "HardFault"));
-    // SysTick preempts thread mode, HardFault preempts both; no other interrupt is enabled.
-    let total = match (thread, systick, hardfault) {
-        (Some(t), Some(s), Some(h)) => Some(t + EXCEPTION_FRAME + s + EXCEPTION_FRAME + h),
-        _ => None,
-    };
+    let task = funcs
+        .iter()
+        .find(|(_, f)| {
+            f.name
+                .contains("TaskStorage<psmpa_firmware::firmware::__one_run_task")
+        })
+        .map(|(a, _)| *a);
+    let w = task.and_then(|t| analysis("").worst(t).0);
+    println!("{:<46} {:>10}", "run task (one deciding poll)", show(w));
+    let (mut recursion, mut unknown_frame, mut indirect) =
+        (BTreeSet::new(), BTreeSet::new(), BTreeMap::new());
+    let mut deepest = Vec::new();
+    let mut total = Some(0);
+    for (i, (label, symbol, excluded, _)) in LEVELS.iter().enumerate() {
+        let mut a = analysis(excluded);
+        let addr = by_name(funcs, symbol);
+        let w = addr.and_then(|addr| a.worst(addr).0);
+        println!("{label:<46} {:>10}", show(w));
+        // A preempting level adds its hardware frame.
+        let frame = if i == 0 { 0 } else { EXCEPTION_FRAME };
+        total = total.zip(w).map(|(t, w)| t + w + frame);
+        if let Some(addr) = addr.filter(|_| !excluded.is_empty()) {
+            deepest.push((label, a.deepest_path(addr)));
+        }
+        recursion.append(&mut a.recursion);
+        unknown_frame.append(&mut a.unknown_frame);
+        indirect.append(&mut a.indirect);
+    }
     println!(
         "{:<46} {:>10}",
-        "bound (thread + SysTick + HardFault)",
+        "bound (every level nested, with its frame)",
         show(total)
     );
-
-    if let Some(reset) = by_name(funcs, "Reset") {
-        println!("\ndeepest path in thread mode (frame, function):");
-        for (frame, name) in a.deepest_path(reset) {
+    for (label, path) in deepest {
+        println!("\ndeepest path in {label} (frame, function):");
+        for (frame, name) in path {
             println!("  {:>6}  {name}", show(frame));
         }
     }
@@ -914,7 +960,7 @@ pub fn run() -> Result<(), String> {
         program.table_words.len(),
         program.stored.len()
     );
-    for ((caller, site), n) in &a.indirect {
+    for ((caller, site), n) in &indirect {
         let site = match site {
             Site::Slot(k) => format!("slot {k}"),
             Site::Unknown(at) => format!("{at:#x}"),
@@ -922,13 +968,19 @@ pub fn run() -> Result<(), String> {
         println!("  {n:>3} targets  {site:<8}  {caller}");
     }
     for f in &program.stored {
-        println!("stored at run time: {}", a.name(*f));
+        println!(
+            "stored at run time: {}",
+            funcs.get(f).map_or("?", |f| f.name.as_str())
+        );
     }
     for (pattern, depth, why) in BOUNDED_RECURSION {
         println!("recursion through `{pattern}` bounded by {depth}: {why}");
     }
     for (callee, only, why) in ONLY_FROM {
         println!("`{callee}` is called through a pointer from `{only}` only: {why}");
+    }
+    for (label, _, excluded, why) in LEVELS.iter().filter(|l| !l.2.is_empty()) {
+        println!("{label} never calls `{excluded}`: {why}");
     }
     let report = |title: &str, set: &BTreeSet<String>| {
         if !set.is_empty() {
@@ -938,11 +990,8 @@ pub fn run() -> Result<(), String> {
             }
         }
     };
-    report("unbounded recursion", &a.recursion);
-    report(
-        "reachable functions without a known frame",
-        &a.unknown_frame,
-    );
+    report("unbounded recursion", &recursion);
+    report("reachable functions without a known frame", &unknown_frame);
 
     let log = firmware::run(&elf)?;
     let measured = firmware::stack_high_water(&log)
