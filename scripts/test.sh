@@ -15,7 +15,7 @@ for component in clippy rustfmt; do
   grep -q "^$component" <<<"$installed_components" || rustup component add "$component"
 done
 
-step "system tools: QEMU, ARM binutils, valgrind, defmt-print (installed only when missing)"
+step "system tools: QEMU, ARM binutils, valgrind, defmt-print, flip-link (installed only when missing)"
 missing=()
 command -v qemu-system-arm >/dev/null || missing+=(qemu-system-arm)
 command -v arm-none-eabi-objdump >/dev/null || missing+=(binutils-arm-none-eabi)
@@ -27,6 +27,7 @@ if ((${#missing[@]})); then
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q "${missing[@]}"
 fi
 command -v defmt-print >/dev/null || cargo install defmt-print --locked
+command -v flip-link >/dev/null || cargo install flip-link --locked
 
 step "format"
 cargo fmt --all --check

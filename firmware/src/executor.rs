@@ -188,6 +188,10 @@ pub fn compute(cycles: u32) {
 }
 
 /// Interrupt 14: polls the sensing executor.
+///
+/// # Safety
+///
+/// Only the vector table calls it, as interrupt 14's handler.
 pub unsafe extern "C" fn sensing_interrupt() {
     let tick = embassy_time::Instant::now().as_ticks();
     let (begin, preempted) = (counter(), PREEMPTED.load(Ordering::Relaxed));
@@ -203,6 +207,10 @@ pub unsafe extern "C" fn sensing_interrupt() {
 }
 
 /// Interrupt 15: the deciding executor has work; thread mode polls it.
+///
+/// # Safety
+///
+/// Only the vector table calls it, as interrupt 15's handler.
 pub unsafe extern "C" fn deciding_interrupt() {
     WOKEN.store(true, Ordering::Release);
 }

@@ -15,18 +15,11 @@ fn main() {
 }
 
 #[cfg(target_os = "none")]
-mod executor;
-#[cfg(target_os = "none")]
-mod time_driver;
-
-#[cfg(target_os = "none")]
 mod firmware {
     use core::mem::MaybeUninit;
 
-    use cortex_m_rt::{ExceptionFrame, entry, exception};
-    use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
+    use cortex_m_rt::entry;
     use defmt::{error, info};
-    use defmt_semihosting as _;
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use psmpa_core::{TraceEvent, TraceSink};
     use psmpa_sim::robot::{Arch, PlannerSpace, Robot};
@@ -34,32 +27,13 @@ mod firmware {
     use psmpa_sim::scenario::Scenario;
     use psmpa_sim::world::{Device, Fate, WorldEvent, WorldLog};
 
-    use crate::executor::{self, Irq};
-    use crate::time_driver;
+    use psmpa_firmware::board::{self, fail, stack_high_water};
+    use psmpa_firmware::{executor, time_driver};
 
     include!(concat!(env!("OUT_DIR"), "/scenarios.rs"));
 
     /// `missions/fetch-tea.json`, whitespace removed at build time.
     static FETCH_TEA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fetch-tea.json"));
-
-    defmt::timestamp!("{=u64:ms}", embassy_time::Instant::now().as_millis());
-
-    unsafe extern "C" {
-        fn DefaultHandler();
-    }
-
-    /// The device part of the vector table: 16 entries (cortex-m-rt's default has 240, 960
-    /// bytes of flash): the alarm and the two executors' interrupts, the rest to the default
-    /// handler.
-    #[unsafe(link_section = ".vector_table.interrupts")]
-    #[unsafe(no_mangle)]
-    static __INTERRUPTS: [unsafe extern "C" fn(); 16] = {
-        let mut table: [unsafe extern "C" fn(); 16] = [DefaultHandler; 16];
-        table[Irq::Alarm as usize] = time_driver::alarm_interrupt;
-        table[Irq::Sensing as usize] = executor::sensing_interrupt;
-        table[Irq::Deciding as usize] = executor::deciding_interrupt;
-        table
-    };
 
     /// Marks [`NEXT_RUN`] as written by a previous boot.
     const MAGIC: u32 = 0x7053_4d50;
@@ -85,10 +59,7 @@ mod firmware {
         if run.is_some() {
             cortex_m::peripheral::SCB::sys_reset();
         }
-        debug::exit(EXIT_SUCCESS);
-        loop {
-            cortex_m::asm::wfi();
-        }
+        board::exit()
     }
 
     #[entry]
@@ -371,64 +342,5 @@ mod firmware {
         let (used, size) = stack_high_water();
         info!("stack high-water {=u32} of {=u32} bytes", used, size);
         next((run + 1 < runs).then_some(run + 1))
-    }
-
-    /// cortex-m-rt's `paint-stack` fills the stack region with a pattern at reset: the
-    /// deepest word it no longer holds is the high-water mark.
-    fn stack_high_water() -> (u32, u32) {
-        unsafe extern "C" {
-            static mut _stack_end: u32;
-            static mut _stack_start: u32;
-        }
-        let bottom = (&raw const _stack_end).cast::<u32>();
-        let top = (&raw const _stack_start).cast::<u32>();
-        let mut p = bottom;
-        // SAFETY: [bottom, top) is the stack region, word aligned, and readable.
-        while p < top && unsafe { p.read_volatile() } == cortex_m_rt::STACK_PAINT_VALUE {
-            p = p.wrapping_add(1);
-        }
-        (
-            (top as u32).wrapping_sub(p as u32),
-            (top as u32).wrapping_sub(bottom as u32),
-        )
-    }
-
-    fn fail(what: &str) -> ! {
-        error!("failure: {=str}", what);
-        debug::exit(EXIT_FAILURE);
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
-
-    /// Set by the first panic: a panic while logging one exits at once, so the handler nests
-    /// at most once (the stack bound of `cargo xtask stack` relies on it).
-    static PANICKING: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
-
-    #[panic_handler]
-    fn panic(info: &core::panic::PanicInfo) -> ! {
-        if !PANICKING.swap(true, core::sync::atomic::Ordering::Relaxed) {
-            match info.location() {
-                Some(l) => error!("panic at {=str}:{=u32}", l.file(), l.line()),
-                None => error!("panic"),
-            }
-        }
-        debug::exit(EXIT_FAILURE);
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
-
-    #[exception]
-    unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-        error!(
-            "HardFault at pc {=u32:#010x}, lr {=u32:#010x}",
-            frame.pc(),
-            frame.lr()
-        );
-        debug::exit(EXIT_FAILURE);
-        loop {
-            cortex_m::asm::wfi();
-        }
     }
 }

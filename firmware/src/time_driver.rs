@@ -127,6 +127,10 @@ embassy_time_driver::time_driver_impl!(static DRIVER: TimerDriver = TimerDriver 
 });
 
 /// TIMER1's interrupt: wakes what is due and sets the next alarm.
+///
+/// # Safety
+///
+/// Only the vector table calls it, as interrupt 9's handler.
 pub unsafe extern "C" fn alarm_interrupt() {
     let begin = counter();
     write(TIMER1 + 0xC, 1);

@@ -663,24 +663,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// The world at time 0 of `scenario`, logging into `log`.
     #[inline(never)] // Its temporaries stay out of the frame of the task polling a run.
     pub fn new(scenario: &'s Scenario, log: L) -> Self {
-        let obstacles = scenario
-            .interferences
-            .iter()
-            .map(|i| Obstacle {
-                kind: i.kind,
-                at_ms: i.at_ms,
-                ahead_um: i.ahead_um,
-                hold_ms: i.hold_ms,
-                pos_um: 0,
-                phase: Phase::Pending,
-                fate: Fate::Unmet,
-                certain_since: None,
-                reaction_ms: None,
-                certain_samples: 0,
-                sensed: false,
-            })
-            .collect();
-        Self {
+        let mut world = Self {
             scenario,
             state: Mutex::new(RefCell::new(State {
                 now: 0,
@@ -692,7 +675,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 on: [false; 4],
                 on_ms: [0; 4],
                 gaps: [Gaps::default(); 4],
-                obstacles,
+                obstacles: Vec::new(),
                 rng: Pcg32::seed_from_u64(scenario.seed),
                 at_door_ms: None,
                 door_open: false,
@@ -702,7 +685,26 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 hash: TraceHash::new(),
                 log,
             })),
+        };
+        // Pushed in place: a collected vector would be one more copy of it in this frame.
+        let obstacles = &mut world.state.get_mut().get_mut().obstacles;
+        for i in &scenario.interferences {
+            // The same capacity as the scenario's: room for each.
+            let _ = obstacles.push(Obstacle {
+                kind: i.kind,
+                at_ms: i.at_ms,
+                ahead_um: i.ahead_um,
+                hold_ms: i.hold_ms,
+                pos_um: 0,
+                phase: Phase::Pending,
+                fate: Fate::Unmet,
+                certain_since: None,
+                reaction_ms: None,
+                certain_samples: 0,
+                sensed: false,
+            });
         }
+        world
     }
 
     /// The scenario.

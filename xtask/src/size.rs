@@ -1,4 +1,9 @@
-//! Firmware size against the budget and the committed snapshot (RTIC style).
+//! Flash and RAM of both firmware images against their budgets and the committed snapshot
+//! (RTIC style).
+//!
+//! * Flash is what is written to the chip: `.vector_table + .text + .rodata + .data` (the
+//!   initial values of `.data` are flashed and copied at boot).
+//! * RAM is `.data + .bss` and the stack's high-water mark measured in QEMU.
 
 use std::path::Path;
 
@@ -7,22 +12,54 @@ use serde::{Deserialize, Serialize};
 
 use crate::firmware;
 
-/// The limits the firmware must hold (issue: a small real part's share for the mission).
-const FLASH_BUDGET: u64 = 64 * 1024;
-const RAM_BUDGET: u64 = 16 * 1024;
+/// What an image may take, bytes.
+struct Budget {
+    flash: u64,
+    ram_with_stack: u64,
+    /// `false`: a target this image does not meet yet; reported, not enforced.
+    flash_enforced: bool,
+}
+
+/// The simulator-carrying firmware: a small real part's share for the mission.
+const FIRMWARE: Budget = Budget {
+    flash: 64 * 1024,
+    ram_with_stack: 16 * 1024,
+    flash_enforced: true,
+};
+
+/// The product-shaped image. Its flash target is not met: the core alone (control loop, FSM,
+/// sensing side) takes about 17 KB and what stable Rust cannot drop of `core::fmt` behind
+/// panics about 5 KB (README, "Timing and memory guarantees").
+const PRODUCT: Budget = Budget {
+    flash: 32 * 1024,
+    ram_with_stack: 8 * 1024,
+    flash_enforced: false,
+};
+
 /// Growth over the snapshot that fails the check.
 const GROWTH_PERCENT: u64 = 2;
 
-/// What `firmware/size.json` holds.
+/// The sizes of one image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Sizes {
-    /// `.vector_table + .text + .rodata`, bytes.
+    /// `.vector_table + .text + .rodata + .data`, bytes.
     pub flash: u64,
     /// `.data + .bss`, bytes.
     pub static_ram: u64,
     /// Stack high-water mark measured in QEMU, bytes.
     pub stack: u64,
 }
+
+/// What `firmware/size.json` holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Snapshot {
+    /// `psmpa-firmware`: the core, the simulated world and the embedded scenarios.
+    pub firmware: Sizes,
+    /// `psmpa-product`: the core, the mission loader and stub drivers.
+    pub product: Sizes,
+}
+
+const FLASH_SECTIONS: [&str; 4] = [".vector_table", ".text", ".rodata", ".data"];
 
 fn sections(elf: &Path) -> Result<(u64, u64), String> {
     let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
@@ -33,10 +70,7 @@ fn sections(elf: &Path) -> Result<(u64, u64), String> {
             .map(|s| s.size())
             .sum()
     };
-    Ok((
-        size(&[".vector_table", ".text", ".rodata"]),
-        size(&[".data", ".bss"]),
-    ))
+    Ok((size(&FLASH_SECTIONS), size(&[".data", ".bss"])))
 }
 
 /// Flash bytes by crate, from the size of every function and constant symbol in the flash
@@ -50,10 +84,7 @@ fn flash_by_crate(elf: &Path, flash: u64) -> Result<Vec<(String, u64)>, String> 
     let file = object::File::parse(&*data).map_err(|e| format!("{}: {e}", elf.display()))?;
     let flash_sections: Vec<SectionIndex> = file
         .sections()
-        .filter(|s| {
-            s.name()
-                .is_ok_and(|n| [".vector_table", ".text", ".rodata"].contains(&n))
-        })
+        .filter(|s| s.name().is_ok_and(|n| FLASH_SECTIONS.contains(&n)))
         .map(|s| s.index())
         .collect();
     let mut by_crate = std::collections::BTreeMap::<String, u64>::new();
@@ -98,93 +129,155 @@ fn crate_of(name: &str) -> String {
         .unwrap_or_else(|| "(unnamed)".into())
 }
 
-/// Measures, compares, and with `bless` writes the snapshot.
-pub fn run(bless: bool) -> Result<(), String> {
-    let elf = firmware::build(&[])?;
-    let (flash, static_ram) = sections(&elf)?;
-    let log = firmware::run(&elf)?;
+/// Measures one image: sizes from its ELF, the stack from its run in QEMU.
+fn measure(elf: &Path) -> Result<Sizes, String> {
+    let (flash, static_ram) = sections(elf)?;
+    let log = firmware::run(elf)?;
     let stack = firmware::stack_high_water(&log)
-        .ok_or("the firmware did not report its stack high-water mark")?;
-    let now = Sizes {
+        .ok_or_else(|| format!("{} did not report its stack high-water mark", elf.display()))?;
+    Ok(Sizes {
         flash,
         static_ram,
         stack,
-    };
-    let path = firmware::root().join("firmware/size.json");
-    let snapshot: Option<Sizes> = std::fs::read(&path)
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok());
+    })
+}
 
-    let row = |name: &str, value: u64, old: Option<u64>, budget: &str| {
+/// Prints one image's rows and returns what breaks its budget or grew past the snapshot.
+fn report(
+    name: &str,
+    now: Sizes,
+    old: Option<Sizes>,
+    budget: &Budget,
+    check_growth: bool,
+) -> Vec<String> {
+    let row = |what: &str, value: u64, old: Option<u64>, budget: String| {
         let delta = old.map_or(String::new(), |o| format!("{:+}", value as i64 - o as i64));
-        println!("{name:<28} {value:>8} B  {delta:>8}  {budget}");
+        println!("  {what:<42} {value:>8} B  {delta:>8}  {budget}");
     };
-    println!("{:<28} {:>10}  {:>8}  budget", "", "measured", "vs snap");
+    let ram = now.static_ram + now.stack;
+    let over = |value: u64, limit: u64| {
+        if value <= limit {
+            format!("{} KiB", limit / 1024)
+        } else {
+            format!("{} KiB: over by {} B", limit / 1024, value - limit)
+        }
+    };
+    println!("{name}:");
     row(
-        "flash (.vector_table+.text+.rodata)",
-        flash,
-        snapshot.map(|s| s.flash),
-        "64 KiB",
+        "flash (.vector_table+.text+.rodata+.data)",
+        now.flash,
+        old.map(|s| s.flash),
+        if budget.flash_enforced {
+            over(now.flash, budget.flash)
+        } else {
+            format!("{} (target, not enforced)", over(now.flash, budget.flash))
+        },
     );
     row(
         "static RAM (.data+.bss)",
-        static_ram,
-        snapshot.map(|s| s.static_ram),
-        "",
+        now.static_ram,
+        old.map(|s| s.static_ram),
+        String::new(),
     );
     row(
         "stack high-water (QEMU)",
-        stack,
-        snapshot.map(|s| s.stack),
-        "",
+        now.stack,
+        old.map(|s| s.stack),
+        String::new(),
     );
     row(
         "static RAM + stack",
-        static_ram + stack,
-        snapshot.map(|s| s.static_ram + s.stack),
-        "16 KiB",
+        ram,
+        old.map(|s| s.static_ram + s.stack),
+        over(ram, budget.ram_with_stack),
     );
+    let mut failures = Vec::new();
+    if budget.flash_enforced && now.flash > budget.flash {
+        failures.push(format!(
+            "{name}: flash {} B is over the budget of {} B",
+            now.flash, budget.flash
+        ));
+    }
+    if ram > budget.ram_with_stack {
+        failures.push(format!(
+            "{name}: static RAM + stack {ram} B is over the budget of {} B",
+            budget.ram_with_stack
+        ));
+    }
+    if let Some(old) = old.filter(|_| check_growth) {
+        for (what, new, old) in [
+            ("flash", now.flash, old.flash),
+            ("static RAM", now.static_ram, old.static_ram),
+            ("stack", now.stack, old.stack),
+        ] {
+            if new * 100 > old * (100 + GROWTH_PERCENT) {
+                failures.push(format!("{name}: {what} grew from {old} B to {new} B (more than {GROWTH_PERCENT} %); if intended, run cargo xtask size --bless"));
+            }
+        }
+    }
+    failures
+}
 
-    println!();
-    println!("flash by crate (by symbol name; inlined code counts where it was inlined):");
-    for (krate, bytes) in flash_by_crate(&elf, flash)? {
-        println!("  {krate:<48} {bytes:>6} B");
+/// Measures both images, compares, and with `bless` writes the snapshot.
+pub fn run(bless: bool) -> Result<(), String> {
+    let elf = firmware::build(&[])?;
+    let product_elf = firmware::product(&elf);
+    let now = Snapshot {
+        firmware: measure(&elf)?,
+        product: measure(&product_elf)?,
+    };
+    let path = firmware::root().join("firmware/size.json");
+    let snapshot: Option<Snapshot> = std::fs::read(&path)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok());
+
+    println!("{:<44} {:>10}  {:>8}  budget", "", "measured", "vs snap");
+    let mut failures = report(
+        "psmpa-firmware (core, simulated world, 15 scenarios)",
+        now.firmware,
+        snapshot.map(|s| s.firmware),
+        &FIRMWARE,
+        !bless,
+    );
+    failures.extend(report(
+        "psmpa-product (core, mission loader, stub drivers)",
+        now.product,
+        snapshot.map(|s| s.product),
+        &PRODUCT,
+        !bless,
+    ));
+    for (name, elf, flash) in [
+        ("psmpa-firmware", &elf, now.firmware.flash),
+        ("psmpa-product", &product_elf, now.product.flash),
+    ] {
+        println!();
+        println!(
+            "{name}: flash by crate (by symbol name; inlined code counts where it was inlined):"
+        );
+        for (krate, bytes) in flash_by_crate(elf, flash)? {
+            println!("  {krate:<48} {bytes:>6} B");
+        }
+    }
+    // The product must carry neither the simulated world nor the scenario parser.
+    let data = std::fs::read(&product_elf).map_err(|e| e.to_string())?;
+    let file = object::File::parse(&*data).map_err(|e| e.to_string())?;
+    if let Some(sim) = object::Object::symbols(&file)
+        .filter_map(|s| object::ObjectSymbol::name(&s).ok().map(str::to_owned))
+        .map(|n| rustc_demangle::demangle(&n).to_string())
+        .find(|n| n.contains("psmpa_sim::"))
+    {
+        failures.push(format!("psmpa-product links the simulator: {sim}"));
     }
 
     if bless {
         let text = serde_json::to_string_pretty(&now).map_err(|e| e.to_string())? + "\n";
         std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
         println!("wrote {}", path.display());
-    }
-    let mut failures = Vec::new();
-    if flash > FLASH_BUDGET {
+    } else if snapshot.is_none() {
         failures.push(format!(
-            "flash {flash} B is over the budget of {FLASH_BUDGET} B"
-        ));
-    }
-    if static_ram + stack > RAM_BUDGET {
-        failures.push(format!(
-            "static RAM + stack {} B is over the budget of {RAM_BUDGET} B",
-            static_ram + stack
-        ));
-    }
-    match snapshot {
-        Some(old) if !bless => {
-            for (name, new, old) in [
-                ("flash", flash, old.flash),
-                ("static RAM", static_ram, old.static_ram),
-                ("stack", stack, old.stack),
-            ] {
-                if new * 100 > old * (100 + GROWTH_PERCENT) {
-                    failures.push(format!("{name} grew from {old} B to {new} B (more than {GROWTH_PERCENT} %); if intended, run cargo xtask size --bless"));
-                }
-            }
-        }
-        None if !bless => failures.push(format!(
-            "no snapshot at {}: run cargo xtask size --bless",
+            "no snapshot (or an old one) at {}: run cargo xtask size --bless",
             path.display()
-        )),
-        _ => {}
+        ));
     }
     if failures.is_empty() {
         Ok(())

@@ -192,8 +192,8 @@ fn demangle(name: &str) -> String {
 /// Builds the firmware for analysis: the same compiler and flags as the shipped firmware, plus
 /// `-Z emit-stack-sizes` (a section beside the code) and `--emit-relocs` (which words are
 /// addresses). `RUSTC_BOOTSTRAP` unlocks the `-Z` flag on the stable compiler, so the code
-/// analysed is the code shipped; [`run`] checks that byte for byte. (A compiler that believes
-/// it is nightly mangles names the v0 way, which moves code: legacy keeps stable's layout.)
+/// analysed is the code shipped; [`run`] checks that byte for byte (both use v0 mangling, so
+/// the names are the same too).
 fn build() -> Result<PathBuf, String> {
     let target_dir = firmware::root().join("target/stack");
     let flags = [
@@ -203,7 +203,15 @@ fn build() -> Result<PathBuf, String> {
     ]
     .join("\x1f");
     let status = firmware::cargo()
-        .args(["build", "--quiet", "-p", "psmpa-firmware", "--target"])
+        .args([
+            "build",
+            "--quiet",
+            "-p",
+            "psmpa-firmware",
+            "--bin",
+            "psmpa-firmware",
+        ])
+        .arg("--target")
         .args([firmware::TARGET, "--profile", firmware::PROFILE])
         .env("CARGO_ENCODED_RUSTFLAGS", flags)
         .env("CARGO_TARGET_DIR", &target_dir)

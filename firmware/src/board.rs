@@ -1,0 +1,98 @@
+//! The mps2-an386 board as both images use it: the interrupt vector, leaving QEMU, the stack's
+//! high-water mark, and what a fault or a panic does.
+
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use cortex_m_rt::{ExceptionFrame, exception};
+use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
+use defmt::error;
+use defmt_semihosting as _;
+
+use crate::executor::{self, Irq};
+use crate::time_driver;
+
+defmt::timestamp!("{=u64:ms}", embassy_time::Instant::now().as_millis());
+
+unsafe extern "C" {
+    fn DefaultHandler();
+}
+
+/// The device part of the vector table: 16 entries (cortex-m-rt's default has 240, 960 bytes
+/// of flash): the alarm and the two executors' interrupts, the rest to the default handler.
+#[unsafe(link_section = ".vector_table.interrupts")]
+#[unsafe(no_mangle)]
+static __INTERRUPTS: [unsafe extern "C" fn(); 16] = {
+    let mut table: [unsafe extern "C" fn(); 16] = [DefaultHandler; 16];
+    table[Irq::Alarm as usize] = time_driver::alarm_interrupt;
+    table[Irq::Sensing as usize] = executor::sensing_interrupt;
+    table[Irq::Deciding as usize] = executor::deciding_interrupt;
+    table
+};
+
+/// Leaves QEMU with success.
+pub fn exit() -> ! {
+    debug::exit(EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Logs `what` and leaves QEMU with failure.
+pub fn fail(what: &str) -> ! {
+    error!("failure: {=str}", what);
+    debug::exit(EXIT_FAILURE);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// The stack's high-water mark and size, bytes. cortex-m-rt's `paint-stack` fills the stack
+/// region with a pattern at reset: the deepest word it no longer holds is the mark.
+pub fn stack_high_water() -> (u32, u32) {
+    unsafe extern "C" {
+        static mut _stack_end: u32;
+        static mut _stack_start: u32;
+    }
+    let bottom = (&raw const _stack_end).cast::<u32>();
+    let top = (&raw const _stack_start).cast::<u32>();
+    let mut p = bottom;
+    // SAFETY: [bottom, top) is the stack region, word aligned, and readable.
+    while p < top && unsafe { p.read_volatile() } == cortex_m_rt::STACK_PAINT_VALUE {
+        p = p.wrapping_add(1);
+    }
+    (
+        (top as u32).wrapping_sub(p as u32),
+        (top as u32).wrapping_sub(bottom as u32),
+    )
+}
+
+/// Set by the first panic: a panic while logging one exits at once, so the handler nests at
+/// most once (the stack bound of `cargo xtask stack` relies on it).
+static PANICKING: AtomicBool = AtomicBool::new(false);
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    if !PANICKING.swap(true, Ordering::Relaxed) {
+        match info.location() {
+            Some(l) => error!("panic at {=str}:{=u32}", l.file(), l.line()),
+            None => error!("panic"),
+        }
+    }
+    debug::exit(EXIT_FAILURE);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    error!(
+        "HardFault at pc {=u32:#010x}, lr {=u32:#010x}",
+        frame.pc(),
+        frame.lr()
+    );
+    debug::exit(EXIT_FAILURE);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}

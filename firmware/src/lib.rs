@@ -1,0 +1,17 @@
+//! What both firmware images share on QEMU's mps2-an386 (Cortex-M4F): the two executors, the
+//! clock, and the board's vector table, fault and panic handling.
+//!
+//! * `psmpa-firmware` (`src/main.rs`): the simulated NAO world and every embedded scenario,
+//!   checked against the host by `cargo xtask qemu`.
+//! * `psmpa-product` (`src/bin/product.rs`): what a robot's firmware carries, the core, the
+//!   mission loader and a platform of stubs where the drivers go; `cargo xtask size` holds it
+//!   to its budget.
+#![cfg_attr(target_os = "none", no_std)]
+#![deny(missing_docs)]
+
+#[cfg(target_os = "none")]
+pub mod board;
+#[cfg(target_os = "none")]
+pub mod executor;
+#[cfg(target_os = "none")]
+pub mod time_driver;
