@@ -10,7 +10,7 @@
 #[cfg(not(target_os = "none"))]
 fn main() {
     eprintln!(
-        "psmpa-firmware runs on the target: cargo run -p psmpa-firmware --target thumbv7em-none-eabihf --release"
+        "psmpa-firmware runs on the target: cargo run -p psmpa-firmware --target thumbv7em-none-eabihf --profile firmware"
     );
 }
 
