@@ -165,26 +165,40 @@ fn record(sensing: bool, cycles: u32, tick: u64) {
     });
 }
 
+/// The clock and the handlers' total read together: no handler ran between the two reads, so
+/// a handler's cycles are either in both or in neither.
+fn snapshot() -> (u32, u32) {
+    loop {
+        let preempted = PREEMPTED.load(Ordering::Relaxed);
+        let now = counter();
+        if PREEMPTED.load(Ordering::Relaxed) == preempted {
+            return (now, preempted);
+        }
+    }
+}
+
+/// The cycles of its own spent since `begin` (a [`snapshot`]): the span less the handlers
+/// that ran in it.
+fn own_since((begin, preempted): (u32, u32)) -> u32 {
+    let (now, total) = snapshot();
+    // The counter counts down.
+    let span = begin.wrapping_sub(now);
+    span.saturating_sub(total.wrapping_sub(preempted))
+}
+
 /// Runs `poll`, returning the cycles it took of its own: its span less the handlers that
 /// preempted it (whose own entry and exit, a dozen cycles each, stay in the span).
 fn timed(poll: impl FnOnce()) -> u32 {
-    let (begin, preempted) = (counter(), PREEMPTED.load(Ordering::Relaxed));
+    let begin = snapshot();
     poll();
-    let span = begin.wrapping_sub(counter());
-    span.wrapping_sub(PREEMPTED.load(Ordering::Relaxed).wrapping_sub(preempted))
+    own_since(begin)
 }
 
 /// Spends `cycles` of processor time of its own (what preempts it does not count): a
 /// behaviour's computation.
 pub fn compute(cycles: u32) {
-    let (begin, preempted) = (counter(), PREEMPTED.load(Ordering::Relaxed));
-    loop {
-        let span = begin.wrapping_sub(counter());
-        let other = PREEMPTED.load(Ordering::Relaxed).wrapping_sub(preempted);
-        if span.wrapping_sub(other) >= cycles {
-            return;
-        }
-    }
+    let begin = snapshot();
+    while own_since(begin) < cycles {}
 }
 
 /// Interrupt 14: polls the sensing executor.
@@ -194,15 +208,14 @@ pub fn compute(cycles: u32) {
 /// Only the vector table calls it, as interrupt 14's handler.
 pub unsafe extern "C" fn sensing_interrupt() {
     let tick = embassy_time::Instant::now().as_ticks();
-    let (begin, preempted) = (counter(), PREEMPTED.load(Ordering::Relaxed));
+    let begin = snapshot();
     IN_SENSING.store(true, Ordering::Relaxed);
     // SAFETY: the handler of the interrupt `SENSING` was started on, called from nowhere else.
     let own = timed(|| unsafe { SENSING.on_interrupt() });
     IN_SENSING.store(false, Ordering::Relaxed);
-    // What the deciding side sees: this whole span, nested handlers included.
-    let span = begin.wrapping_sub(counter());
-    let nested = PREEMPTED.load(Ordering::Relaxed).wrapping_sub(preempted);
-    PREEMPTED.fetch_add(span.wrapping_sub(nested), Ordering::Relaxed);
+    // What the code below sees: this whole span, nested handlers included. Those added their
+    // own share already: add this handler's.
+    PREEMPTED.fetch_add(own_since(begin), Ordering::Relaxed);
     record(true, own, tick);
 }
 
