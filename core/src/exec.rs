@@ -523,18 +523,19 @@ impl<
         });
     }
 
-    /// A wait of the deciding side on the shared state: `done` decides, and when it says not
-    /// yet the waker is registered, in the same lock, so that a sensing side that preempts in
-    /// between cannot wake nobody.
-    fn poll_deciding<R>(
+    /// A wait on the shared state: `done` decides, and when it says not yet the waker is
+    /// registered with the side's wakers (`wakers`), in the same lock, so that a side that
+    /// preempts in between cannot wake nobody.
+    fn poll_shared<R>(
         &self,
         cx: &mut Context<'_>,
+        wakers: impl FnOnce(&Shared<NS>) -> &RefCell<MultiWakerRegistration<4>>,
         done: impl FnOnce(&Shared<NS>) -> Option<R>,
     ) -> Poll<R> {
         self.shared.lock(|s| match done(s) {
             Some(r) => Poll::Ready(r),
             None => {
-                if let Ok(mut w) = s.deciding.try_borrow_mut() {
+                if let Ok(mut w) = wakers(s).try_borrow_mut() {
                     w.register(cx.waker());
                 }
                 Poll::Pending
@@ -542,21 +543,22 @@ impl<
         })
     }
 
-    /// [`poll_deciding`](Self::poll_deciding) for a sampler.
+    /// [`poll_shared`](Self::poll_shared) for the deciding side.
+    fn poll_deciding<R>(
+        &self,
+        cx: &mut Context<'_>,
+        done: impl FnOnce(&Shared<NS>) -> Option<R>,
+    ) -> Poll<R> {
+        self.poll_shared(cx, |s| &s.deciding, done)
+    }
+
+    /// [`poll_shared`](Self::poll_shared) for a sampler.
     pub(crate) fn poll_sensing<R>(
         &self,
         cx: &mut Context<'_>,
         done: impl FnOnce(&Shared<NS>) -> Option<R>,
     ) -> Poll<R> {
-        self.shared.lock(|s| match done(s) {
-            Some(r) => Poll::Ready(r),
-            None => {
-                if let Ok(mut w) = s.sensing.try_borrow_mut() {
-                    w.register(cx.waker());
-                }
-                Poll::Pending
-            }
-        })
+        self.poll_shared(cx, |s| &s.sensing, done)
     }
 
     /// The sensors that failed and are out of service: a state that needs one fails at once

@@ -64,7 +64,7 @@ pub const CONTROL: u32 = 1 << 8;
 pub const SENSORS: usize = 4;
 
 /// How long polls took, in core cycles of their own (preempting handlers excluded).
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct Polls {
     /// Polls run, of both executors.
     pub count: u32,
@@ -87,17 +87,22 @@ pub struct Polls {
     pub max_critical: u32,
 }
 
-static POLLS: Mutex<Cell<Polls>> = Mutex::new(Cell::new(Polls {
-    count: 0,
-    max_cycles: 0,
-    max_at: 0,
-    total_cycles: 0,
-    max_sample: [0; SENSORS],
-    max_control: 0,
-    max_behaviour: 0,
-    max_deciding: 0,
-    max_critical: 0,
-}));
+impl Polls {
+    /// No poll yet.
+    pub const NONE: Self = Self {
+        count: 0,
+        max_cycles: 0,
+        max_at: 0,
+        total_cycles: 0,
+        max_sample: [0; SENSORS],
+        max_control: 0,
+        max_behaviour: 0,
+        max_deciding: 0,
+        max_critical: 0,
+    };
+}
+
+static POLLS: Mutex<Cell<Polls>> = Mutex::new(Cell::new(Polls::NONE));
 
 /// Steps of the running sensing poll, and of the running deciding poll.
 static SENSING_STEPS: AtomicU32 = AtomicU32::new(0);
@@ -127,7 +132,7 @@ pub fn handler_ran(cycles: u32) {
 /// The poll statistics since the last call, which starts them again.
 pub fn take_polls() -> Polls {
     let critical = MAX_CRITICAL.swap(0, Ordering::Relaxed);
-    let mut p = critical_section::with(|cs| POLLS.borrow(cs).replace(Polls::default()));
+    let mut p = critical_section::with(|cs| POLLS.borrow(cs).replace(Polls::NONE));
     p.max_critical = critical;
     p
 }
