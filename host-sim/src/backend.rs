@@ -1,20 +1,24 @@
-//! The host backend: a virtual-time `embassy-time` driver and two hand-driven embassy
-//! executors, one per priority.
+//! The host backend: a virtual-time `embassy-time` driver and a two-priority poll loop.
 //!
-//! [`simulate`] polls a future on an `embassy_executor::raw::Executor` until nothing is ready,
-//! then jumps the virtual clock to the earliest timer deadline, and so on until the future
-//! completes. Time only moves when every task waits, so a minute of robot time takes
-//! milliseconds, and the same future gives the same result every time.
+//! [`simulate`] polls a future until nothing is ready, then jumps the virtual clock to the
+//! earliest timer deadline, and so on until the future completes. Time only moves when
+//! everything waits, so a minute of robot time takes milliseconds, and the same future gives
+//! the same result every time.
 //!
-//! Inside a simulation, [`beside`] runs a second future (a runtime's sensing side) on a
-//! second executor of *higher priority*: whenever it has work, it is polled before the next
-//! poll of the simulated future, so at every instant ready sensing work comes before deciding
-//! work, as on a microcontroller where sensing runs on an interrupt executor (there it can
-//! even preempt a poll; here polls take no time, so preempting at poll boundaries is the same).
+//! Inside a simulation, [`beside`] runs a second future (a runtime's sensing side) at a
+//! *higher priority*: whenever it has work, it is polled before the next poll of the simulated
+//! future, so at every instant ready sensing work comes before deciding work, as on a
+//! microcontroller where sensing runs on an interrupt executor (there it can even preempt a
+//! poll; here polls take no time, so preempting at poll boundaries is the same).
 //! [`simulate_split`] is the two together.
 //!
-//! The clock, the timer queue and the executor are per thread: independent simulations run on
-//! parallel test threads without seeing each other. A simulation must stay on its thread.
+//! No executor: the core spawns no tasks, so the loop polls its two futures itself, each with
+//! its priority's waker, whose wake only sets that priority's "pending" flag. Timers sit in one
+//! alarm slot per priority waker; a future that polls with a waker of its own gets a list.
+//!
+//! The clock, the timers and the flags are per thread: independent simulations run on parallel
+//! test threads without seeing each other. A simulation must stay on its thread (its wakers set
+//! the flags of the thread that wakes them).
 //!
 //! Errors instead of hangs: a future that waits with no timer pending is a
 //! [`SimError::Deadlock`]; one still running at the time limit is a [`SimError::TimeLimit`].
@@ -23,9 +27,8 @@ use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::future::Future;
 use std::pin::{Pin, pin};
-use std::task::{Context, Poll, Waker};
+use std::task::{Context, Poll, RawWaker, RawWakerVTable, Waker};
 
-use embassy_executor::raw::{Executor, TaskStorage};
 use embassy_time::{Duration, Instant};
 
 use crate::run::{Beside, Erased, HighSlot};
@@ -78,191 +81,300 @@ pub struct Completed<T> {
     pub clock_jumps: u64,
 }
 
-/// A timer registration: wake `waker` at tick `at`; `seq` orders equal deadlines by arrival.
+/// The simulated future's priority: the index of its flag and alarm slot.
+const LOW: usize = 0;
+/// The sensing side's priority ([`beside`]).
+const HIGH: usize = 1;
+
+/// A priority waker's timer: wake at tick `at`; `seq` orders equal deadlines by arrival.
+#[derive(Clone, Copy)]
+struct Slot {
+    at: u64,
+    seq: u64,
+}
+
+/// The end of time: no alarm is later, so a jump takes plain minimums of deadlines (with
+/// `Option`s, the plan benchmark took 17 more instructions a step). An alarm may be set for
+/// then too: `seq` tells it from an empty slot.
+const NEVER: u64 = u64::MAX;
+
+/// An empty slot: due at the end of time, with an arrival number never reached.
+const EMPTY: Slot = Slot {
+    at: NEVER,
+    seq: u64::MAX,
+};
+
+impl Slot {
+    fn is_set(self) -> bool {
+        self.seq != EMPTY.seq
+    }
+}
+
+/// A timer of a waker that is not one of the two priority wakers.
 struct Alarm {
     at: u64,
     seq: u64,
     waker: Waker,
 }
 
-#[derive(Default)]
-struct Clock {
-    now: u64,
-    seq: u64,
-    alarms: Vec<Alarm>,
+/// What a due alarm wakes.
+enum Target {
+    Priority(usize),
+    Foreign(Waker),
 }
 
-/// The running simulation's future, pinned on `simulate`'s stack (no allocation); the
-/// lifetime is erased, and [`Cleanup`] takes the pointer back before that frame ends.
-type TaskPtr = *mut (dyn Future<Output = ()> + 'static);
-
-/// The pender context of the higher-priority executor (the lower one's is null).
-const HIGH_CONTEXT: *mut () = std::ptr::without_provenance_mut(1);
-
-/// Both executors of a thread and their task slots.
-struct Executors {
-    low: Executor,
-    low_task: TaskStorage<Trampoline>,
-    high: Executor,
-    high_task: TaskStorage<HighTrampoline>,
+/// A thread's simulation state. Cells only: no borrow flags, no destructor, so each access is
+/// a plain thread-local load (wakes and timer registrations come several times per step).
+struct State {
+    now: Cell<u64>,
+    /// Arrival counter of alarms.
+    seq: Cell<u64>,
+    /// Per priority: woken since its last poll.
+    pending: [Cell<bool>; 2],
+    /// Per priority waker: its one alarm.
+    alarms: [Cell<Slot>; 2],
+    /// The earliest deadline in `FOREIGN` ([`NEVER`] when empty), so that jumps need not look
+    /// there.
+    foreign_next: Cell<u64>,
+    /// Whether `FOREIGN` may hold alarms: most simulations never touch it.
+    foreign_used: Cell<bool>,
+    /// The sensing side placed by [`beside`], if any.
+    high: Cell<Option<Erased>>,
+    running: Cell<bool>,
 }
 
 thread_local! {
-    static CLOCK: RefCell<Clock> = RefCell::new(Clock::default());
-    /// The future of the running simulation, polled by the trampoline task.
-    static CURRENT: Cell<Option<TaskPtr>> = const { Cell::new(None) };
-    /// The future running at the higher priority, if [`beside`] placed one.
-    static HIGH: Cell<Option<Erased>> = const { Cell::new(None) };
-    /// Alarms due at the current instant, reused so that advancing the clock allocates nothing.
-    static DUE: RefCell<Vec<Alarm>> = const { RefCell::new(Vec::new()) };
-    static TRAMPOLINE_WAKER: RefCell<Option<Waker>> = const { RefCell::new(None) };
-    static HIGH_WAKER: RefCell<Option<Waker>> = const { RefCell::new(None) };
-    static PENDING: Cell<bool> = const { Cell::new(false) };
-    static PENDING_HIGH: Cell<bool> = const { Cell::new(false) };
-    /// Tells the higher-priority trampoline to end: the simulation is over.
-    static STOPPING: Cell<bool> = const { Cell::new(false) };
-    static RUNNING: Cell<bool> = const { Cell::new(false) };
-    /// Two executors and their task slots per thread, made once and kept for the thread's life.
-    static EXECUTORS: &'static Executors = Box::leak(Box::new(Executors {
-        low: Executor::new(std::ptr::null_mut()),
-        low_task: TaskStorage::new(),
-        high: Executor::new(HIGH_CONTEXT),
-        high_task: TaskStorage::new(),
-    }));
+    static STATE: State = const {
+        State {
+            now: Cell::new(0),
+            seq: Cell::new(0),
+            pending: [Cell::new(false), Cell::new(false)],
+            alarms: [Cell::new(EMPTY), Cell::new(EMPTY)],
+            foreign_next: Cell::new(NEVER),
+            foreign_used: Cell::new(false),
+            high: Cell::new(None),
+            running: Cell::new(false),
+        }
+    };
+    /// Alarms of other wakers, one per waker; rare, so a list. Kept with its capacity.
+    static FOREIGN: RefCell<Vec<Alarm>> = const { RefCell::new(Vec::new()) };
+    /// Alarms due at a jump that involves `FOREIGN`, being sorted; kept with its capacity.
+    static DUE: RefCell<Vec<(u64, u64, Target)>> = const { RefCell::new(Vec::new()) };
+}
+
+impl State {
+    /// The next arrival number.
+    fn arrival(&self) -> u64 {
+        let seq = self.seq.get();
+        self.seq.set(seq + 1);
+        seq
+    }
+
+    /// Sets the alarm of priority `p`'s waker. One alarm per waker: the earliest deadline wins
+    /// (the driver contract allows an early wake; the woken future re-registers what it still
+    /// needs), with its first arrival.
+    fn arm(&self, p: usize, at: u64) {
+        let slot = self.alarms[p].get();
+        if !slot.is_set() {
+            self.alarms[p].set(Slot {
+                at,
+                seq: self.arrival(),
+            });
+        } else if at < slot.at {
+            self.alarms[p].set(Slot { at, ..slot });
+        }
+    }
+
+    /// Forgets every timer, flag and sensing side, keeping the lists' capacity.
+    fn clear(&self) {
+        self.pending.iter().for_each(|p| p.set(false));
+        self.alarms.iter().for_each(|a| a.set(EMPTY));
+        self.high.set(None);
+        self.foreign_next.set(NEVER);
+        if self.foreign_used.replace(false) {
+            // Taken out first: dropping a waker may run arbitrary code.
+            let mut foreign = FOREIGN.with(RefCell::take);
+            foreign.clear();
+            FOREIGN.with(|f| f.replace(foreign));
+        }
+    }
+}
+
+/// The priority of a waker made by [`priority_waker`]: its data pointer's address.
+fn priority_of_data(data: *const ()) -> usize {
+    usize::from(data.addr() == HIGH)
+}
+
+/// A priority waker's priority, `None` for any other waker: a pointer comparison.
+fn priority_of(waker: &Waker) -> Option<usize> {
+    std::ptr::eq(waker.vtable(), &VTABLE).then(|| priority_of_data(waker.data()))
+}
+
+// No reference count: the waker only names a priority; it sets the flag of the thread that wakes
+// it, so it belongs to its simulation's thread.
+static VTABLE: RawWakerVTable =
+    RawWakerVTable::new(waker_clone, waker_wake, waker_wake, waker_drop);
+
+fn waker_clone(data: *const ()) -> RawWaker {
+    RawWaker::new(data, &VTABLE)
+}
+
+fn waker_wake(data: *const ()) {
+    STATE.with(|s| s.pending[priority_of_data(data)].set(true));
+}
+
+fn waker_drop(_: *const ()) {}
+
+/// The waker of `priority` on this thread.
+fn priority_waker(priority: usize) -> Waker {
+    let data = std::ptr::without_provenance(priority);
+    // SAFETY: the vtable's functions neither dereference `data` nor own anything, so every
+    // contract of `RawWakerVTable` holds trivially, on any thread.
+    unsafe { Waker::from_raw(RawWaker::new(data, &VTABLE)) }
 }
 
 struct VirtualClock;
 
 impl embassy_time_driver::Driver for VirtualClock {
     fn now(&self) -> u64 {
-        CLOCK.with(|c| c.borrow().now)
+        STATE.with(|s| s.now.get())
     }
 
     fn schedule_wake(&self, at: u64, waker: &Waker) {
-        // A deadline that has come is due now: wake at once, as a hardware driver does, so the
-        // task is polled again at this instant, in its priority's turn.
-        if at <= CLOCK.with(|c| c.borrow().now) {
-            waker.wake_by_ref();
-            return;
-        }
-        CLOCK.with(|c| {
-            let mut c = c.borrow_mut();
-            // One alarm per task: keep the earliest deadline (the driver contract allows an
-            // early wake; the woken future re-registers what it still needs).
-            if let Some(alarm) = c.alarms.iter_mut().find(|a| a.waker.will_wake(waker)) {
-                alarm.at = alarm.at.min(at);
+        STATE.with(|s| {
+            // A deadline that has come is due now: wake at once, as a hardware driver does, so
+            // the task is polled again at this instant, in its priority's turn.
+            if at <= s.now.get() {
+                waker.wake_by_ref();
                 return;
             }
-            let seq = c.seq;
-            c.seq += 1;
-            c.alarms.push(Alarm {
-                at,
-                seq,
-                waker: waker.clone(),
-            });
+            match priority_of(waker) {
+                Some(p) => s.arm(p, at),
+                None => schedule_foreign(s, at, waker),
+            }
         });
     }
 }
 
+/// `schedule_wake` for a waker of a future's own: kept out of the common path.
+#[cold]
+#[inline(never)]
+fn schedule_foreign(s: &State, at: u64, waker: &Waker) {
+    FOREIGN.with(|f| {
+        let mut foreign = f.borrow_mut();
+        if let Some(alarm) = foreign.iter_mut().find(|a| a.waker.will_wake(waker)) {
+            alarm.at = alarm.at.min(at);
+        } else {
+            foreign.push(Alarm {
+                at,
+                seq: s.arrival(),
+                waker: waker.clone(),
+            });
+        }
+    });
+    s.foreign_next.set(s.foreign_next.get().min(at));
+    s.foreign_used.set(true);
+}
+
 embassy_time_driver::time_driver_impl!(static DRIVER: VirtualClock = VirtualClock);
 
-// An executor calls this when one of its tasks was woken: note which, the run loop polls.
-#[unsafe(export_name = "__pender")]
-fn pender(context: *mut ()) {
-    if context == HIGH_CONTEXT {
-        PENDING_HIGH.with(|p| p.set(true));
+/// Moves the clock to the earliest alarm and wakes every alarm due by then, in
+/// (deadline, arrival) order. Returns `false` when no alarm is pending.
+fn advance(s: &State, limit: u64) -> Result<bool, SimError> {
+    let (low, high) = (s.alarms[LOW].get(), s.alarms[HIGH].get());
+    let next = low.at.min(high.at).min(s.foreign_next.get());
+    if next == NEVER && !set_at_the_end(s) {
+        return Ok(false);
+    }
+    if next > limit {
+        return Err(SimError::TimeLimit {
+            limit: Duration::from_ticks(limit),
+        });
+    }
+    let now = s.now.get().max(next);
+    s.now.set(now);
+    // (At the end of time, an empty slot is "due" too: the careful path tells them apart.)
+    if s.foreign_next.get() <= now {
+        wake_with_foreign(s, now);
     } else {
-        PENDING.with(|p| p.set(true));
-    }
-}
-
-/// The one task of a thread's executor: polls whatever future [`simulate`] put in `CURRENT`.
-struct Trampoline;
-
-impl Future for Trampoline {
-    type Output = ();
-
-    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
-        TRAMPOLINE_WAKER.with(|w| *w.borrow_mut() = Some(cx.waker().clone()));
-        // Take the future out while polling it, so that it may use the thread-locals freely.
-        let Some(future) = CURRENT.with(Cell::take) else {
-            return Poll::Ready(());
-        };
-        // SAFETY: the pointer is to the future `simulate` pinned on its stack, alive until its
-        // `Cleanup` has cleared `CURRENT`; taking it out first means nothing else aliases it.
-        let pinned = unsafe { Pin::new_unchecked(&mut *future) };
-        match pinned.poll(cx) {
-            Poll::Ready(()) => Poll::Ready(()),
-            Poll::Pending => {
-                CURRENT.with(|c| c.set(Some(future)));
-                Poll::Pending
+        // A priority wake only sets a flag: the order of the two cannot be observed.
+        for (p, slot) in [(LOW, low), (HIGH, high)] {
+            if slot.at <= now {
+                s.alarms[p].set(EMPTY);
+                s.pending[p].set(true);
             }
         }
     }
+    Ok(true)
 }
 
-/// The task of the higher-priority executor: polls whatever future [`beside`] put in `HIGH`,
-/// until the simulation ends.
-struct HighTrampoline;
+/// Whether an alarm is set for the end of time, when every deadline is [`NEVER`].
+#[cold]
+fn set_at_the_end(s: &State) -> bool {
+    s.alarms.iter().any(|a| a.get().is_set())
+        || s.foreign_used.get() && FOREIGN.with(|f| !f.borrow().is_empty())
+}
 
-impl Future for HighTrampoline {
-    type Output = ();
-
-    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
-        HIGH_WAKER.with(|w| *w.borrow_mut() = Some(cx.waker().clone()));
-        if STOPPING.with(Cell::get) {
-            return Poll::Ready(());
-        }
-        // Taken out while polled, like the simulation's own future.
-        if let Some(future) = HIGH.with(Cell::take) {
-            // SAFETY: installed by a live `Beside`, whose `Drop` clears `HIGH` first; taken out
-            // while polled, so nothing else uses it.
-            // A future that ends is polled no more; the `Beside` keeps it until dropped.
-            if unsafe { future.poll(cx) }.is_pending() {
-                HIGH.with(|h| h.set(Some(future)));
+/// [`advance`]'s wakes when a foreign waker is due: those may run code that observes the order.
+#[cold]
+#[inline(never)]
+fn wake_with_foreign(s: &State, now: u64) {
+    // Taken out of its thread-local while waking: a wake may register a new alarm.
+    let mut due = DUE.with(RefCell::take);
+    FOREIGN.with(|f| {
+        let mut foreign = f.borrow_mut();
+        let mut i = 0;
+        while i < foreign.len() {
+            if foreign[i].at <= now {
+                let alarm = foreign.swap_remove(i);
+                due.push((alarm.at, alarm.seq, Target::Foreign(alarm.waker)));
+            } else {
+                i += 1;
             }
         }
-        Poll::Pending
-    }
-}
-
-/// Polls until no task is ready: the higher-priority executor whenever it has work, the
-/// simulation's own executor only when it has none.
-fn poll_ready(executors: &'static Executors) {
-    loop {
-        // SAFETY (both): `poll` is never re-entered: the pender only sets a flag, and this
-        // thread is the only one that polls its executors.
-        if PENDING_HIGH.with(|p| p.replace(false)) {
-            unsafe { executors.high.poll() };
-        } else if PENDING.with(|p| p.replace(false)) {
-            unsafe { executors.low.poll() };
-        } else {
-            return;
+        s.foreign_next
+            .set(foreign.iter().map(|a| a.at).min().unwrap_or(NEVER));
+    });
+    for p in [LOW, HIGH] {
+        let slot = s.alarms[p].get();
+        if slot.is_set() && slot.at <= now {
+            s.alarms[p].set(EMPTY);
+            due.push((slot.at, slot.seq, Target::Priority(p)));
         }
     }
+    // (deadline, arrival) is unique: the unstable sort gives the stable order.
+    due.sort_unstable_by_key(|&(at, seq, _)| (at, seq));
+    for (_, _, target) in due.drain(..) {
+        match target {
+            Target::Priority(p) => s.pending[p].set(true),
+            Target::Foreign(waker) => waker.wake(),
+        }
+    }
+    DUE.with(|d| d.replace(due));
 }
 
-/// The higher-priority task's slot on this thread.
+/// The higher-priority slot on this thread, polled by [`simulate`]'s loop.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ThreadSlot;
 
-// SAFETY: the slot is polled only by `HighTrampoline`, which takes the pointer out for the
-// duration of its poll, on this thread, from `poll_ready`, which is never re-entered; a
-// `Beside` runs on the same thread, so it never uninstalls in the middle of that poll.
+// SAFETY: the slot is polled only by `simulate`'s loop, on this thread, which takes the
+// pointer out for the duration of its poll and is never re-entered (`SimError::Nested`); a
+// `Beside` runs on the same thread, inside the lower-priority poll, so it never uninstalls in
+// the middle of a poll of the slot.
 unsafe impl HighSlot for ThreadSlot {
     fn install(&self, future: Erased) -> bool {
-        if HIGH.with(Cell::get).is_some() {
-            return false;
-        }
-        HIGH.with(|h| h.set(Some(future)));
-        if let Some(w) = HIGH_WAKER.with(|w| w.borrow().clone()) {
-            w.wake();
-        }
-        true
+        STATE.with(|s| {
+            if s.high.get().is_some() {
+                return false;
+            }
+            s.high.set(Some(future));
+            s.pending[HIGH].set(true);
+            true
+        })
     }
 
     fn uninstall(&self) {
-        HIGH.with(|h| h.set(None));
+        STATE.with(|s| s.high.set(None));
     }
 }
 
@@ -296,155 +408,75 @@ pub fn simulate_split<S: Future, D: Future>(
     simulate(unsafe { beside(sensing, deciding) }, limit)
 }
 
-/// Moves the clock to the earliest alarm and wakes every alarm due by then, in
-/// (deadline, arrival) order. Returns `false` when no alarm is pending.
-fn advance(limit: u64) -> Result<bool, SimError> {
-    let due = CLOCK.with(|c| {
-        let mut c = c.borrow_mut();
-        let Some(next) = c.alarms.iter().map(|a| a.at).min() else {
-            return Ok(None);
-        };
-        if next > limit {
-            return Err(SimError::TimeLimit {
-                limit: Duration::from_ticks(limit),
-            });
-        }
-        c.now = c.now.max(next);
-        let now = c.now;
-        DUE.with(|d| {
-            let mut due = d.borrow_mut();
-            let mut i = 0;
-            while i < c.alarms.len() {
-                if c.alarms[i].at <= now {
-                    due.push(c.alarms.remove(i));
-                } else {
-                    i += 1;
-                }
-            }
-            // (deadline, arrival) is unique: the unstable sort gives the stable order.
-            due.sort_unstable_by_key(|a| (a.at, a.seq));
-        });
-        Ok(Some(()))
-    })?;
-    // Wake outside the clock's borrow: a woken task may schedule a new alarm when polled.
-    match due {
-        Some(()) => {
-            DUE.with(|d| {
-                for alarm in d.borrow_mut().drain(..) {
-                    alarm.waker.wake();
-                }
-            });
-            Ok(true)
-        }
-        None => Ok(false),
-    }
-}
+/// Ends the thread's simulation, on return and on unwind: nothing outlives it.
+struct Running<'s>(&'s State);
 
-/// Drops the running future and lets both trampoline tasks finish, so the thread's task slots
-/// are free for the next simulation.
-struct Cleanup(&'static Executors);
-
-impl Drop for Cleanup {
+impl Drop for Running<'_> {
     fn drop(&mut self) {
-        CURRENT.with(|c| c.set(None));
-        HIGH.with(|h| h.set(None));
-        STOPPING.with(|s| s.set(true));
-        for waker in [&TRAMPOLINE_WAKER, &HIGH_WAKER] {
-            if let Some(waker) = waker.with(|w| w.borrow_mut().take()) {
-                waker.wake();
-            }
-        }
-        poll_ready(self.0);
-        STOPPING.with(|s| s.set(false));
-        CLOCK.with(|c| c.borrow_mut().alarms.clear());
-        RUNNING.with(|r| r.set(false));
+        self.0.clear();
+        self.0.running.set(false);
     }
 }
 
-/// Runs `future` to completion in virtual time starting at 0, on this thread's embassy
-/// executor. Fails when the future deadlocks or is still running at `limit`.
+/// Runs `future` to completion in virtual time starting at 0, on this thread. Fails when the
+/// future deadlocks or is still running at `limit`.
 pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Output>, SimError> {
-    if RUNNING.with(|r| r.replace(true)) {
-        return Err(SimError::Nested);
-    }
-    let executors = EXECUTORS.with(|e| *e);
-    CLOCK.with(|c| {
-        // Keep the alarm list's capacity: a simulation after the first allocates nothing.
-        let mut c = c.borrow_mut();
-        c.now = 0;
-        c.seq = 0;
-        c.alarms.clear();
-    });
-    PENDING.with(|p| p.set(false));
-    PENDING_HIGH.with(|p| p.set(false));
-
-    let mut output: Option<F::Output> = None;
-    let slot: *mut Option<F::Output> = &mut output;
-    let wrapped = async move {
-        let value = future.await;
-        // SAFETY: `output` outlives the wrapped future: the future is dropped by `Cleanup`
-        // before `simulate` returns, and `output` is only read after that.
-        unsafe { *slot = Some(value) };
-    };
-    let mut pinned = std::pin::pin!(wrapped);
-    // SAFETY: the future stays pinned in this frame; the pointer is only dereferenced by the
-    // trampoline, which never moves it.
-    let raw: *mut (dyn Future<Output = ()> + '_) = unsafe { pinned.as_mut().get_unchecked_mut() };
-    // SAFETY: lifetime erasure only. `cleanup`, declared after `pinned` and so dropped before
-    // it (on return and on unwind), clears the thread-local before the future and its borrows
-    // of the caller's frame end.
-    let raw: TaskPtr =
-        unsafe { std::mem::transmute::<*mut (dyn Future<Output = ()> + '_), TaskPtr>(raw) };
-    CURRENT.with(|c| c.set(Some(raw)));
-    let cleanup = Cleanup(executors);
-
-    let token = executors
-        .low_task
-        .spawn(|| Trampoline)
-        .map_err(|_| SimError::Nested)?;
-    executors.low.spawner().spawn(token);
-    let token = executors
-        .high_task
-        .spawn(|| HighTrampoline)
-        .map_err(|_| SimError::Nested)?;
-    executors.high.spawner().spawn(token);
-    PENDING.with(|p| p.set(true));
-
-    let limit = limit.as_ticks();
-    let mut clock_jumps = 0u64;
-    let result = loop {
-        poll_ready(executors);
-        if CURRENT.with(|c| c.get().is_none()) {
-            break Ok(());
+    // Pinned here and polled in place below: never moved, never type-erased. Dropped after the
+    // simulation has ended, so its drop may start another.
+    let mut future = pin!(future);
+    STATE.with(|s| {
+        if s.running.replace(true) {
+            return Err(SimError::Nested);
         }
-        match advance(limit) {
-            Ok(true) => clock_jumps += 1,
-            Ok(false) => {
-                break Err(SimError::Deadlock {
-                    at: Instant::from_ticks(CLOCK.with(|c| c.borrow().now)),
+        let _running = Running(s);
+        // Whatever a `Beside` outside any simulation left here is not this simulation's.
+        s.clear();
+        s.now.set(0);
+        s.seq.set(0);
+        s.pending[LOW].set(true);
+        let (low, high) = (priority_waker(LOW), priority_waker(HIGH));
+        let (mut low_cx, mut high_cx) = (Context::from_waker(&low), Context::from_waker(&high));
+        let limit = limit.as_ticks();
+        let mut clock_jumps = 0u64;
+        let output = loop {
+            if s.pending[HIGH].replace(false) {
+                // Taken out while polled, so that nothing else uses it meanwhile. One that
+                // ends is polled no more; its `Beside` keeps it until dropped.
+                if let Some(sensing) = s.high.take() {
+                    // SAFETY: installed by a live `Beside`, which uninstalls before `sensing`
+                    // ends; this loop is its only poller and is not re-entered.
+                    if unsafe { sensing.poll(&mut high_cx) }.is_pending() {
+                        s.high.set(Some(sensing));
+                    }
+                }
+            } else if s.pending[LOW].replace(false) {
+                if let Poll::Ready(output) = future.as_mut().poll(&mut low_cx) {
+                    break output;
+                }
+            } else if advance(s, limit)? {
+                clock_jumps += 1;
+            } else {
+                return Err(SimError::Deadlock {
+                    at: Instant::from_ticks(s.now.get()),
                 });
             }
-            Err(e) => break Err(e),
-        }
-    };
-    let elapsed = Duration::from_ticks(CLOCK.with(|c| c.borrow().now));
-    drop(cleanup);
-    result?;
-    output
-        .take()
-        .map(|output| Completed {
+        };
+        Ok(Completed {
             output,
-            elapsed,
+            elapsed: Duration::from_ticks(s.now.get()),
             clock_jumps,
         })
-        .ok_or(SimError::Deadlock {
-            at: Instant::from_ticks(elapsed.as_ticks()),
-        })
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::{Arc, Mutex};
+    use std::task::Wake;
+
+    use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+    use embassy_sync::signal::Signal;
     use embassy_time::Timer;
 
     #[test]
@@ -487,6 +519,32 @@ mod tests {
     }
 
     #[test]
+    fn a_panicking_future_leaves_the_thread_usable() {
+        let log = RefCell::new(Vec::new());
+        let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            simulate_split(
+                std::future::pending::<()>(),
+                async {
+                    Timer::after_secs(1).await;
+                    panic!("on purpose")
+                },
+                Duration::from_secs(10),
+            )
+        }));
+        assert!(panicked.is_err());
+        let ok = simulate_split(
+            async { log.borrow_mut().push(Instant::now()) },
+            // Made inside: `Timer::after` reads the clock when made.
+            async { Timer::after_secs(2).await },
+            Duration::from_secs(10),
+        )
+        .unwrap();
+        // From time 0, with the sensing slot free again.
+        assert_eq!(ok.elapsed, Duration::from_secs(2));
+        assert_eq!(*log.borrow(), [Instant::from_ticks(0)]);
+    }
+
+    #[test]
     fn time_limit_stops_a_long_run() {
         let err = simulate(Timer::after_secs(100), Duration::from_secs(10)).unwrap_err();
         assert_eq!(
@@ -495,6 +553,11 @@ mod tests {
                 limit: Duration::from_secs(10)
             }
         );
+        // A timer at the end of time is a timer too, not a deadlock.
+        let err = simulate(Timer::at(Instant::MAX), Duration::from_secs(10)).unwrap_err();
+        assert!(matches!(err, SimError::TimeLimit { .. }));
+        let end = simulate(Timer::at(Instant::MAX), Duration::MAX).unwrap();
+        assert_eq!((end.elapsed, end.clock_jumps), (Duration::MAX, 1));
     }
 
     #[test]
@@ -526,5 +589,176 @@ mod tests {
             .collect();
         let got: Vec<u64> = handles.into_iter().map(|h| h.join().unwrap()).collect();
         assert_eq!(got, [1, 2, 3, 4]);
+    }
+
+    /// A foreign waker: logs its name when woken, then wakes `then`, if set.
+    struct Logger {
+        name: &'static str,
+        log: Arc<Mutex<Vec<(&'static str, u64)>>>,
+        then: Mutex<Option<Waker>>,
+    }
+
+    impl Wake for Logger {
+        fn wake(self: Arc<Self>) {
+            self.wake_by_ref();
+        }
+
+        fn wake_by_ref(self: &Arc<Self>) {
+            let now = Instant::now().as_millis();
+            self.log.lock().unwrap().push((self.name, now));
+            if let Some(w) = self.then.lock().unwrap().take() {
+                w.wake();
+            }
+        }
+    }
+
+    fn logger(name: &'static str, log: &Arc<Mutex<Vec<(&'static str, u64)>>>) -> Arc<Logger> {
+        Arc::new(Logger {
+            name,
+            log: log.clone(),
+            then: Mutex::new(None),
+        })
+    }
+
+    #[test]
+    fn equal_deadlines_wake_in_arrival_order() {
+        let log = Arc::new(Mutex::new(Vec::new()));
+        let [a, b, c, d] = ["a", "b", "c", "d"].map(|n| Waker::from(logger(n, &log)));
+        let done = simulate(
+            async {
+                let at = |ms| Instant::from_millis(ms).as_ticks();
+                embassy_time_driver::schedule_wake(at(10), &a);
+                embassy_time_driver::schedule_wake(at(5), &b);
+                embassy_time_driver::schedule_wake(at(10), &c);
+                embassy_time_driver::schedule_wake(at(5), &d);
+                // Earlier: `a` moves to 5 ms and keeps its arrival, first; later: ignored.
+                embassy_time_driver::schedule_wake(at(5), &a);
+                embassy_time_driver::schedule_wake(at(20), &c);
+                // The simulated future's own timer, between foreign ones at 10 ms.
+                Timer::at(Instant::from_millis(10)).await;
+                Timer::at(Instant::from_millis(30)).await;
+            },
+            Duration::from_secs(1),
+        )
+        .unwrap();
+        assert_eq!(
+            *log.lock().unwrap(),
+            [("a", 5), ("b", 5), ("d", 5), ("c", 10)]
+        );
+        assert_eq!(done.clock_jumps, 3);
+        assert_eq!(done.elapsed, Duration::from_millis(30));
+    }
+
+    #[test]
+    fn sensing_is_polled_before_deciding_at_one_instant() {
+        let log = RefCell::new(Vec::new());
+        let work = Signal::<NoopRawMutex, u32>::new();
+        let done = simulate_split(
+            async {
+                loop {
+                    let n = work.wait().await;
+                    log.borrow_mut().push(("sensing", n));
+                }
+            },
+            async {
+                // Deciding registers its timer first, yet sensing runs first at 10 ms.
+                Timer::at(Instant::from_millis(10)).await;
+                log.borrow_mut().push(("deciding", 0));
+                for n in 1..=3 {
+                    // Sensing gets work, and runs before deciding's next poll, at this instant.
+                    work.signal(n);
+                    embassy_futures::yield_now().await;
+                    log.borrow_mut().push(("deciding", n));
+                }
+                Instant::now().as_millis()
+            },
+            Duration::from_secs(1),
+        );
+        assert_eq!(done.unwrap().output, 10);
+        assert_eq!(
+            *log.borrow(),
+            [
+                ("deciding", 0),
+                ("sensing", 1),
+                ("deciding", 1),
+                ("sensing", 2),
+                ("deciding", 2),
+                ("sensing", 3),
+                ("deciding", 3),
+            ]
+        );
+    }
+
+    #[test]
+    fn sensing_wakes_before_deciding_at_an_equal_deadline() {
+        let log = RefCell::new(Vec::new());
+        let done = simulate_split(
+            async {
+                Timer::at(Instant::from_millis(10)).await;
+                log.borrow_mut().push("sensing");
+                std::future::pending::<()>().await
+            },
+            async {
+                // Polled first, so its timer arrives first.
+                Timer::at(Instant::from_millis(10)).await;
+                log.borrow_mut().push("deciding");
+            },
+            Duration::from_secs(1),
+        )
+        .unwrap();
+        assert_eq!(*log.borrow(), ["sensing", "deciding"]);
+        assert_eq!(done.clock_jumps, 1);
+    }
+
+    #[test]
+    fn a_foreign_waker_gets_its_timer() {
+        let log = Arc::new(Mutex::new(Vec::new()));
+        let inner = logger("inner", &log);
+        let foreign = Waker::from(inner.clone());
+        let done = simulate(
+            async {
+                // A timer polled with a waker of its own, which wakes this future in turn.
+                let mut timer = pin!(Timer::after_millis(5));
+                let mut own = pin!(Timer::after_millis(8));
+                let mut own_done = false;
+                std::future::poll_fn(|cx| {
+                    *inner.then.lock().unwrap() = Some(cx.waker().clone());
+                    own_done |= own.as_mut().poll(cx).is_ready();
+                    let timer_done = timer
+                        .as_mut()
+                        .poll(&mut Context::from_waker(&foreign))
+                        .is_ready();
+                    if own_done && timer_done {
+                        Poll::Ready(Instant::now().as_millis())
+                    } else {
+                        Poll::Pending
+                    }
+                })
+                .await
+            },
+            Duration::from_secs(1),
+        )
+        .unwrap();
+        assert_eq!(done.output, 8);
+        assert_eq!(done.clock_jumps, 2);
+        assert_eq!(*log.lock().unwrap(), [("inner", 5)]);
+
+        // A foreign timer left pending does not outlive its simulation.
+        let err = simulate(
+            async {
+                let at = Instant::from_millis(50).as_ticks();
+                embassy_time_driver::schedule_wake(at, &Waker::from(logger("left", &log)));
+            },
+            Duration::from_secs(1),
+        );
+        assert!(err.is_ok());
+        let err = simulate(std::future::pending::<()>(), Duration::from_secs(1)).unwrap_err();
+        assert_eq!(
+            err,
+            SimError::Deadlock {
+                at: Instant::from_ticks(0)
+            }
+        );
+        assert_eq!(log.lock().unwrap().len(), 1);
     }
 }

@@ -5,9 +5,13 @@
 //! embassy-time tick rate), and a timed 10,000-scenario sweep; reads criterion's medians from
 //! `target/criterion`, writes `bench/RESULTS.md`, and puts the same table into `README.md`
 //! between its `bench:start` and `bench:end` markers.
+//!
+//! Beside the times, one count that does not depend on the machine's load: the instructions
+//! psmpa's plan workload takes per action step, counted by callgrind in `profile_plan`
+//! (`bench/examples`). `cargo xtask bench --instructions` counts only that, in seconds.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
@@ -146,11 +150,179 @@ fn fmt_ns(ns: f64) -> String {
     }
 }
 
-/// What criterion does not keep: allocation counts and the sweep's time.
+/// What criterion does not keep: allocation counts, the sweep's time, the instruction count.
 #[derive(serde::Serialize, Deserialize)]
 struct Extra {
     allocations: BTreeMap<String, u64>,
     sweep_s: f64,
+    /// Absent from results written before it was measured.
+    #[serde(default)]
+    instructions_per_step: Option<f64>,
+}
+
+/// Plans per callgrind run of `profile_plan`: the difference of two runs leaves out the
+/// program's start and exit.
+const CALLGRIND_PLANS: [u32; 2] = [200, 400];
+
+/// One callgrind run of `profile_plan`.
+struct Count {
+    plans: u64,
+    steps: u64,
+    instructions: u64,
+}
+
+/// Fails, naming the package, when valgrind is not installed.
+fn check_valgrind() -> Result<(), String> {
+    match Command::new("valgrind")
+        .arg("--version")
+        .stdout(Stdio::null())
+        .status()
+    {
+        Ok(s) if s.success() => Ok(()),
+        Ok(s) => Err(format!("`valgrind --version` failed ({s})")),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(
+            "valgrind is not installed; the instruction count needs it: `apt-get install valgrind` \
+             (scripts/test.sh installs it)"
+                .to_owned(),
+        ),
+        Err(e) => Err(format!("cannot run valgrind: {e}")),
+    }
+}
+
+/// Builds `profile_plan` with the `bench` profile, so it shares every compiled crate with
+/// `cargo bench` (and with `--release`: the two profiles are the same); returns its path.
+fn build_profile_plan() -> Result<PathBuf, String> {
+    let out = firmware::cargo()
+        .args([
+            "build",
+            "--profile",
+            "bench",
+            "-p",
+            "psmpa-bench",
+            "--example",
+            "profile_plan",
+            "--message-format=json-render-diagnostics",
+        ])
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !out.status.success() {
+        return Err("the profile_plan example does not build".to_owned());
+    }
+    // The executable's path from cargo's own report: right whatever the target directory.
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|m| m["reason"] == "compiler-artifact" && m["target"]["name"] == "profile_plan")
+        .find_map(|m| m["executable"].as_str().map(PathBuf::from))
+        .ok_or_else(|| "cargo reported no profile_plan executable".to_owned())
+}
+
+/// Runs `exe` (`profile_plan`) for `plans` plans under callgrind.
+fn callgrind(root: &Path, exe: &Path, plans: u32) -> Result<Count, String> {
+    let out_file = root.join(format!("target/callgrind.profile_plan.{plans}.out"));
+    let out = Command::new("valgrind")
+        .current_dir(root)
+        .arg("--tool=callgrind")
+        .arg(format!("--callgrind-out-file={}", out_file.display()))
+        .arg(exe)
+        .arg(plans.to_string())
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| format!("cannot run valgrind: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "profile_plan {plans} failed under callgrind: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    // "N action steps in M plans"
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let (steps, ran) = stdout
+        .lines()
+        .find_map(|l| {
+            let (steps, rest) = l.split_once(" action steps in ")?;
+            let ran = rest.strip_suffix(" plans")?;
+            Some((steps.trim().parse().ok()?, ran.trim().parse().ok()?))
+        })
+        .ok_or_else(|| {
+            format!("profile_plan printed no \"N action steps in M plans\": {stdout}")
+        })?;
+    // The file's `summary:` line: the whole run's instructions (its only event).
+    let text =
+        std::fs::read_to_string(&out_file).map_err(|e| format!("{}: {e}", out_file.display()))?;
+    let instructions = text
+        .lines()
+        .find_map(|l| l.strip_prefix("summary:")?.trim().parse().ok())
+        .ok_or_else(|| format!("{}: no summary line", out_file.display()))?;
+    Ok(Count {
+        plans: ran,
+        steps,
+        instructions,
+    })
+}
+
+/// `1383.4` as `1,383`.
+fn fmt_count(n: f64) -> String {
+    let digits = format!("{:.0}", n.max(0.0));
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// The instruction set the count is in (`x86-64` on the usual host).
+fn isa() -> &'static str {
+    match std::env::consts::ARCH {
+        "x86_64" => "x86-64",
+        arch => arch,
+    }
+}
+
+/// The sentence the table and the quick mode print.
+fn instructions_line(per_step: f64) -> String {
+    format!(
+        "psmpa: {} {} instructions per action step (callgrind, deterministic)",
+        fmt_count(per_step),
+        isa()
+    )
+}
+
+/// psmpa's plan workload in instructions per action step: two callgrind runs of
+/// `profile_plan`, the difference of their counts over the difference of their steps.
+fn instructions_per_step(root: &Path) -> Result<f64, String> {
+    check_valgrind()?;
+    let exe = build_profile_plan()?;
+    let mut counts = Vec::new();
+    for plans in CALLGRIND_PLANS {
+        let c = callgrind(root, &exe, plans)?;
+        println!(
+            "profile_plan: {} action steps in {} plans: {} instructions",
+            c.steps,
+            c.plans,
+            fmt_count(c.instructions as f64)
+        );
+        counts.push(c);
+    }
+    let (a, b) = (&counts[0], &counts[1]);
+    if b.steps <= a.steps || b.instructions < a.instructions {
+        return Err(format!(
+            "profile_plan ran {} then {} action steps: no difference to divide by",
+            a.steps, b.steps
+        ));
+    }
+    Ok((b.instructions - a.instructions) as f64 / (b.steps - a.steps) as f64)
+}
+
+/// `cargo xtask bench --instructions`: only the instruction count, printed; writes nothing.
+pub fn instructions() -> Result<(), String> {
+    let per_step = instructions_per_step(&firmware::root())?;
+    println!("{}", instructions_line(per_step));
+    Ok(())
 }
 
 /// Runs everything (or, with `no_run`, reuses the last run's results), writes the table.
@@ -174,8 +346,10 @@ pub fn run(no_run: bool) -> Result<(), String> {
     report(&root, &extra)
 }
 
-/// Runs the benches and the sweep.
+/// Runs the benches, the sweep and the instruction count.
 fn measure(root: &Path) -> Result<Extra, String> {
+    // Before minutes of benches: a missing valgrind fails at once.
+    check_valgrind()?;
     let text = cargo_bench(&[
         "-p",
         "psmpa-bench",
@@ -195,9 +369,13 @@ fn measure(root: &Path) -> Result<Extra, String> {
         "steps",
     ])?;
     allocs.extend(allocations(&bt_text));
+    let sweep_s = sweep_seconds()?;
+    let per_step = instructions_per_step(root)?;
+    println!("{}", instructions_line(per_step));
     Ok(Extra {
         allocations: allocs,
-        sweep_s: sweep_seconds()?,
+        sweep_s,
+        instructions_per_step: Some(per_step),
     })
 }
 
@@ -243,6 +421,15 @@ fn report(root: &Path, extra: &Extra) -> Result<(), String> {
             step / floor_step,
             allocs.get(name).map_or("?".to_owned(), |a| a.to_string())
         ));
+    }
+    match extra.instructions_per_step {
+        Some(per_step) => md.push_str(&format!(
+            "\n{}. `cargo xtask bench --instructions` counts it alone: `bench/examples/profile_plan.rs` under callgrind for {} and {} plans, the difference in instructions over the difference in action steps.\n",
+            instructions_line(per_step),
+            CALLGRIND_PLANS[0],
+            CALLGRIND_PLANS[1]
+        )),
+        None => md.push_str("\npsmpa's instructions per action step: not measured in this run.\n"),
     }
     md.push_str("\n**Data stores**: one get and one put of the same key, 8 keys.\n\n| store | per get + put | vs fixed array |\n|---|---|---|\n");
     let array = get("store", "fixed array")?;

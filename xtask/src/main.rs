@@ -7,7 +7,8 @@
 //!   checked against the budget and the committed snapshot `firmware/size.json`.
 //! * `stack`: a static bound on the firmware's stack from its call graph and frame sizes,
 //!   checked against the high-water mark the same binary measures in QEMU.
-//! * `bench`: every benchmark in one run, written as the README's table.
+//! * `bench`: every benchmark in one run, written as the README's table; `--instructions`: only
+//!   psmpa's instructions per action step (callgrind).
 //! * `timing`: response-time analysis from the step costs the firmware measures in QEMU: the
 //!   reaction-latency bound of every sensor, checked against the measured reactions.
 
@@ -56,6 +57,10 @@ enum Task {
         /// Only rewrite the table from the last run's results.
         #[arg(long)]
         no_run: bool,
+        /// Only count psmpa's instructions per action step under callgrind (quick and
+        /// deterministic, for optimising); writes nothing.
+        #[arg(long, conflicts_with = "no_run")]
+        instructions: bool,
     },
     /// Response-time analysis from step costs measured in QEMU: a latency bound per sensor,
     /// checked against every measured reaction; the table also goes to a JSON file.
@@ -80,7 +85,10 @@ fn main() -> ExitCode {
         } => firmware::qemu_check(inject_fault).then_expect(expect_failure),
         Task::Size { bless } => size::run(bless),
         Task::Stack => stack::run(),
-        Task::Bench { no_run } => bench::run(no_run),
+        Task::Bench {
+            instructions: true, ..
+        } => bench::instructions(),
+        Task::Bench { no_run, .. } => bench::run(no_run),
         Task::Timing {
             clock_hz,
             json,
