@@ -14,9 +14,9 @@ use core::cell::{Cell, RefCell};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::Duration;
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Config, Domain, FactSet, Key, Mission, Outcome,
-    Plan, PlanLibrary, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode,
-    Task, Value,
+    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Domain, FactSet, Key, Mission,
+    Outcome, Plan, PlanLibrary, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId,
+    SensorMode, Task, Value,
 };
 
 use crate::workload::{STEPS_PER_ACTION, Sonar, path_clear};
@@ -93,6 +93,10 @@ impl Sensor for Platform {
     }
 }
 
+impl psmpa_core::Platform for Platform {
+    type Mutex = NoopRawMutex;
+}
+
 impl Actuator for Platform {
     async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
         let Some(sonar) = SensorId::new(0) else {
@@ -124,8 +128,7 @@ impl Actuator for Platform {
 }
 
 /// The runtime of the workload: 4 keys per store.
-pub type BenchRuntime<'r> =
-    Runtime<'r, 'static, NoopRawMutex, Platform, Platform, (), 1, 3, 1, 3, 4>;
+pub type BenchRuntime<'r> = Runtime<'r, Platform, Caps<1, 3, 1, 3, 4>>;
 
 /// Runs the plan once on `platform`, from `mission`; returns the action steps it ran.
 pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
@@ -133,7 +136,7 @@ pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
         max_violation: Duration::from_ticks(0),
         ..Config::default()
     };
-    let runtime: BenchRuntime<'_> = Runtime::new(mission, platform, platform, (), config);
+    let runtime: BenchRuntime<'_> = Runtime::new(mission, platform, (), config);
     let before = platform.steps.get();
     let done = psmpa_sim::backend::simulate_split(
         runtime.sensing(),

@@ -9,19 +9,17 @@
 //! end loop                           ... until the goal holds, or a clear error
 //! ```
 
-use embassy_sync::blocking_mutex::raw::RawMutex;
-
 use heapless::Vec;
 
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
-use crate::exec::{Failure, Mode, Runtime};
+use crate::exec::{Engine, Failure, Mode};
 use crate::facts::FactSet;
 use crate::fmt::{info, warning};
 use crate::fsm::{Fsm, FsmError};
 use crate::plan::{FailureMemory, Plan, PlanId, PlanSet};
 use crate::planner::{Found, Planner, PlanningError, Search};
-use crate::platform::{Actuator, Sensor};
+use crate::platform::Platform;
 use crate::trace::{TraceEvent, TraceSink};
 use embassy_futures::yield_now;
 
@@ -91,17 +89,15 @@ pub enum ControlError {
 }
 
 impl<
-    'a,
-    M: RawMutex,
-    S: Sensor,
-    A: Actuator,
+    'r,
+    P: Platform,
     T: TraceSink,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Runtime<'_, 'a, M, S, A, T, NS, NA, NP, L, K>
+> Engine<'r, P, T, NS, NA, NP, L, K>
 {
     /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor in service
     /// whose `pre(s)` holds is switched on, sampled once and switched off again, all at once.
@@ -156,7 +152,7 @@ impl<
     /// that a sensor running beside the action perceives are checked by that sensor when the
     /// action runs, so they are assumed to hold unless a sample already showed them false. An
     /// action beside a sensor that failed cannot be monitored: it never applies.
-    fn planning_actions(&self) -> Vec<ActuatorAction<'a>, NA> {
+    fn planning_actions(&self) -> Vec<ActuatorAction<'r>, NA> {
         let domain = &self.mission.domain;
         let known_false = self.known_false();
         let faulty = self.faulty_sensors();

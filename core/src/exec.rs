@@ -1,10 +1,10 @@
 //! Executing compiled plans: Algorithm 2 at run time, on two sides that run concurrently.
 //!
-//! * **Sensing** ([`Runtime::sensing`], the paper's sensory controller): one sampler per
+//! * **Sensing** ([`Engine::sensing`], the paper's sensory controller): one sampler per
 //!   sensor, each on its own schedule; a sample is read, stored, fused into the beliefs and
 //!   checked against the running action's precondition, and whoever waits is woken. See
 //!   [`crate::sense`].
-//! * **Deciding** ([`Runtime::run`], the deliberative controller): the control loop
+//! * **Deciding** ([`Engine::run`], the deliberative controller): the control loop
 //!   (Algorithm 1), the FSM of the selected plan and the actuator behaviours. It switches
 //!   sensors on and off by telling the sensing side which sensors the running state needs
 //!   (least commitment), and learns what they perceive from the beliefs and the data stores.
@@ -33,7 +33,6 @@ use core::task::{Context, Poll};
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_sync::waitqueue::MultiWakerRegistration;
 use embassy_time::{Duration, Instant, Timer};
 
@@ -43,7 +42,7 @@ use crate::fmt::debug;
 use crate::fsm::{BehaviourState, Edge, Fsm, Target};
 use crate::mission::Mission;
 use crate::model::WorldModel;
-use crate::platform::{Actuator, Outcome, Sensor, SensorFault};
+use crate::platform::{Outcome, Platform, SensorFault};
 use crate::store::{DataStore, Entry, Key, MutualStore, StoreFull, Value};
 use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};
 
@@ -128,7 +127,7 @@ pub enum Failure {
         missing: FactSet,
     },
     /// A sensor the state needs cannot run: it failed earlier and is out of service
-    /// ([`Runtime::faulty_sensors`]), `pre(s)` does not hold, or the domain has no such sensor.
+    /// ([`Engine::faulty_sensors`]), `pre(s)` does not hold, or the domain has no such sensor.
     SensorUnavailable {
         /// The sensor.
         sensor: SensorId,
@@ -151,7 +150,7 @@ pub enum Failure {
         state: u8,
     },
     /// The sensing side did not answer within the sensors' own timeouts: nothing polls
-    /// [`Runtime::sensing`]. Run it beside the deciding side.
+    /// [`Engine::sensing`]. Run it beside the deciding side.
     SensingStalled,
 }
 
@@ -292,7 +291,7 @@ pub(crate) struct Shared<const NS: usize> {
     pub(crate) last_read: [Cell<Option<Instant>>; NS],
     /// Facts some sample has decided (true or false) since the start.
     pub(crate) sensed: Cell<FactSet>,
-    /// Sensors that failed: out of service until [`Runtime::clear_faults`].
+    /// Sensors that failed: out of service until [`Engine::clear_faults`].
     pub(crate) faulty: Cell<SensorSet>,
     pub(crate) violation: Cell<Option<Violation>>,
     pub(crate) requests: Cell<SensorSet>,
@@ -325,24 +324,18 @@ pub(crate) async fn sleep_until(at: Option<Instant>) {
     }
 }
 
-/// The P-SMPA runtime of one robot: the mission, the platform, the data stores of every
-/// behaviour, the beliefs and the trace.
-///
-/// Capacities: `NS` sensors, `NA` actions, `NP` plans of at most `L` actions, `K` keys per
-/// data store. Everything lives inside this value; put it in a `static` (with a
-/// `StaticCell`) or on the stack of the task that runs it.
+/// What a [`Runtime`](crate::Runtime) does: the mission, the platform, the data stores of
+/// every behaviour, the beliefs and the trace. Name it through [`Runtime`](crate::Runtime)
+/// and [`Caps`](crate::Caps); its capacities are `NS` sensors, `NA` actions, `NP` plans of at
+/// most `L` actions, `K` keys per data store.
 ///
 /// It runs as two futures: [`sensing`](Self::sensing), which never ends, and the control
 /// loop, [`run`](Self::run) or [`run_planning`](Self::run_planning). Run both: on one
 /// executor (`select(rt.sensing(), rt.run())` polls sensing first), or sensing in a task of
-/// a higher-priority executor. With `M = CriticalSectionRawMutex` and a `Sync` platform the
-/// runtime is `Sync`, so a `&'static Runtime` can be shared by tasks at two priorities.
-pub struct Runtime<
+/// a higher-priority executor.
+pub struct Engine<
     'r,
-    'a,
-    M: RawMutex,
-    S: Sensor,
-    A: Actuator,
+    P: Platform,
     T: TraceSink,
     const NS: usize,
     const NA: usize,
@@ -350,44 +343,38 @@ pub struct Runtime<
     const L: usize,
     const K: usize,
 > {
-    pub(crate) mission: &'r Mission<'a, NS, NA, NP, L>,
-    pub(crate) sensors: &'r S,
-    actuators: &'r A,
+    pub(crate) mission: &'r Mission<'r, NS, NA, NP, L>,
+    pub(crate) platform: &'r P,
     pub(crate) config: Config,
-    pub(crate) sensor_stores: [DataStore<M, K>; NS],
-    action_stores: [DataStore<M, K>; NA],
-    pub(crate) shared: Mutex<M, Shared<NS>>,
-    tracer: Mutex<M, RefCell<Tracer<T>>>,
-    trace_lost: Mutex<M, Cell<u32>>,
+    pub(crate) sensor_stores: [DataStore<P::Mutex, K>; NS],
+    action_stores: [DataStore<P::Mutex, K>; NA],
+    pub(crate) shared: Mutex<P::Mutex, Shared<NS>>,
+    tracer: Mutex<P::Mutex, RefCell<Tracer<T>>>,
+    trace_lost: Mutex<P::Mutex, Cell<u32>>,
 }
 
 impl<
     'r,
-    'a,
-    M: RawMutex,
-    S: Sensor,
-    A: Actuator,
+    P: Platform,
     T: TraceSink,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Runtime<'r, 'a, M, S, A, T, NS, NA, NP, L, K>
+> Engine<'r, P, T, NS, NA, NP, L, K>
 {
-    /// A runtime for `mission` on a platform, tracing into `sink`. The beliefs start at the
+    /// A runtime for `mission` on `platform`, tracing into `sink`. The beliefs start at the
     /// task's initial state `τ0`.
     pub fn new(
-        mission: &'r Mission<'a, NS, NA, NP, L>,
-        sensors: &'r S,
-        actuators: &'r A,
+        mission: &'r Mission<'r, NS, NA, NP, L>,
+        platform: &'r P,
         sink: T,
         config: Config,
     ) -> Self {
         Self {
             mission,
-            sensors,
-            actuators,
+            platform,
             config,
             sensor_stores: [const { DataStore::new() }; NS],
             action_stores: [const { DataStore::new() }; NA],
@@ -423,7 +410,7 @@ impl<
     }
 
     /// The mission.
-    pub fn mission(&self) -> &'r Mission<'a, NS, NA, NP, L> {
+    pub fn mission(&self) -> &'r Mission<'r, NS, NA, NP, L> {
         self.mission
     }
 
@@ -458,12 +445,12 @@ impl<
     }
 
     /// The data store of a sensor-based action.
-    pub fn sensor_store(&self, sensor: SensorId) -> Option<&DataStore<M, K>> {
+    pub fn sensor_store(&self, sensor: SensorId) -> Option<&DataStore<P::Mutex, K>> {
         self.sensor_stores.get(sensor.index())
     }
 
     /// The data store of an actuator-based action.
-    pub fn action_store(&self, action: ActionId) -> Option<&DataStore<M, K>> {
+    pub fn action_store(&self, action: ActionId) -> Option<&DataStore<P::Mutex, K>> {
         self.action_stores.get(action.index())
     }
 
@@ -687,7 +674,7 @@ impl<
     async fn run_parallel(
         &self,
         action: ActionId,
-        spec: &ActuatorAction<'a>,
+        spec: &ActuatorAction<'r>,
         sensors: SensorSet,
         io: &ActionIo<'_>,
     ) -> Result<Outcome, Failure> {
@@ -698,10 +685,10 @@ impl<
             self.check_precondition();
             // The watch first: a failure reported at this instant stops the behaviour before
             // it takes another step.
-            let behaviour = self.actuators.run(action, io);
+            let behaviour = self.platform.run(action, io);
             match select(self.watch(epoch, action), behaviour).await {
                 Either::First(failure) => {
-                    self.actuators.halt(action);
+                    self.platform.halt(action);
                     Err(failure)
                 }
                 Either::Second(outcome) => Ok(outcome),
@@ -716,7 +703,7 @@ impl<
     async fn sense_phase(
         &self,
         action: ActionId,
-        spec: &ActuatorAction<'a>,
+        spec: &ActuatorAction<'r>,
         sensors: SensorSet,
         until: Instant,
         first: bool,
@@ -739,7 +726,7 @@ impl<
     async fn run_alternating(
         &self,
         action: ActionId,
-        spec: &ActuatorAction<'a>,
+        spec: &ActuatorAction<'r>,
         sensors: SensorSet,
         io: &ActionIo<'_>,
         sense: Duration,
@@ -750,20 +737,20 @@ impl<
             sense.max(Duration::from_ticks(1)),
             act.max(Duration::from_ticks(1)),
         );
-        let mut behaviour = pin!(self.actuators.run(action, io));
+        let mut behaviour = pin!(self.platform.run(action, io));
         let mut first = true;
         loop {
             self.trace(TraceEvent::PhaseStarted {
                 action,
                 phase: Phase::Sense,
             });
-            self.actuators.hold(action, true);
+            self.platform.hold(action, true);
             let until = Instant::now().saturating_add(sense);
             let sensed = self.sense_phase(action, spec, sensors, until, first).await;
             first = false;
-            self.actuators.hold(action, false);
+            self.platform.hold(action, false);
             if let Err(failure) = sensed {
-                self.actuators.halt(action);
+                self.platform.halt(action);
                 return Err(failure);
             }
             self.trace(TraceEvent::PhaseStarted {
@@ -851,7 +838,7 @@ impl<
             sensors.bits()
         );
         if sensors.is_empty() {
-            return Ok(self.actuators.run(action, &io).await);
+            return Ok(self.platform.run(action, &io).await);
         }
         match self.config.policy {
             Policy::PSmpa => self.run_parallel(action, spec, sensors, &io).await,
@@ -888,19 +875,18 @@ impl<
 }
 
 impl<
-    M: RawMutex,
-    S: Sensor,
-    A: Actuator,
+    'r,
+    P: Platform,
     T: TraceSink,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Monitor for Runtime<'_, '_, M, S, A, T, NS, NA, NP, L, K>
+> Monitor for Engine<'r, P, T, NS, NA, NP, L, K>
 {
     fn beliefs(&self) -> FactSet {
-        Runtime::beliefs(self)
+        Engine::beliefs(self)
     }
 
     fn violation(&self) -> Option<Violation> {

@@ -20,8 +20,8 @@
 //!
 //! The platform (a robot, or a simulator) implements [`platform::Sensor`] and
 //! [`platform::Actuator`]. The core only exposes futures: the sensing side
-//! ([`Runtime::sensing`]: every sensor samples on its own schedule) and the deciding side
-//! ([`Runtime::run`]: the control loop, the FSM, the behaviours). The platform places them, on
+//! ([`Runtime::sensing`](Engine::sensing): every sensor samples on its own schedule) and the deciding side
+//! ([`Runtime::run`](Engine::run): the control loop, the FSM, the behaviours). The platform places them, on
 //! one executor or sensing at a higher priority. The core never spawns a task and never reads a
 //! clock other than `embassy-time`, so the same code runs on a microcontroller under the
 //! embassy executor and on a host in virtual time. Capacities are const generics; a full
@@ -58,6 +58,7 @@ pub mod model;
 pub mod plan;
 pub mod planner;
 pub mod platform;
+pub mod runtime;
 pub mod sense;
 pub mod store;
 pub mod timing;
@@ -66,12 +67,15 @@ pub mod trace;
 pub use action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, SensorSet};
 pub use control::{ControlError, Report};
 pub use domain::{Domain, DomainError, EventId};
-pub use exec::{ActionIo, Config, Failure, Policy, Runtime, Violation};
+pub use exec::{ActionIo, Config, Engine, Failure, Policy, Violation};
 pub use facts::{FactId, FactSet};
 pub use fsm::{BehaviourState, Fsm, FsmError, Target};
 pub use mission::{Bindings, LoadError, Loaded, Mission, Registry};
 pub use model::{Task, WorldModel};
 pub use plan::{Plan, PlanError, PlanId, PlanLibrary};
-pub use platform::{Actuator, MAX_PAIRS, Outcome, PairRejected, Reading, Sensor, SensorFault};
+pub use platform::{
+    Actuator, MAX_PAIRS, Outcome, PairRejected, Platform, Reading, Sensor, SensorFault,
+};
+pub use runtime::{Capacity, Caps, LoadedOf, MissionOf, Runtime};
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
 pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};

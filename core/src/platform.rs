@@ -109,7 +109,7 @@ pub enum Outcome {
 
 /// The sensors of a platform (the sensing side: the paper's sensory controller).
 ///
-/// Every running sensor has a sampler of its own in [`Runtime::sensing`](crate::exec::Runtime::sensing):
+/// Every running sensor has a sampler of its own in [`Engine::sensing`](crate::exec::Engine::sensing):
 /// its methods are called for one sensor at a time, but calls for *different* sensors overlap.
 ///
 /// * A call may await I/O for as long as the device needs (an ultrasonic echo up to 38 ms, a
@@ -157,4 +157,14 @@ pub trait Actuator {
     fn halt(&self, action: ActionId) {
         let _ = action;
     }
+}
+
+/// A robot, or a simulated one: its sensors, its actuator behaviours, and how the runtime's two
+/// sides share state on it. The one type a [`Runtime`](crate::Runtime) is generic over besides
+/// its capacities.
+pub trait Platform: Sensor + Actuator {
+    /// The mutex through which the sensing and deciding sides share state:
+    /// `NoopRawMutex` where both run on one executor (or a host simulation),
+    /// `CriticalSectionRawMutex` where sensing runs on a higher-priority executor.
+    type Mutex: embassy_sync::blocking_mutex::raw::RawMutex;
 }

@@ -1,7 +1,7 @@
 //! The sensing side of the runtime (the paper's sensory controller): every sensor samples on
 //! its own, above the deciding side.
 //!
-//! [`Runtime::sensing`] runs one *sampler* per sensor of the domain. A sampler waits until the
+//! [`Engine::sensing`] runs one *sampler* per sensor of the domain. A sampler waits until the
 //! deciding side commands its sensor (a state that needs it started: least commitment), then
 //! switches it on and samples it:
 //!
@@ -35,15 +35,14 @@ use core::task::{Context, Poll};
 
 use embassy_futures::join::join_array;
 use embassy_futures::select::{Either, select};
-use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, TimeoutError, with_timeout};
 use pin_project_lite::pin_project;
 
 use crate::action::{SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::Domain;
-use crate::exec::{Failure, Mode, Runtime, Shared, Violation, sleep_until};
+use crate::exec::{Engine, Failure, Mode, Shared, Violation, sleep_until};
 use crate::facts::FactSet;
-use crate::platform::{Actuator, Reading, Sensor, SensorFault};
+use crate::platform::{Platform, Reading, SensorFault};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
 use crate::trace::{TraceEvent, TraceSink};
 
@@ -62,7 +61,7 @@ pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
 }
 
 pin_project! {
-    /// The sensing side of a runtime ([`Runtime::sensing`]): its samplers, each polled in
+    /// The sensing side of a runtime ([`Engine::sensing`]): its samplers, each polled in
     /// place. Never ends.
     #[must_use = "futures do nothing unless polled"]
     pub struct Sensing<F> {
@@ -82,16 +81,15 @@ impl<F: Future> Future for Sensing<F> {
 }
 
 impl<
-    M: RawMutex,
-    S: Sensor,
-    A: Actuator,
+    'r,
+    P: Platform,
     T: TraceSink,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Runtime<'_, '_, M, S, A, T, NS, NA, NP, L, K>
+> Engine<'r, P, T, NS, NA, NP, L, K>
 {
     /// The sensing side: one sampler per sensor, all concurrent. Never ends; drop it to stop
     /// sensing. Place it on an executor of higher priority than the deciding side, or run it
@@ -134,7 +132,7 @@ impl<
             served = Some(epoch);
             self.shared
                 .lock(|s| s.active.set(s.active.get().with(sensor)));
-            let fault = match with_timeout(spec.timeout, self.sensors.switch_on(sensor)).await {
+            let fault = match with_timeout(spec.timeout, self.platform.switch_on(sensor)).await {
                 Ok(Ok(())) => None,
                 Ok(Err(fault)) => Some(fault),
                 Err(_) => Some(SensorFault::Timeout),
@@ -188,7 +186,7 @@ impl<
                         }
                     });
                 } else {
-                    let read = with_timeout(spec.timeout, self.sensors.sample(sensor));
+                    let read = with_timeout(spec.timeout, self.platform.sample(sensor));
                     let Either::Second(read) = select(self.ended(epoch), read).await else {
                         // Cancelled: no read of this instant was taken.
                         break;
@@ -213,7 +211,7 @@ impl<
             }
             // A sensor that does not answer is traced and counted off: it is not used again
             // until it is switched on.
-            if with_timeout(spec.timeout, self.sensors.switch_off(sensor))
+            if with_timeout(spec.timeout, self.platform.switch_off(sensor))
                 .await
                 .is_err()
             {

@@ -143,7 +143,6 @@ mod firmware {
                 'static,
                 'static,
                 'static,
-                'static,
                 Reactions,
                 Steps,
                 CriticalSectionRawMutex,

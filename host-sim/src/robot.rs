@@ -22,9 +22,9 @@ use psmpa_core::mission::{self, Bindings, LoadError, Registry};
 use psmpa_core::planner::{Planner, Search, Strategy};
 use psmpa_core::timing::{Blocking, Job, Response, TimingError};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, Config, DomainError, Entry, FactId, FactSet, Key, Mission,
-    Outcome, Policy, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode,
-    Value,
+    ActionId, ActionIo, Actuator, Capacity, Config, DomainError, Entry, FactId, FactSet, Key,
+    MissionOf, Outcome, Platform, Policy, Reading, Runtime, Sensor, SensorAction, SensorFault,
+    SensorId, SensorMode, Value,
 };
 
 use crate::scenario::Scenario;
@@ -38,8 +38,12 @@ pub const OPEN_DOOR: Duration = Duration::from_millis(1_000);
 /// Time to walk through an open door.
 pub const ENTER_KITCHEN: Duration = Duration::from_millis(1_000);
 
-/// Capacities of the robot's missions: 4 sensors, 8 actions, 4 plans of up to 6 actions.
-pub type FetchTea<'a> = Mission<'a, 4, 8, 4, 6>;
+/// Capacities of the robot's missions: 4 sensors, 8 actions, 4 plans of up to 6 actions, 4
+/// keys per data store.
+pub type Caps = psmpa_core::Caps<4, 8, 4, 6, 4>;
+
+/// A mission of the robot.
+pub type FetchTea<'a> = MissionOf<'a, Caps>;
 
 /// The robot's sensor behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -143,7 +147,7 @@ pub struct Robot<'a> {
     /// The mission, with the scenario's sampling periods.
     pub mission: FetchTea<'a>,
     /// The behaviour of every sensor and action id.
-    pub bindings: Bindings<NaoSensor, NaoAction, 4, 8>,
+    pub bindings: <Caps as Capacity>::Bindings<NaoSensor, NaoAction>,
     /// Percept fact ids.
     pub percepts: Percepts,
 }
@@ -183,7 +187,7 @@ impl Robot<'_> {
     pub const fn empty() -> Self {
         let none = FactId::FIRST;
         Self {
-            mission: Mission::empty(),
+            mission: FetchTea::empty(),
             bindings: Bindings::new(),
             percepts: Percepts {
                 path_clear: none,
@@ -382,7 +386,7 @@ pub const STUCK_AFTER_UM: i64 = 50_000;
 /// the mutex `M`, as the world's state does.
 pub struct Nao<'w, 's, L: WorldLog, M: RawMutex = NoopRawMutex> {
     world: &'w World<'s, L, M>,
-    bindings: Bindings<NaoSensor, NaoAction, 4, 8>,
+    bindings: <Caps as Capacity>::Bindings<NaoSensor, NaoAction>,
     percepts: Percepts,
     /// The sonar's last echo in range and the odometry when it was first read.
     echo: Mutex<M, core::cell::Cell<Option<(u32, i64)>>>,
@@ -728,6 +732,9 @@ impl<L: WorldLog, M: RawMutex> Actuator for Nao<'_, '_, L, M> {
     }
 }
 
+impl<L: WorldLog, M: RawMutex> Platform for Nao<'_, '_, L, M> {
+    type Mutex = M;
+}
+
 /// The runtime type of a Fetch Tea run, its two sides sharing state through `M`.
-pub type NaoRuntime<'r, 'a, 'w, 's, L, T, M = NoopRawMutex> =
-    Runtime<'r, 'a, M, Nao<'w, 's, L, M>, Nao<'w, 's, L, M>, T, 4, 8, 4, 6, 4>;
+pub type NaoRuntime<'r, 'w, 's, L, T, M = NoopRawMutex> = Runtime<'r, Nao<'w, 's, L, M>, Caps, T>;

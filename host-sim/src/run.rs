@@ -262,13 +262,8 @@ pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
 ) -> (Summary, L, T) {
     let world: World<'_, L, P::Mutex> = World::new(scenario, log);
     let nao = Nao::new(&world, robot).with_compute(P::compute);
-    let runtime: robot::NaoRuntime<'_, '_, '_, '_, L, T, P::Mutex> = Runtime::new(
-        &robot.mission,
-        &nao,
-        &nao,
-        sink,
-        robot::config(scenario, arch),
-    );
+    let runtime: robot::NaoRuntime<'_, '_, '_, L, T, P::Mutex> =
+        Runtime::new(&robot.mission, &nao, sink, robot::config(scenario, arch));
     let ending = {
         let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
         // Built where they stay: neither side is ever copied.

@@ -6,9 +6,9 @@ use embassy_futures::select::select;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Config, Domain, FactSet, Key, Mission, Outcome,
-    Plan, PlanLibrary, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode,
-    Task, Value,
+    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Domain, FactSet, Key, Mission,
+    Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor, SensorAction, SensorFault,
+    SensorId, SensorMode, Task, Value,
 };
 
 use crate::Recorder;
@@ -16,8 +16,7 @@ use crate::Recorder;
 /// Capacities of the tiny mission: 2 sensors, 4 actions, 4 plans of up to 4 actions.
 pub type TinyMission = Mission<'static, 2, 4, 4, 4>;
 /// The runtime of the tiny mission, keys per store `K`.
-pub type TinyRuntime<'r, const K: usize> =
-    Runtime<'r, 'static, NoopRawMutex, TinyWorld, TinyWorld, Recorder, 2, 4, 4, 4, K>;
+pub type TinyRuntime<'r, const K: usize> = Runtime<'r, TinyWorld, Caps<2, 4, 4, 4, K>, Recorder>;
 
 /// Ids in the tiny mission.
 #[derive(Clone, Copy, Debug)]
@@ -273,6 +272,10 @@ impl Sensor for TinyWorld {
     }
 }
 
+impl Platform for TinyWorld {
+    type Mutex = NoopRawMutex;
+}
+
 impl Actuator for TinyWorld {
     async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
         if action == self.ids.walk || action == self.ids.stumble {
@@ -310,7 +313,7 @@ pub fn runtime<'r, const K: usize>(
     world: &'r TinyWorld,
     config: Config,
 ) -> TinyRuntime<'r, K> {
-    Runtime::new(mission, world, world, Recorder::default(), config)
+    Runtime::new(mission, world, Recorder::default(), config)
 }
 
 /// SMPA with 1 s sense and 3 s act phases.

@@ -9,9 +9,9 @@ use core::cell::{Cell, RefCell};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Config, ControlError, Domain, Entry, FactSet,
-    Failure, Key, Mission, Outcome, Plan, PlanLibrary, Reading, Runtime, Sensor, SensorAction,
-    SensorFault, SensorId, SensorMode, Task, TraceEvent, Value,
+    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, ControlError, Domain, Entry,
+    FactSet, Failure, Key, Mission, Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor,
+    SensorAction, SensorFault, SensorId, SensorMode, Task, TraceEvent, Value,
 };
 use psmpa_sim::backend::{simulate, simulate_split};
 use psmpa_tests::Recorder;
@@ -194,7 +194,11 @@ impl Actuator for Robot {
     }
 }
 
-type PairRuntime<'r> = Runtime<'r, 'static, NoopRawMutex, Robot, Robot, Recorder, 2, 2, 1, 2, 4>;
+impl Platform for Robot {
+    type Mutex = NoopRawMutex;
+}
+
+type PairRuntime<'r> = Runtime<'r, Robot, Caps<2, 2, 1, 2, 4>, Recorder>;
 
 /// Runs the mission; returns the trace and when the drive state started.
 fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
@@ -202,13 +206,7 @@ fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
 }
 
 fn run_mission(robot: &Robot, mission: Pair) -> (Vec<(Instant, TraceEvent)>, Instant) {
-    let rt: PairRuntime<'_> = Runtime::new(
-        &mission,
-        robot,
-        robot,
-        Recorder::default(),
-        Config::default(),
-    );
+    let rt: PairRuntime<'_> = Runtime::new(&mission, robot, Recorder::default(), Config::default());
     let done = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
     done.output.unwrap();
     let trace = rt.into_sink().0;
@@ -361,13 +359,8 @@ fn a_read_cancelled_by_the_end_of_a_state_is_taken_again_by_the_next() {
 fn a_control_loop_without_its_sensing_side_fails_clearly_instead_of_hanging() {
     let robot = Robot::new(0, 200);
     let (mission, _) = mission();
-    let rt: PairRuntime<'_> = Runtime::new(
-        &mission,
-        &robot,
-        &robot,
-        Recorder::default(),
-        Config::default(),
-    );
+    let rt: PairRuntime<'_> =
+        Runtime::new(&mission, &robot, Recorder::default(), Config::default());
     // Nobody runs `rt.sensing()`.
     let done = simulate(rt.run(), LIMIT).unwrap();
     assert_eq!(
@@ -408,8 +401,11 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
     fn sendable<F: core::future::Future + Send>(_: &F) {}
 
     let (mission, _) = mission();
-    let rt: Runtime<'_, '_, CriticalSectionRawMutex, Stateless, Stateless, (), 2, 2, 1, 2, 4> =
-        Runtime::new(&mission, &Stateless, &Stateless, (), Config::default());
+    impl Platform for Stateless {
+        type Mutex = CriticalSectionRawMutex;
+    }
+    let rt: Runtime<'_, Stateless, Caps<2, 2, 1, 2, 4>> =
+        Runtime::new(&mission, &Stateless, (), Config::default());
     shared(&rt);
     sendable(&rt.sensing());
 }

@@ -68,7 +68,7 @@ const HOST_STEPS: &[(&str, &str)] = &[
     ),
     (
         "precondition check",
-        "Runtime<M,S,A,T,_,_,_,_,_>>::check_precondition",
+        "Engine<P,T,_,_,_,_,_>>::check_precondition",
     ),
     (
         "behaviour step (one poll)",

@@ -6,8 +6,8 @@
 //! critical section and its stack, and leaves QEMU. `cargo xtask size` holds it to 8 KiB of RAM
 //! with the stack and reports its flash against the 32 KiB target.
 //!
-//! It runs the mission's library plan (`Runtime::run`): re-planning with the planner would add
-//! about 0.4 KB of flash and its 1 KiB search space (`Runtime::run_planning`), past the RAM
+//! It runs the mission's library plan (`Engine::run`): re-planning with the planner would add
+//! about 0.4 KB of flash and its 1 KiB search space (`Engine::run_planning`), past the RAM
 //! budget.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
@@ -28,8 +28,8 @@ mod product {
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_time::{Instant, Timer};
     use psmpa_core::{
-        ActionId, ActionIo, Actuator, Bindings, Config, Mission, Outcome, Reading, Registry,
-        Runtime, Sensor, SensorFault, SensorId, Value,
+        ActionId, ActionIo, Actuator, Bindings, Capacity, Caps, Config, MissionOf, Outcome,
+        Platform, Reading, Registry, Runtime, Sensor, SensorFault, SensorId, Value,
     };
     use psmpa_firmware::board::{exit, fail, stack_high_water};
     use psmpa_firmware::executor;
@@ -38,10 +38,10 @@ mod product {
     static FETCH_TEA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fetch-tea.json"));
 
     /// Capacities: 4 sensors, 8 actions, 4 plans of at most 6 actions, 4 keys per store.
-    type FetchTea = Mission<'static, 4, 8, 4, 6>;
-    type Parts = Bindings<Part, Motion, 4, 8>;
-    type ProductRuntime =
-        Runtime<'static, 'static, CriticalSectionRawMutex, Stubs, Stubs, (), 4, 8, 4, 6, 4>;
+    type FetchTeaCaps = Caps<4, 8, 4, 6, 4>;
+    type FetchTea = MissionOf<'static, FetchTeaCaps>;
+    type Parts = <FetchTeaCaps as Capacity>::Bindings<Part, Motion>;
+    type ProductRuntime = Runtime<'static, Stubs, FetchTeaCaps>;
 
     /// The sensors a mission may name, each a driver on a real board.
     #[derive(Clone, Copy)]
@@ -120,6 +120,10 @@ mod product {
             Timer::after_micros(wait_us).await;
             Ok(Some(Reading::new(value, per)))
         }
+    }
+
+    impl Platform for Stubs {
+        type Mutex = CriticalSectionRawMutex;
     }
 
     impl Actuator for Stubs {
@@ -214,13 +218,13 @@ mod product {
         if cfg!(feature = "inject-fault") {
             overflow(u32::MAX);
         }
-        let mission = mission.write(Mission::empty());
+        let mission = mission.write(FetchTea::empty());
         let parts = parts.write(Bindings::new());
         if psmpa_core::mission::load_into(FETCH_TEA, &Board, mission, parts).is_err() {
             fail("the Fetch Tea mission does not load");
         }
         let (mission, parts) = (&*mission, &*parts);
         let stubs = &*stubs.write(Stubs { mission, parts });
-        runtime.write(Runtime::new(mission, stubs, stubs, (), Config::default()))
+        runtime.write(Runtime::new(mission, stubs, (), Config::default()))
     }
 }

@@ -1,0 +1,126 @@
+//! Naming a runtime in one line: the platform and one type for every capacity.
+//!
+//! ```
+//! use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+//! use psmpa_core::{ActionId, ActionIo, Actuator, Caps, Outcome, Platform, Reading, Runtime,
+//!     Sensor, SensorFault, SensorId};
+//!
+//! struct Dock;
+//! # impl Sensor for Dock {
+//! #     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> { Ok(()) }
+//! #     async fn switch_off(&self, _: SensorId) {}
+//! #     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> { Ok(None) }
+//! # }
+//! # impl Actuator for Dock {
+//! #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
+//! # }
+//! impl Platform for Dock {
+//!     type Mutex = NoopRawMutex; // both sides on one executor
+//! }
+//!
+//! /// 4 sensors, 6 actions, 2 plans of at most 4 actions, 8 keys per data store.
+//! type DockCaps = Caps<4, 6, 2, 4, 8>;
+//! type DockRuntime = Runtime<'static, Dock, DockCaps>;
+//! ```
+
+use core::ops::Deref;
+
+use crate::exec::{Config, Engine};
+use crate::mission::{Bindings, Loaded, Mission};
+use crate::platform::Platform;
+use crate::trace::TraceSink;
+
+/// Every capacity of a runtime in one type: `NS` sensors, `NA` actions, `NP` plans of at most
+/// `L` actions each, `K` keys per data store. Only a name: it holds nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Caps<const NS: usize, const NA: usize, const NP: usize, const L: usize, const K: usize>;
+
+/// What a capacity type ([`Caps`]) sizes: the mission, its bindings and the runtime's engine.
+pub trait Capacity {
+    /// The mission of these capacities.
+    type Mission<'a>;
+    /// The loaded mission with the platform's behaviours of sensors `S` and actions `A`.
+    type Loaded<'a, S, A>;
+    /// The bindings of sensors `S` and actions `A`.
+    type Bindings<S, A>;
+    /// The runtime's engine on platform `P`, tracing into `T`.
+    type Engine<'r, P: Platform + 'r, T: TraceSink>;
+}
+
+impl<const NS: usize, const NA: usize, const NP: usize, const L: usize, const K: usize> Capacity
+    for Caps<NS, NA, NP, L, K>
+{
+    type Mission<'a> = Mission<'a, NS, NA, NP, L>;
+    type Loaded<'a, S, A> = Loaded<'a, S, A, NS, NA, NP, L>;
+    type Bindings<S, A> = Bindings<S, A, NS, NA>;
+    type Engine<'r, P: Platform + 'r, T: TraceSink> = Engine<'r, P, T, NS, NA, NP, L, K>;
+}
+
+/// The mission of capacities `C`.
+pub type MissionOf<'a, C> = <C as Capacity>::Mission<'a>;
+
+/// A mission loaded for registry `R`'s behaviours, of capacities `C`.
+pub type LoadedOf<'a, R, C> = <C as Capacity>::Loaded<
+    'a,
+    <R as crate::mission::Registry>::Sensor,
+    <R as crate::mission::Registry>::Action,
+>;
+
+/// The P-SMPA runtime of one robot: platform `P`, capacities `C` ([`Caps`]), trace sink `T`
+/// (none by default). Everything it does is the [`Engine`]'s, reached through `Deref`:
+/// [`sensing`](Engine::sensing), [`run`](Engine::run), [`beliefs`](Engine::beliefs), ...
+///
+/// Everything lives inside this value; put it in a `static` (with a `StaticCell`) or on the
+/// stack of the task that runs it. With `P::Mutex = CriticalSectionRawMutex` and a `Sync`
+/// platform it is `Sync`: a `&'static Runtime` can be shared by tasks at two priorities.
+pub struct Runtime<'r, P: Platform + 'r, C: Capacity, T: TraceSink = ()> {
+    engine: C::Engine<'r, P, T>,
+}
+
+impl<
+    'r,
+    P: Platform + 'r,
+    T: TraceSink,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+> Runtime<'r, P, Caps<NS, NA, NP, L, K>, T>
+{
+    /// A runtime for `mission` on `platform`, tracing into `sink` (`()` for none). The
+    /// beliefs start at the task's initial state `τ0`.
+    pub fn new(
+        mission: &'r Mission<'r, NS, NA, NP, L>,
+        platform: &'r P,
+        sink: T,
+        config: Config,
+    ) -> Self {
+        Self {
+            engine: Engine::new(mission, platform, sink, config),
+        }
+    }
+
+    /// Gives the runtime up and returns the trace sink.
+    pub fn into_sink(self) -> T {
+        self.engine.into_sink()
+    }
+}
+
+impl<
+    'r,
+    P: Platform + 'r,
+    T: TraceSink,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+> Deref for Runtime<'r, P, Caps<NS, NA, NP, L, K>, T>
+{
+    type Target = Engine<'r, P, T, NS, NA, NP, L, K>;
+
+    fn deref(&self) -> &Self::Target {
+        &self.engine
+    }
+}
