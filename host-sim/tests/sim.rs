@@ -444,23 +444,23 @@ fn trace_hashes_are_pinned() {
 }
 
 const PINS: [(&str, u64, u64); 15] = [
-    ("sonar-6", 0x19071704f06cab70, 0x58c343ae1c0ac49b),
-    ("sonar-7", 0xf92344e3db6661df, 0x74fd9f9e9b44144c),
-    ("sonar-8", 0xc50009a8c9f2b8b4, 0xb38bea704245c30c),
-    ("bumper-4", 0x26739505c66717f3, 0xda278d3cef0f901b),
-    ("bumper-5", 0xbd1ed69f69f6b042, 0x71379220fc89e6fb),
-    ("bumper-6", 0x055d41ffcac74394, 0xc76e142add524ab1),
-    ("quiet", 0x57af6fde6534b7b5, 0xedb60ffdcb34d4de),
-    ("blind-box", 0xeaf29fc348a02953, 0xbdc05c1b0badb5a1),
-    ("far-box", 0x9941c50bea4f5221, 0x3380b28076e35e1c),
-    ("transient", 0xb01a9d68e3772289, 0x469effaf454b4fe1),
-    ("noisy-sonar", 0x47cb02e8c833093b, 0x98f985cc12cd250a),
-    ("locked-door", 0x5a0b5cbc4d266c13, 0xe4a1810e12d46b46),
-    ("mixed", 0x73c3cdcbc8abee62, 0xc6c1477a283b476f),
-    ("slow-echo", 0xf248b88bcd39cb80, 0x934cc6b0ee7604a2),
+    ("sonar-6", 0xb8a5c6a21ba60286, 0x6bdc8ba1fe4d829a),
+    ("sonar-7", 0xc973407615e6875e, 0x290f7936d3d61cb9),
+    ("sonar-8", 0xa036cbce6cc99bc0, 0x48628e14653bed08),
+    ("bumper-4", 0x4423fbf65987578f, 0x311f2f3b6c9ab55f),
+    ("bumper-5", 0x4a4d06886a81a539, 0xd83f279d988c8803),
+    ("bumper-6", 0x0af518e215b5e43c, 0xf03f98a4268fbad0),
+    ("quiet", 0xa640b37231d06dca, 0x6847ed875c3a601f),
+    ("blind-box", 0x73cfc34b40ef17ee, 0xf7b7ea8a232329ad),
+    ("far-box", 0xcba9d616f409231e, 0xf3de12eede4df68f),
+    ("transient", 0x691a79a903f152bc, 0xa67a84bea7b53a93),
+    ("noisy-sonar", 0xb1104516fe8d3a6e, 0xfda2684e81397cd5),
+    ("locked-door", 0x120b70ddde89d4f3, 0xeb501624995a4fbe),
+    ("mixed", 0x6b47b28142efcb93, 0xb9ae78135ca6108b),
+    ("slow-echo", 0x8a47c41441f93092, 0x2442ddf66ac5061a),
     // `mixed` with 50 ms of path planning at each (re)start: computing takes no virtual time,
     // so the trace is `mixed`'s.
-    ("replan", 0x73c3cdcbc8abee62, 0xc6c1477a283b476f),
+    ("replan", 0x6b47b28142efcb93, 0xb9ae78135ca6108b),
 ];
 
 #[test]
