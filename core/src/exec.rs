@@ -28,12 +28,12 @@
 
 use core::cell::{Cell, RefCell};
 use core::future::poll_fn;
-use core::pin::pin;
+use core::pin::{Pin, pin};
 use core::task::{Context, Poll};
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::waitqueue::MultiWakerRegistration;
+use embassy_sync::waitqueue::WakerRegistration;
 use embassy_time::{Duration, Instant, Timer};
 
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorSet};
@@ -297,16 +297,36 @@ pub(crate) struct Shared<const NS: usize> {
     pub(crate) requests: Cell<SensorSet>,
     pub(crate) version: Cell<u32>,
     pub(crate) command: Cell<Command>,
+    /// The command's epoch, apart: samplers read it at every await.
+    pub(crate) epoch: Cell<u32>,
     /// Sensors of the current command that are on and have taken the samples due at its start.
     pub(crate) ready: Cell<SensorSet>,
     /// Sensors whose sampler is between switching on and having switched off.
     pub(crate) active: Cell<SensorSet>,
     /// The first failure under the command of that epoch.
     pub(crate) failure: Cell<Option<(u32, Failure)>>,
-    /// Behaviours, the precondition watch and the control loop.
-    pub(crate) deciding: RefCell<MultiWakerRegistration<4>>,
-    /// The samplers.
-    pub(crate) sensing: RefCell<MultiWakerRegistration<4>>,
+    /// The deciding side's task (behaviours, the precondition watch and the control loop).
+    /// One task per side: a registration of another waker wakes the one it replaces.
+    pub(crate) deciding: RefCell<WakerRegistration>,
+    /// The sensing side's task (the samplers).
+    pub(crate) sensing: RefCell<WakerRegistration>,
+}
+
+impl<const NS: usize> Shared<NS> {
+    /// Something the deciding side may wait for changed: bump the version and wake it.
+    pub(crate) fn notify(&self) {
+        self.version.set(self.version.get().wrapping_add(1));
+        if let Ok(mut w) = self.deciding.try_borrow_mut() {
+            w.wake();
+        }
+    }
+
+    /// A read of `sensor` started at `at`.
+    pub(crate) fn record_read(&self, sensor: SensorId, at: Instant) {
+        if let Some(r) = self.last_read.get(sensor.index()) {
+            r.set(Some(at));
+        }
+    }
 }
 
 fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
@@ -314,13 +334,6 @@ fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
         Outcome::Success => Ok(()),
         Outcome::Failure => Err(Failure::ActionFailed { action }),
         Outcome::Interrupted => Err(Failure::ActionInterrupted { action }),
-    }
-}
-
-pub(crate) async fn sleep_until(at: Option<Instant>) {
-    match at {
-        Some(at) => Timer::at(at).await,
-        None => core::future::pending().await,
     }
 }
 
@@ -401,8 +414,9 @@ impl<
                 ready: Cell::new(SensorSet::EMPTY),
                 active: Cell::new(SensorSet::EMPTY),
                 failure: Cell::new(None),
-                deciding: RefCell::new(MultiWakerRegistration::new()),
-                sensing: RefCell::new(MultiWakerRegistration::new()),
+                epoch: Cell::new(0),
+                deciding: RefCell::new(WakerRegistration::new()),
+                sensing: RefCell::new(WakerRegistration::new()),
             }),
             tracer: Mutex::new(RefCell::new(Tracer::new(sink))),
             trace_lost: Mutex::new(Cell::new(0)),
@@ -493,12 +507,7 @@ impl<
 
     /// Something the deciding side may wait for changed: bump the version and wake it.
     pub(crate) fn notify(&self) {
-        self.shared.lock(|s| {
-            s.version.set(s.version.get().wrapping_add(1));
-            if let Ok(mut w) = s.deciding.try_borrow_mut() {
-                w.wake();
-            }
-        });
+        self.shared.lock(Shared::notify);
     }
 
     /// Something a sampler may wait for changed (a command, a request): wake the sensing side.
@@ -516,7 +525,7 @@ impl<
     fn poll_shared<R>(
         &self,
         cx: &mut Context<'_>,
-        wakers: impl FnOnce(&Shared<NS>) -> &RefCell<MultiWakerRegistration<4>>,
+        wakers: impl FnOnce(&Shared<NS>) -> &RefCell<WakerRegistration>,
         done: impl FnOnce(&Shared<NS>) -> Option<R>,
     ) -> Poll<R> {
         self.shared.lock(|s| match done(s) {
@@ -581,20 +590,13 @@ impl<
                 watch,
                 start,
             });
+            s.epoch.set(epoch);
             s.ready.set(SensorSet::EMPTY);
             s.failure.set(None);
             epoch
         });
         self.wake_sensing();
         epoch
-    }
-
-    /// The failure reported under command `epoch`, if any.
-    fn failure_of(&self, epoch: u32) -> Option<Failure> {
-        self.shared
-            .lock(|s| s.failure.get())
-            .filter(|(e, _)| *e == epoch)
-            .map(|(_, f)| f)
     }
 
     /// How long the sensing side may take to answer for `sensors`: `steps` calls of the
@@ -648,26 +650,46 @@ impl<
 
     /// Watches the running action under command `epoch`: returns the first failure the
     /// sensing side reports, or the violation of `pre(a)` once it has lasted
-    /// [`Config::max_violation`]. Never returns while all is well.
+    /// [`Config::max_violation`]. Never returns while all is well. One lock a poll; woken by
+    /// every delivery, and by a timer at the deadline of a violation.
     async fn watch(&self, epoch: u32, action: ActionId) -> Failure {
-        loop {
-            let version = self.shared.lock(|s| s.version.get());
-            if let Some(failure) = self.failure_of(epoch) {
-                return failure;
-            }
-            let violation = self.shared.lock(|s| s.violation.get());
-            let deadline = violation.map(|v| v.since.saturating_add(self.config.max_violation));
-            if let (Some(v), Some(deadline)) = (violation, deadline) {
-                if Instant::now() >= deadline {
-                    return Failure::PreconditionViolated {
-                        action,
-                        missing: v.missing,
-                    };
+        let max = self.config.max_violation;
+        let mut alarm: Option<(Instant, Timer)> = None;
+        poll_fn(|cx| {
+            // Registered in the same lock as the check: a delivery in between cannot be missed.
+            let seen = self.shared.lock(|s| match s.failure.get() {
+                Some((e, failure)) if e == epoch => Err(failure),
+                _ => {
+                    if let Ok(mut w) = s.deciding.try_borrow_mut() {
+                        w.register(cx.waker());
+                    }
+                    Ok(s.violation.get())
                 }
+            });
+            let violation = match seen {
+                Err(failure) => return Poll::Ready(failure),
+                Ok(None) => {
+                    alarm = None;
+                    return Poll::Pending;
+                }
+                Ok(Some(v)) => v,
+            };
+            let deadline = violation.since.saturating_add(max);
+            if Instant::now() >= deadline {
+                return Poll::Ready(Failure::PreconditionViolated {
+                    action,
+                    missing: violation.missing,
+                });
             }
-            let changed = poll_fn(|cx| Monitor::poll_changed(self, cx, version));
-            select(changed, sleep_until(deadline)).await;
-        }
+            let timer = match &mut alarm {
+                Some((at, timer)) if *at == deadline => timer,
+                slot => &mut slot.insert((deadline, Timer::at(deadline))).1,
+            };
+            // Pending: the timer wakes this task at the deadline.
+            let _ = Pin::new(timer).poll(cx);
+            Poll::Pending
+        })
+        .await
     }
 
     /// P-SMPA: `δ'_i = δ_i ∥ {s_k}`; the sensors end when the action ends.

@@ -30,17 +30,16 @@
 
 use core::convert::Infallible;
 use core::future::{Future, pending, poll_fn};
-use core::pin::Pin;
+use core::pin::{Pin, pin};
 use core::task::{Context, Poll};
 
 use embassy_futures::join::join_array;
-use embassy_futures::select::{Either, select};
-use embassy_time::{Instant, TimeoutError, with_timeout};
+use embassy_time::{Instant, TimeoutError, Timer, with_timeout};
 use pin_project_lite::pin_project;
 
-use crate::action::{SensorAction, SensorId, SensorMode, SensorSet};
+use crate::action::{ActionId, SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::Domain;
-use crate::exec::{Engine, Failure, Mode, Shared, Violation, sleep_until};
+use crate::exec::{Engine, Failure, Mode, Shared, Violation};
 use crate::facts::FactSet;
 use crate::platform::{Platform, Reading, SensorFault};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
@@ -155,23 +154,31 @@ impl<
                 (SensorMode::OneShot, _) => Some(start),
                 (SensorMode::OnDemand, _) => None,
             };
-            if due.is_none() {
+            let mut marked = due.is_none();
+            if marked {
                 self.mark_ready(sensor, epoch);
             }
+            // The instant of this command's latest read: a read never repeats an instant. Only
+            // the command's first instant can have been read before it (by the state that just
+            // ended, or the initial model): that one is checked against the shared record.
+            let mut last: Option<Instant> = None;
             // Sample until the command ends or the sensor fails. The end of the command comes
             // first at every await: no sample starts, or is delivered, once the state is over.
             loop {
-                let wait = async {
-                    match spec.mode {
-                        SensorMode::OnDemand => self.requested(sensor).await,
-                        _ => sleep_until(due).await,
+                let waited = match (spec.mode, due) {
+                    (SensorMode::OnDemand, _) => {
+                        self.bounded(epoch, None, self.requested(sensor)).await
                     }
+                    (_, Some(due)) => self.bounded(epoch, None, Timer::at(due)).await,
+                    (_, None) => self.bounded(epoch, None, pending::<()>()).await,
                 };
-                if let Either::First(()) = select(self.ended(epoch), wait).await {
+                if !matches!(waited, Bound::Done(())) {
                     break;
                 }
                 let started = Instant::now();
-                if self.read_at(sensor, started) {
+                if last == Some(started) {
+                    // Read and delivered at this instant under this command already.
+                } else if last.is_none() && self.read_at(sensor, started) {
                     // A read that started at this instant was completed already (by the state or
                     // sense phase that just ended, or the initial model): a sensor never takes
                     // two samples of one instant.
@@ -186,21 +193,25 @@ impl<
                         }
                     });
                 } else {
-                    let read = with_timeout(spec.timeout, self.platform.sample(sensor));
-                    let Either::Second(read) = select(self.ended(epoch), read).await else {
+                    let limit = started.saturating_add(spec.timeout);
+                    let read = match self
+                        .bounded(epoch, Some(limit), self.platform.sample(sensor))
+                        .await
+                    {
+                        Bound::Done(read) => Ok(read),
+                        Bound::TimedOut => Err(TimeoutError),
                         // Cancelled: no read of this instant was taken.
-                        break;
+                        Bound::Ended => break,
                     };
-                    self.shared.lock(|s| {
-                        if let Some(r) = s.last_read.get(sensor.index()) {
-                            r.set(Some(started));
-                        }
-                    });
+                    last = Some(started);
                     if self.take(sensor, spec, read, started, epoch).is_err() {
                         break;
                     }
                 }
-                self.mark_ready(sensor, epoch);
+                if !marked {
+                    self.mark_ready(sensor, epoch);
+                    marked = true;
+                }
                 due = match (spec.mode, mode, due) {
                     (SensorMode::Cyclic { .. }, Mode::Once, _) => None,
                     (SensorMode::Cyclic { period }, _, Some(due)) => {
@@ -230,10 +241,33 @@ impl<
         }
     }
 
-    /// Completes when the deciding side's command is no longer the one of `epoch`.
-    async fn ended(&self, epoch: u32) {
-        poll_fn(|cx| self.poll_sensing(cx, |s| (s.command.get().epoch != epoch).then_some(())))
-            .await;
+    /// Awaits `inner` unless the command of `epoch` ends first, or `deadline` passes: every
+    /// await of a sampler in one future, one lock a poll. The end of the command is checked
+    /// first, then `inner`, then the deadline (as `with_timeout` would).
+    async fn bounded<F: Future>(
+        &self,
+        epoch: u32,
+        deadline: Option<Instant>,
+        inner: F,
+    ) -> Bound<F::Output> {
+        let mut inner = pin!(inner);
+        let mut timer = deadline.map(Timer::at);
+        poll_fn(|cx| {
+            if self
+                .poll_sensing(cx, |s| (s.epoch.get() != epoch).then_some(()))
+                .is_ready()
+            {
+                return Poll::Ready(Bound::Ended);
+            }
+            if let Poll::Ready(out) = inner.as_mut().poll(cx) {
+                return Poll::Ready(Bound::Done(out));
+            }
+            match timer.as_mut().map(|t| Pin::new(t).poll(cx)) {
+                Some(Poll::Ready(())) => Poll::Ready(Bound::TimedOut),
+                _ => Poll::Pending,
+            }
+        })
+        .await
     }
 
     /// Whether a read of `sensor` started at `at`.
@@ -280,6 +314,9 @@ impl<
         started: Instant,
         epoch: u32,
     ) -> Result<(), ()> {
+        if !matches!(read, Ok(Ok(Some(_)))) {
+            self.shared.lock(|s| s.record_read(sensor, started));
+        }
         let fault = match read {
             Ok(Ok(Some(reading))) => {
                 return self.deliver(sensor, spec, &reading, started).map_err(|f| {
@@ -325,7 +362,9 @@ impl<
         }
         let holds = reading.holds.intersection(spec.per);
         let domain = &self.mission.domain;
-        self.shared.lock(|s| {
+        // One lock for the whole delivery: fuse, record, check pre(a), wake the deciding side.
+        let change = self.shared.lock(|s| {
+            s.record_read(sensor, at);
             if let Some(n) = s.lost.get(sensor.index()) {
                 n.set(0);
             }
@@ -337,8 +376,9 @@ impl<
             // Sensor fusion by conjunction: a fact of per(s) holds only if no running sensor that
             // perceives it and has sampled says otherwise (the sonar sees a box while the bumper
             // feels nothing: the path is not clear).
-            let sampled = SensorSet::from_bits(s.running.get().bits() & fresh.bits()).with(sensor);
-            let decided = sampled.iter().fold(spec.per, |acc, t| {
+            let sampled =
+                SensorSet::from_bits(s.running.get().bits() & fresh.bits()).without(sensor);
+            let decided = sampled.iter().fold(holds, |acc, t| {
                 let per_t = domain.sensor(t).map_or(FactSet::EMPTY, |t| t.per);
                 let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, |h| h.get());
                 acc.difference(per_t.difference(holds_t))
@@ -352,47 +392,29 @@ impl<
                     at,
                 }));
             }
+            let change = check(s, domain);
+            s.notify();
+            change
         });
         self.trace(TraceEvent::Sample {
             sensor,
             value: reading.value,
             holds,
         });
-        self.check_precondition();
-        self.notify();
+        self.trace_change(change);
         Ok(())
     }
 
-    /// After a delivery: compares the watched action's `pre(a)` with the beliefs and traces a
-    /// change. The deciding side fails the state once a violation has lasted
-    /// [`Config::max_violation`](crate::exec::Config::max_violation). Reads and updates the
-    /// violation in one lock: the two sides both call it.
+    /// Compares the watched action's `pre(a)` with the beliefs and traces a change. The
+    /// deciding side fails the state once a violation has lasted its action's `max_violation`.
+    /// Reads and updates the violation in one lock: the two sides both call it.
     pub(crate) fn check_precondition(&self) {
         let domain = &self.mission.domain;
-        let change = self.shared.lock(|s| {
-            let (action, pre) = s.command.get().watch?;
-            let missing = pre.difference(s.beliefs.get());
-            let before = s.violation.get();
-            let after = match (missing.is_empty(), before) {
-                (true, None) => return None,
-                (true, Some(_)) => None,
-                (false, None) => {
-                    let seen = evidence(s, domain, missing).unwrap_or_else(Instant::now);
-                    Some(Violation {
-                        missing,
-                        since: seen,
-                        last_seen: seen,
-                    })
-                }
-                (false, Some(v)) => Some(Violation {
-                    missing,
-                    last_seen: evidence(s, domain, missing).unwrap_or(v.last_seen),
-                    ..v
-                }),
-            };
-            s.violation.set(after);
-            Some((action, before, after))
-        });
+        let change = self.shared.lock(|s| check(s, domain));
+        self.trace_change(change);
+    }
+
+    fn trace_change(&self, change: Option<Change>) {
         match change {
             Some((action, _, None)) => self.trace(TraceEvent::PreconditionRestored { action }),
             Some((action, b, Some(a))) if b.is_none_or(|b| b.missing != a.missing) => {
@@ -424,6 +446,49 @@ impl<
         });
         self.notify();
     }
+}
+
+/// How a sampler's [`bounded`](Engine::bounded) await ended.
+enum Bound<T> {
+    /// The awaited future completed.
+    Done(T),
+    /// The command ended first.
+    Ended,
+    /// The deadline passed first.
+    TimedOut,
+}
+
+/// A change of the watched action's violation: (action, before, after).
+type Change = (ActionId, Option<Violation>, Option<Violation>);
+
+/// Compares the watched action's `pre(a)` with the beliefs and updates the violation, in the
+/// caller's lock. `None` when nothing is watched or nothing changed. O(NS).
+fn check<const NS: usize, const NA: usize>(
+    s: &Shared<NS>,
+    domain: &Domain<'_, NS, NA>,
+) -> Option<Change> {
+    let (action, pre) = s.command.get().watch?;
+    let missing = pre.difference(s.beliefs.get());
+    let before = s.violation.get();
+    let after = match (missing.is_empty(), before) {
+        (true, None) => return None,
+        (true, Some(_)) => None,
+        (false, None) => {
+            let seen = evidence(s, domain, missing).unwrap_or_else(Instant::now);
+            Some(Violation {
+                missing,
+                since: seen,
+                last_seen: seen,
+            })
+        }
+        (false, Some(v)) => Some(Violation {
+            missing,
+            last_seen: evidence(s, domain, missing).unwrap_or(v.last_seen),
+            ..v
+        }),
+    };
+    s.violation.set(after);
+    Some((action, before, after))
 }
 
 /// When the latest sample was taken that says one of `missing` does not hold: the newest
