@@ -185,6 +185,11 @@ const fn head(kind: u8, a: u8, b: u8, c: u8) -> u64 {
     u64::from_le_bytes([kind, a, b, c, 0, 0, 0, 0])
 }
 
+/// The two's-complement bits of `i`.
+fn bits(i: i32) -> u64 {
+    u64::from(u32::from_le_bytes(i.to_le_bytes()))
+}
+
 /// An id as a byte: ids are below their capacity, and capacities fit a byte.
 fn id(i: usize) -> u8 {
     u8::try_from(i).unwrap_or(u8::MAX)
@@ -232,8 +237,8 @@ impl TraceHash {
     fn value_of(v: Value) -> (u8, u64) {
         match v {
             Value::Bool(b) => (0, u64::from(b)),
-            Value::Int(i) => (1, u64::from(i.cast_unsigned())),
-            Value::Mm(mm) => (2, u64::from(mm.cast_unsigned())),
+            Value::Int(i) => (1, bits(i)),
+            Value::Mm(mm) => (2, bits(mm)),
             Value::Level(l) => (3, u64::from(l)),
             Value::NoEcho => (4, 0),
         }
@@ -336,7 +341,7 @@ impl TraceHash {
             E::GoalReached { beliefs } => (head(14, 0, 0, 0), beliefs.bits()),
             E::User { code, value } => (
                 head(16, 0, 0, 0) | u64::from(code) << 16,
-                u64::from(value.cast_unsigned()),
+                bits(value),
             ),
             E::SampleLost { sensor } => (head(17, id(sensor.index()), 0, 0), 0),
             E::PlanGenerated { length, expanded } => (head(18, length, 0, 0), u64::from(expanded)),
