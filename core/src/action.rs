@@ -221,6 +221,10 @@ pub struct ActuatorAction<'a> {
     pub add: FactSet,
     /// `del(a)`: facts the action makes false.
     pub del: FactSet,
+    /// How long `pre(a)` may stay false while the action runs before the runtime stops it;
+    /// `None`: the runtime's [`Config::max_violation`](crate::exec::Config::max_violation).
+    /// A robot at a cliff's edge stops at once (zero); one before a box may wait for it.
+    pub max_violation: Option<Duration>,
 }
 
 impl<'a> ActuatorAction<'a> {
@@ -231,6 +235,14 @@ impl<'a> ActuatorAction<'a> {
             pre,
             add,
             del,
+            max_violation: None,
         }
+    }
+
+    /// The same action with its own tolerance for a false precondition.
+    #[must_use]
+    pub const fn with_max_violation(mut self, max_violation: Duration) -> Self {
+        self.max_violation = Some(max_violation);
+        self
     }
 }

@@ -47,6 +47,16 @@ pub enum ControlError {
         /// The beliefs.
         beliefs: FactSet,
     },
+    /// Every plan applicable to the event starts with an action whose precondition a percept
+    /// has already shown false: none was started.
+    Inapplicable {
+        /// The event.
+        event: EventId,
+        /// The plans passed over.
+        skipped: PlanSet,
+        /// The facts percepts showed false.
+        known_false: FactSet,
+    },
     /// Every applicable plan already failed under the current beliefs.
     Exhausted {
         /// The event.
@@ -172,8 +182,9 @@ impl<
             .collect()
     }
 
-    /// `generatePlans: M -> P` from the library: the first applicable plan, else why none
-    /// applies.
+    /// `generatePlans: M -> P` from the library: the first applicable plan whose first action
+    /// could start, else why none applies. A plan whose first action needs a fact a percept
+    /// has shown false is passed over: started, it would only wait for that fact. O(NP).
     fn select(
         &self,
         memory: &FailureMemory,
@@ -182,14 +193,32 @@ impl<
         let task = self.mission.task;
         let library = &self.mission.library;
         let excluded = memory.excluded(task.event, beliefs);
-        if let Some(plan) = library.select(task.event, beliefs, excluded) {
+        let known_false = self.known_false();
+        let mut skipped = PlanSet::EMPTY;
+        while let Some(plan) = library.select(task.event, beliefs, excluded.union(skipped)) {
             let body = library
                 .get(plan)
                 .map(|p| p.body.clone())
                 .unwrap_or_default();
-            return Ok((plan, body));
+            let blocked = body
+                .first()
+                .and_then(|a| self.mission.domain.action(*a))
+                .is_some_and(|a| a.pre.intersects(known_false));
+            if !blocked {
+                return Ok((plan, body));
+            }
+            if skipped.contains(plan) {
+                break; // An id without a bit: never the case in a library.
+            }
+            skipped = skipped.with(plan);
         }
-        Err(if excluded.is_empty() {
+        Err(if !skipped.is_empty() {
+            ControlError::Inapplicable {
+                event: task.event,
+                skipped,
+                known_false,
+            }
+        } else if excluded.is_empty() {
             ControlError::NoApplicablePlan {
                 event: task.event,
                 beliefs,
@@ -271,6 +300,7 @@ impl<
                     .map_or("generated", |p| p.name),
                 trigger: task.event,
                 context: FactSet::EMPTY,
+                context_not: FactSet::EMPTY,
                 body,
             };
             let fsm: Fsm<L> = Fsm::compile(plan, &named, &self.mission.domain)

@@ -248,6 +248,21 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
         Ok(())
     }
 
+    /// Sets how long an action's precondition may stay false while it runs
+    /// ([`ActuatorAction::max_violation`]; `None`: the runtime's default).
+    pub fn set_max_violation(
+        &mut self,
+        id: ActionId,
+        max_violation: Option<embassy_time::Duration>,
+    ) -> Result<(), DomainError> {
+        let action = self
+            .actions
+            .get_mut(id.index())
+            .ok_or(DomainError::Unknown(Table::Action))?;
+        action.max_violation = max_violation;
+        Ok(())
+    }
+
     /// An actuator-based action.
     pub fn action(&self, id: ActionId) -> Option<&ActuatorAction<'a>> {
         self.actions.get(id.index())

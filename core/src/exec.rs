@@ -69,7 +69,8 @@ pub struct Config {
     /// The scheduling policy.
     pub policy: Policy,
     /// How long a running action's precondition may stay false before the runtime stops the
-    /// action and takes the failure edge. The behaviour is told at once either way.
+    /// action and takes the failure edge, for actions without their own
+    /// ([`ActuatorAction::max_violation`]). The behaviour is told at once either way.
     pub max_violation: Duration,
     /// Plan failures tolerated: the control loop gives up at failure `max_failures + 1`.
     pub max_failures: u16,
@@ -653,7 +654,12 @@ impl<
     /// [`Config::max_violation`]. Never returns while all is well. One lock a poll; woken by
     /// every delivery, and by a timer at the deadline of a violation.
     async fn watch(&self, epoch: u32, action: ActionId) -> Failure {
-        let max = self.config.max_violation;
+        let max = self
+            .mission
+            .domain
+            .action(action)
+            .and_then(|a| a.max_violation)
+            .unwrap_or(self.config.max_violation);
         let mut alarm: Option<(Instant, Timer)> = None;
         poll_fn(|cx| {
             // Registered in the same lock as the check: a delivery in between cannot be missed.

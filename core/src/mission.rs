@@ -37,7 +37,7 @@ use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor
 
 use crate::action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode};
 use crate::domain::{Domain, DomainError, EventId, Table};
-use crate::facts::FactSet;
+use crate::facts::{FactId, FactSet};
 use crate::model::Task;
 use crate::plan::{Plan, PlanError, PlanLibrary};
 
@@ -182,6 +182,10 @@ pub enum Problem<'a> {
     },
     /// A cyclic sensor needs a `period_ms` of at least 1.
     Period,
+    /// A number of milliseconds past what the runtime counts (2³² − 1).
+    Millis,
+    /// A plan's context requires this fact both true (`context`) and false (`context_not`).
+    Contradiction(&'a str),
     /// No sequence of actions and percepts can ever make this goal fact true.
     UnreachableGoal(&'a str),
     /// The platform has no behaviour of this name.
@@ -246,6 +250,11 @@ impl fmt::Display for LoadError<'_> {
                 write!(f, "more than {limit} {what} (the runtime's capacity)")
             }
             Problem::Period => f.write_str("needs a whole number of milliseconds of at least 1"),
+            Problem::Millis => f.write_str("more than 4294967295 milliseconds"),
+            Problem::Contradiction(n) => write!(
+                f,
+                "fact `{n}` is required both true (`context`) and false (`context_not`): the plan could never apply"
+            ),
             Problem::UnreachableGoal(n) => {
                 write!(
                     f,
@@ -277,7 +286,10 @@ trait Build<'a> {
         name: &'a str,
         trigger: EventId,
         context: FactSet,
+        context_not: FactSet,
     ) -> Result<(), Problem<'a>>;
+    /// The name of a declared fact.
+    fn fact_name(&self, fact: FactId) -> &'a str;
     fn set_task(&mut self, task: Task);
     fn set_name(&mut self, name: &'a str);
 }
@@ -430,21 +442,28 @@ impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L
         })
     }
 
+    fn fact_name(&self, fact: FactId) -> &'a str {
+        self.mission.domain.fact_name(fact).unwrap_or("")
+    }
+
     fn add_plan(
         &mut self,
         name: &'a str,
         trigger: EventId,
         context: FactSet,
+        context_not: FactSet,
     ) -> Result<(), Problem<'a>> {
         let body = core::mem::take(&mut self.body);
-        let plan = Plan::new(name, trigger, context, &body).map_err(|e| match e {
-            PlanError::EmptyBody => Problem::EmptyBody,
-            PlanError::BodyTooLong { capacity } => Problem::Capacity {
-                what: "actions in a plan body",
-                limit: capacity,
-            },
-            _ => Problem::EmptyName,
-        })?;
+        let plan = Plan::new(name, trigger, context, &body)
+            .map_err(|e| match e {
+                PlanError::EmptyBody => Problem::EmptyBody,
+                PlanError::BodyTooLong { capacity } => Problem::Capacity {
+                    what: "actions in a plan body",
+                    limit: capacity,
+                },
+                _ => Problem::EmptyName,
+            })?
+            .with_context_not(context_not);
         self.mission
             .library
             .add(plan)
@@ -614,8 +633,8 @@ impl<'a> DeserializeSeed<'a> for Entry<'_, 'a> {
 
 /// The fields each kind of entry has.
 const SENSOR_KEYS: [&str; 6] = ["name", "pre", "per", "mode", "period_ms", "timeout_ms"];
-const ACTION_KEYS: [&str; 4] = ["name", "pre", "add", "del"];
-const PLAN_KEYS: [&str; 4] = ["name", "trigger", "context", "body"];
+const ACTION_KEYS: [&str; 5] = ["name", "pre", "add", "del", "max_violation_ms"];
+const PLAN_KEYS: [&str; 5] = ["name", "trigger", "context", "context_not", "body"];
 const TASK_KEYS: [&str; 3] = ["event", "init", "goal"];
 
 /// The fields of one entry as read, before they are checked together.
@@ -624,7 +643,7 @@ struct Fields<'a> {
     name: Option<&'a str>,
     mode: Option<&'a str>,
     event: Option<&'a str>,
-    number: [Option<u64>; 2],
+    number: [Option<u64>; 3],
     sets: [Option<FactSet>; 3],
     body: bool,
 }
@@ -664,15 +683,16 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
                 "trigger" | "event" => f.event = Some(map.next_value_seed(Str)?),
                 "period_ms" => f.number[0] = Some(map.next_value()?),
                 "timeout_ms" => f.number[1] = Some(map.next_value()?),
+                "max_violation_ms" => f.number[2] = Some(map.next_value()?),
                 "body" => {
                     f.body = true;
                     map.next_value_seed(NameList(&mut *b, ListKind::Body))?;
                 }
                 _ => {
-                    // A fact set: pre/per/add/del/context/init/goal, in a fixed slot each.
+                    // A fact set: pre/per/add/del/context/context_not/init/goal, a fixed slot each.
                     let slot = match name {
                         "pre" | "context" | "init" => 0,
-                        "per" | "add" | "goal" => 1,
+                        "per" | "add" | "goal" | "context_not" => 1,
                         _ => 2,
                     };
                     let set = map.next_value_seed(NameList(&mut *b, ListKind::Facts))?;
@@ -724,12 +744,21 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
             }
             Section::Actions => {
                 let name = required(b, f.name, "name")?;
-                let action = ActuatorAction::new(
+                let mut action = ActuatorAction::new(
                     name,
                     set(0).unwrap_or_default(),
                     set(1).unwrap_or_default(),
                     set(2).unwrap_or_default(),
                 );
+                if let Some(ms) = f.number[2] {
+                    // Zero is allowed: the action stops at the first sample that shows pre(a)
+                    // false (a cliff).
+                    field(b, Some("max_violation_ms"));
+                    let ms = millis(ms.max(1))
+                        .map(|_| Duration::from_millis(ms))
+                        .map_err(|_| fail::<M::Error>(b, Problem::Millis))?;
+                    action = action.with_max_violation(ms);
+                }
                 let added = b.add_action(action);
                 checked(b, added, "name")
             }
@@ -741,7 +770,14 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
                 }
                 field(b, Some("trigger"));
                 let trigger = b.event(trigger_name).map_err(|p| fail::<M::Error>(b, p))?;
-                let added = b.add_plan(name, trigger, set(0).unwrap_or_default());
+                let (context, context_not) =
+                    (set(0).unwrap_or_default(), set(1).unwrap_or_default());
+                if let Some(both) = context.intersection(context_not).iter().next() {
+                    field(b, Some("context_not"));
+                    let name = b.fact_name(both);
+                    return Err(fail(b, Problem::Contradiction(name)));
+                }
+                let added = b.add_plan(name, trigger, context, context_not);
                 // Name the part at fault: the name, the whole plan (one too many), or the body.
                 let at = match added {
                     Err(Problem::Duplicate(_)) => Some("name"),
@@ -1120,6 +1156,32 @@ mod tests {
         assert_eq!(a.mission.task, b.mission.task);
     }
 
+    #[test]
+    fn an_action_may_set_its_own_max_violation_and_a_plan_facts_that_must_be_false() {
+        let json = with(r#""add": ["b"]"#, r#""add": ["b"], "max_violation_ms": 0"#).replacen(
+            r#""trigger": "go""#,
+            r#""trigger": "go", "context_not": ["b"]"#,
+            1,
+        );
+        let m = load_str(&json).unwrap();
+        let d = &m.mission.domain;
+        let x = d.action(d.action_id("x").unwrap()).unwrap();
+        assert_eq!(x.max_violation, Some(Duration::from_millis(0)));
+        let plan = &m.mission.library.plans()[0];
+        assert_eq!(plan.context_not, d.facts(&["b"]).unwrap());
+        let go = m.mission.task.event;
+        assert!(plan.applicable(go, FactSet::EMPTY));
+        assert!(!plan.applicable(go, d.facts(&["b"]).unwrap()));
+        // Without the keys: the runtime's default, and no negative context.
+        let plain = load_str(SMALL).unwrap();
+        let d = &plain.mission.domain;
+        assert_eq!(
+            d.action(d.action_id("x").unwrap()).unwrap().max_violation,
+            None
+        );
+        assert_eq!(plain.mission.library.plans()[0].context_not, FactSet::EMPTY);
+    }
+
     fn with(from: &str, to: &str) -> String {
         assert!(SMALL.contains(from), "{from}");
         SMALL.replacen(from, to, 1)
@@ -1194,6 +1256,24 @@ mod tests {
             (
                 with(r#""add": ["b"]}"#, r#""add": ["b"]"#),
                 "actions: malformed JSON",
+            ),
+            (
+                with(
+                    r#""trigger": "go""#,
+                    r#""trigger": "go", "context": ["a"], "context_not": ["a"]"#,
+                ),
+                "plans[0].context_not: fact `a` is required both true (`context`) and false (`context_not`): the plan could never apply",
+            ),
+            (
+                with(
+                    r#""add": ["b"]"#,
+                    r#""add": ["b"], "max_violation_ms": 4294967296"#,
+                ),
+                "actions[0].max_violation_ms: more than 4294967295 milliseconds",
+            ),
+            (
+                with(r#""add": ["b"]"#, r#""add": ["b"], "max_violation_ms": -1"#),
+                "actions[0].max_violation_ms: not a whole number of milliseconds (no sign, fraction or exponent)",
             ),
         ];
         for (json, expected) in cases {

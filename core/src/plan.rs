@@ -67,6 +67,12 @@ impl PlanSet {
         Self(self.0 | Self::bit(plan))
     }
 
+    /// The plans in either set.
+    #[must_use]
+    pub const fn union(self, other: Self) -> Self {
+        Self(self.0 | other.0)
+    }
+
     /// Whether the set is empty.
     pub const fn is_empty(self) -> bool {
         self.0 == 0
@@ -88,6 +94,9 @@ pub struct Plan<'a, const L: usize> {
     pub trigger: EventId,
     /// `c(p)`: the facts that must hold for the plan to be applicable.
     pub context: FactSet,
+    /// The facts that must *not* hold for the plan to be applicable (a plan for when the
+    /// battery is not ok).
+    pub context_not: FactSet,
     /// `bd(p) = <a0, ..., an>`: the actuator-based actions, in order.
     pub body: Vec<ActionId, L>,
 }
@@ -131,13 +140,24 @@ impl<'a, const L: usize> Plan<'a, L> {
             name,
             trigger,
             context,
+            context_not: FactSet::EMPTY,
             body,
         })
     }
 
-    /// Whether the plan is applicable: `t(p) = event` and `c(p) ⊆ beliefs`. O(1).
+    /// The same plan, applicable only while none of `facts` holds.
+    #[must_use]
+    pub fn with_context_not(mut self, facts: FactSet) -> Self {
+        self.context_not = facts;
+        self
+    }
+
+    /// Whether the plan is applicable: `t(p) = event`, `c(p) ⊆ beliefs` and no fact of
+    /// [`context_not`](Self::context_not) holds. O(1).
     pub fn applicable(&self, event: EventId, beliefs: FactSet) -> bool {
-        self.trigger == event && self.context.is_subset(beliefs)
+        self.trigger == event
+            && self.context.is_subset(beliefs)
+            && !self.context_not.intersects(beliefs)
     }
 }
 

@@ -28,6 +28,7 @@
 //! trace events (O(1) each). Every wake of the sensing future polls each of the NS samplers
 //! once (O(NS)).
 
+use core::cell::Cell;
 use core::convert::Infallible;
 use core::future::{Future, pending, poll_fn};
 use core::pin::{Pin, pin};
@@ -181,17 +182,28 @@ impl<
                 } else if last.is_none() && self.read_at(sensor, started) {
                     // A read that started at this instant was completed already (by the state or
                     // sense phase that just ended, or the initial model): a sensor never takes
-                    // two samples of one instant.
-                    self.shared.lock(|s| {
+                    // two samples of one instant. Its percept counts for this command too: the
+                    // beliefs may have been reset since (a new initial model).
+                    let domain = &self.mission.domain;
+                    let change = self.shared.lock(|s| {
                         let delivered = s
                             .percepts
                             .get(sensor.index())
                             .and_then(|p| p.get())
                             .is_some_and(|e| e.at == started);
-                        if delivered {
-                            s.fresh.set(s.fresh.get().with(sensor));
+                        if !delivered {
+                            return None;
                         }
+                        let holds = s
+                            .holds
+                            .get(sensor.index())
+                            .map_or(FactSet::EMPTY, Cell::get);
+                        fuse(s, domain, sensor, spec.per, holds);
+                        let change = check(s, domain);
+                        s.notify();
+                        change
                     });
+                    self.trace_change(change);
                 } else {
                     let limit = started.saturating_add(spec.timeout);
                     let read = match self
@@ -371,21 +383,7 @@ impl<
             if let Some(h) = s.holds.get(sensor.index()) {
                 h.set(holds);
             }
-            let fresh = s.fresh.get().with(sensor);
-            s.fresh.set(fresh);
-            // Sensor fusion by conjunction: a fact of per(s) holds only if no running sensor that
-            // perceives it and has sampled says otherwise (the sonar sees a box while the bumper
-            // feels nothing: the path is not clear).
-            let sampled =
-                SensorSet::from_bits(s.running.get().bits() & fresh.bits()).without(sensor);
-            let decided = sampled.iter().fold(holds, |acc, t| {
-                let per_t = domain.sensor(t).map_or(FactSet::EMPTY, |t| t.per);
-                let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, |h| h.get());
-                acc.difference(per_t.difference(holds_t))
-            });
-            s.beliefs
-                .set(s.beliefs.get().difference(spec.per).union(decided));
-            s.sensed.set(s.sensed.get().union(spec.per));
+            fuse(s, domain, sensor, spec.per, holds);
             if let Some(p) = s.percepts.get(sensor.index()) {
                 p.set(Some(Entry {
                     value: reading.value,
@@ -456,6 +454,30 @@ enum Bound<T> {
     Ended,
     /// The deadline passed first.
     TimedOut,
+}
+
+/// Fuses a sample of `sensor` (perceiving `per`, saying `holds`) into the beliefs, in the
+/// caller's lock, and marks the sensor fresh. Fusion by conjunction: a fact of `per(s)` holds
+/// only if no running sensor that perceives it and has sampled says otherwise (the sonar sees a
+/// box while the bumper feels nothing: the path is not clear). O(NS).
+fn fuse<const NS: usize, const NA: usize>(
+    s: &Shared<NS>,
+    domain: &Domain<'_, NS, NA>,
+    sensor: SensorId,
+    per: FactSet,
+    holds: FactSet,
+) {
+    let fresh = s.fresh.get().with(sensor);
+    s.fresh.set(fresh);
+    let sampled = SensorSet::from_bits(s.running.get().bits() & fresh.bits()).without(sensor);
+    let decided = sampled.iter().fold(holds, |acc, t| {
+        let per_t = domain.sensor(t).map_or(FactSet::EMPTY, |t| t.per);
+        let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, Cell::get);
+        acc.difference(per_t.difference(holds_t))
+    });
+    s.beliefs
+        .set(s.beliefs.get().difference(per).union(decided));
+    s.sensed.set(s.sensed.get().union(per));
 }
 
 /// A change of the watched action's violation: (action, before, after).

@@ -339,10 +339,7 @@ impl TraceHash {
                 (head(13, id(action.index()), 0, 0), beliefs.bits())
             }
             E::GoalReached { beliefs } => (head(14, 0, 0, 0), beliefs.bits()),
-            E::User { code, value } => (
-                head(16, 0, 0, 0) | u64::from(code) << 16,
-                bits(value),
-            ),
+            E::User { code, value } => (head(16, 0, 0, 0) | u64::from(code) << 16, bits(value)),
             E::SampleLost { sensor } => (head(17, id(sensor.index()), 0, 0), 0),
             E::PlanGenerated { length, expanded } => (head(18, length, 0, 0), u64::from(expanded)),
         };

@@ -578,3 +578,168 @@ fn zero_length_smpa_phases_do_not_livelock() {
         r.elapsed
     );
 }
+
+/// Runs `mission` on the tiny world with obstacles in `windows`, P-SMPA.
+fn run_mission(mission: &tiny::TinyMission, ids: Ids, windows: &[(u64, u64)]) -> Run {
+    let world = TinyWorld::new(ids, windows);
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(mission, &world, tiny::config(Policy::PSmpa));
+    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).expect("simulation completes");
+    let hash = rt.trace_hash().value();
+    Run {
+        result: done.output,
+        trace: rt.into_sink().0,
+        hash,
+        notes: world.notes(),
+        elapsed: done.elapsed,
+    }
+}
+
+fn plan_failures(trace: &[(Instant, TraceEvent)]) -> Vec<(Instant, Failure)> {
+    trace
+        .iter()
+        .filter_map(|(t, e)| match e {
+            TraceEvent::PlanFailed { reason, .. } => Some((*t, *reason)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Per-action monitoring: the same box in the walk's path from 3 s to 4 s. A walk that may wait
+/// (the runtime's default, 30 s here) waits and arrives; the same walk with a tolerance of zero,
+/// as at a cliff's edge, fails at the first sample that shows its path blocked.
+#[test]
+fn an_action_without_tolerance_fails_at_once_while_another_may_wait() {
+    let box_at = [(3_000, 4_000)];
+    let (mission, ids) = tiny::mission(false);
+    let waits = run_mission(&mission, ids, &box_at);
+    assert_eq!(waits.result.unwrap().plans_failed, 0);
+    assert!(plan_failures(&waits.trace).is_empty());
+
+    let (mut cliff, ids) = tiny::mission(false);
+    cliff
+        .domain
+        .set_max_violation(ids.walk, Some(Duration::from_ticks(0)))
+        .unwrap();
+    let stops = run_mission(&cliff, ids, &box_at);
+    assert!(stops.result.is_err(), "{:?}", stops.result);
+    let failures = plan_failures(&stops.trace);
+    // The range samples every 100 ms from the walk's start at 0: the 3 s sample sees the box.
+    assert_eq!(
+        failures.first(),
+        Some(&(
+            Instant::from_millis(3_000),
+            Failure::PreconditionViolated {
+                action: ids.walk,
+                missing: psmpa_core::FactSet::single(psmpa_core::FactId::new(0).unwrap()),
+            }
+        ))
+    );
+    // The same walk with 2 s of tolerance: the 1 s box is waited out.
+    let (mut patient, ids) = tiny::mission(false);
+    patient
+        .domain
+        .set_max_violation(ids.walk, Some(Duration::from_secs(2)))
+        .unwrap();
+    assert_eq!(
+        run_mission(&patient, ids, &box_at)
+            .result
+            .unwrap()
+            .plans_failed,
+        0
+    );
+}
+
+/// A plan context may require a fact to be false: a plan for when the path is *not* clear is
+/// passed over while it is clear, and the next plan is chosen; with the path blocked at the
+/// start it is the one chosen.
+#[test]
+fn a_negative_context_chooses_the_other_plan() {
+    let (mut mission, ids) = tiny::mission(false);
+    let event = mission.task.event;
+    let clear = psmpa_core::FactSet::single(psmpa_core::FactId::new(0).unwrap());
+    let mut library = psmpa_core::PlanLibrary::new();
+    // "detour" (first in priority) applies only while the path is known not clear: its first
+    // action, "open", does not need a clear path.
+    let detour = psmpa_core::Plan::new("detour", event, psmpa_core::FactSet::EMPTY, &[ids.open])
+        .unwrap()
+        .with_context_not(clear);
+    library.add(detour).unwrap();
+    library
+        .add(
+            psmpa_core::Plan::new(
+                "get-in",
+                event,
+                psmpa_core::FactSet::EMPTY,
+                &[ids.walk, ids.open],
+            )
+            .unwrap(),
+        )
+        .unwrap();
+    mission.library = library;
+    let selected = |r: &Run| -> Vec<usize> {
+        r.trace
+            .iter()
+            .filter_map(|(_, e)| match e {
+                TraceEvent::PlanSelected { plan, .. } => Some(plan.index()),
+                _ => None,
+            })
+            .collect()
+    };
+    // The path is clear at the start: "detour" does not apply, "get-in" runs to the goal.
+    let clear_path = run_mission(&mission, ids, &[]);
+    assert_eq!(clear_path.result.unwrap().plans_failed, 0);
+    assert_eq!(selected(&clear_path), [1]);
+    // A box at the start: the initial model shows the path blocked, "detour" applies.
+    let blocked = run_mission(&mission, ids, &[(0, 60_000)]);
+    assert_eq!(selected(&blocked).first(), Some(&0));
+}
+
+/// A plan whose first action needs a fact a percept has already shown false is not started:
+/// the next applicable plan is tried, and when there is none, a clear error names the plans
+/// passed over and the facts known false. Nothing moved.
+#[test]
+fn a_plan_known_to_be_inapplicable_is_skipped() {
+    let (mission, ids) = tiny::mission(true);
+    // A box in front from the start for a minute: both plans start with a walk on a clear path.
+    let r = run_mission(&mission, ids, &[(0, 60_000)]);
+    let clear = psmpa_core::FactSet::single(psmpa_core::FactId::new(0).unwrap());
+    match r.result {
+        Err(ControlError::Inapplicable {
+            skipped,
+            known_false,
+            ..
+        }) => {
+            assert_eq!(skipped.bits(), 0b11, "both plans passed over");
+            assert_eq!(known_false, clear);
+        }
+        other => panic!("expected Inapplicable, got {other:?}"),
+    }
+    assert!(
+        !r.trace.iter().any(|(_, e)| matches!(
+            e,
+            TraceEvent::PlanSelected { .. } | TraceEvent::StateEntered { .. }
+        )),
+        "no plan started, no state entered"
+    );
+    // Once the first plan is out of the way, the second still needs the clear path; a third,
+    // whose first action does not, is the one started.
+    let (mut mission, ids) = tiny::mission(true);
+    let event = mission.task.event;
+    mission
+        .library
+        .add(
+            psmpa_core::Plan::new("open-first", event, psmpa_core::FactSet::EMPTY, &[ids.open])
+                .unwrap(),
+        )
+        .unwrap();
+    let r = run_mission(&mission, ids, &[(0, 60_000)]);
+    let started: Vec<usize> = r
+        .trace
+        .iter()
+        .filter_map(|(_, e)| match e {
+            TraceEvent::PlanSelected { plan, .. } => Some(plan.index()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(started.first(), Some(&2));
+}
