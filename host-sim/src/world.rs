@@ -309,6 +309,25 @@ pub struct Touch {
     touching: u32,
 }
 
+/// Obstacles by index as bits: one `u32` holds them all.
+const _: () = assert!(MAX_INTERFERENCES <= 32);
+
+/// The indices of the set bits of `mask`, lowest first (scenario order).
+fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
+    core::iter::from_fn(move || {
+        let i = mask.trailing_zeros() as usize;
+        mask &= mask.wrapping_sub(1);
+        (i < 32).then_some(i)
+    })
+}
+
+/// `State::flags`: a command changed the state since the last settle.
+const DIRTY: u8 = 1;
+/// `State::flags`: nothing changes by itself from now on.
+const NEXT_NONE: u8 = 2;
+/// `State::flags`: the next change by itself is at `State::next_ms`.
+const NEXT_AT: u8 = 4;
+
 struct State<L> {
     now: u64,
     pos_um: i64,
@@ -322,14 +341,26 @@ struct State<L> {
     on_ms: [u64; 4],
     gaps: [Gaps; 4],
     obstacles: Vec<Obstacle, MAX_INTERFERENCES>,
+    /// The obstacles present, by index (kept by `set_phase`): the only ones the physics acts on.
+    present: u32,
+    /// The earliest appearance or removal due (`u64::MAX`: none), or 0 while unknown (`settle`
+    /// then searches).
+    due_ms: u64,
+    /// The last certainty pass's inputs: where the robot was, and [`how`](State::how) (0: an
+    /// obstacle changed since). With the same inputs and obstacles the pass changes nothing.
+    looked_um: i64,
+    looked_how: u8,
     rng: Pcg32,
     at_door_ms: Option<u64>,
     door_open: bool,
     in_kitchen: bool,
     /// The reading a stuck sonar keeps reporting.
     stuck_mm: Option<u32>,
-    /// A command changed the state since the last settle.
-    dirty: bool,
+    /// [`DIRTY`]: a command changed the state since the last settle. [`NEXT_NONE`] or
+    /// [`NEXT_AT`] (`next_ms`): what `next_event` found, while nothing changed since. A command
+    /// sets it to `DIRTY`, forgetting that in the same store.
+    flags: u8,
+    next_ms: u64,
     hash: TraceHash,
     log: L,
 }
@@ -430,42 +461,58 @@ impl<L: WorldLog> State<L> {
 
     /// Where a walking robot must stop: its target or the nearest obstacle in the way.
     fn limit_um(&self) -> i64 {
-        self.obstacles
-            .iter()
-            .filter(|o| o.blocks() && o.pos_um >= self.pos_um)
-            .map(|o| o.pos_um)
+        self.present_obstacles()
+            .filter(|(_, o)| o.pos_um >= self.pos_um)
+            .map(|(_, o)| o.pos_um)
             .fold(self.target_um, i64::min)
+    }
+
+    /// The obstacles present, with their indices, in scenario order.
+    fn present_obstacles(&self) -> impl Iterator<Item = (usize, &Obstacle)> {
+        bits(self.present).filter_map(|i| self.obstacles.get(i).map(|o| (i, o)))
     }
 
     fn touching(&self, o: &Obstacle) -> bool {
         o.blocks() && o.pos_um <= self.pos_um
     }
 
-    /// Whether an active sensor's next sample registers `o` whatever the noise.
-    fn certain(&self, o: &Obstacle, sc: &Scenario) -> bool {
-        if !o.blocks() {
-            return false;
-        }
-        let d = o.pos_um - self.pos_um;
+    /// Whether an active sensor's next sample registers a present obstacle of `kind` at
+    /// `pos_um` whatever the noise; `nearest` is [`nearest_box`](Self::nearest_box).
+    fn certain(&self, kind: Kind, pos_um: i64, sc: &Scenario, nearest: Option<i64>) -> bool {
+        let d = pos_um - self.pos_um;
         let sonar = self.on[0]
-            && o.kind == Kind::Box
+            && kind == Kind::Box
+            && nearest == Some(d)
             && (sc.sonar.min_um..=sc.sonar.max_um).contains(&d)
-            && certain_at(&sc.sonar, d)
-            && self.nearest_box() == Some(d);
-        let bumper = self.on[1] && self.touching(o);
+            && certain_at(&sc.sonar, d);
+        let bumper = self.on[1] && pos_um <= self.pos_um;
         sonar || bumper
     }
 
     fn nearest_box(&self) -> Option<i64> {
-        self.obstacles
-            .iter()
-            .filter(|o| o.blocks() && o.kind == Kind::Box && o.pos_um >= self.pos_um)
-            .map(|o| o.pos_um - self.pos_um)
+        self.present_obstacles()
+            .filter(|(_, o)| o.kind == Kind::Box && o.pos_um >= self.pos_um)
+            .map(|(_, o)| o.pos_um - self.pos_um)
             .min()
     }
 
     /// The earliest instant after `now` at which something changes by itself.
-    fn next_event(&self, sc: &Scenario) -> Option<u64> {
+    fn next_event(&mut self, sc: &Scenario) -> Option<u64> {
+        // Often asked twice in a row (the walk, then the next advance): answered once.
+        if self.flags & NEXT_AT != 0 {
+            return Some(self.next_ms);
+        }
+        if self.flags & NEXT_NONE != 0 {
+            return None;
+        }
+        let next = self.find_next(sc);
+        self.flags |= if next.is_some() { NEXT_AT } else { NEXT_NONE };
+        self.next_ms = next.unwrap_or(0);
+        next
+    }
+
+    /// [`next_event`](Self::next_event), worked out.
+    fn find_next(&self, sc: &Scenario) -> Option<u64> {
         let now = self.now;
         let mut next: Option<u64> = None;
         let mut consider = |t: u64| {
@@ -473,12 +520,14 @@ impl<L: WorldLog> State<L> {
                 next = Some(next.map_or(t, |n| n.min(t)));
             }
         };
-        for o in &self.obstacles {
-            match o.phase {
-                Phase::Pending => consider(u64::from(o.at_ms)),
-                Phase::Present => consider(o.removal_ms()),
-                _ => {}
-            }
+        // One put down for no time is still there, due at `now`: then look past it.
+        let due = if self.due_ms > now {
+            self.due_ms
+        } else {
+            self.first_due(now.saturating_add(1))
+        };
+        if due != u64::MAX {
+            consider(due);
         }
         let speed = self.speed(sc);
         if self.moving() && speed > 0 {
@@ -488,11 +537,11 @@ impl<L: WorldLog> State<L> {
             }
             if self.on[0] {
                 // A box ahead enters the sonar threshold, then the blind zone below min_m.
-                for o in &self.obstacles {
+                // The reading rounds below the threshold once d < threshold_mm - 0.5 mm.
+                let below = sc.sonar.threshold_mm() * 1000 - 500;
+                for (_, o) in self.present_obstacles() {
                     let d = o.pos_um - self.pos_um;
-                    if o.blocks() && o.kind == Kind::Box && o.fate == Fate::Unmet {
-                        // The reading rounds below the threshold once d < threshold_mm - 0.5 mm.
-                        let below = sc.sonar.threshold_mm() * 1000 - 500;
+                    if o.kind == Kind::Box && o.fate == Fate::Unmet {
                         for edge in [below, sc.sonar.min_um] {
                             if d >= edge {
                                 let dt = (d - edge) / speed + 1;
@@ -513,6 +562,7 @@ impl<L: WorldLog> State<L> {
 
     /// Moves time forward by `dt` with nothing happening in between.
     fn integrate(&mut self, dt: u64, sc: &Scenario) {
+        self.flags &= DIRTY;
         for (on, ms) in self.on.iter().zip(self.on_ms.iter_mut()) {
             if *on {
                 *ms = ms.saturating_add(dt);
@@ -535,21 +585,52 @@ impl<L: WorldLog> State<L> {
     }
 
     /// Applies everything due at `now`.
+    #[inline]
     fn settle(&mut self, sc: &Scenario) {
+        // Most settles find nothing due and nothing moved: told here, without a call.
+        if matches!(self.motion, Motion::Avoiding { left_ms: 0, .. })
+            || self.due_ms <= self.now
+            || !self.looked()
+        {
+            self.apply(sc);
+        }
+    }
+
+    /// The certainty pass's inputs besides the position and the obstacles; never 0.
+    fn how(&self) -> u8 {
+        1 | u8::from(self.on[0]) << 1 | u8::from(self.on[1]) << 2 | u8::from(self.moving()) << 3
+    }
+
+    /// Whether the last certainty pass had the inputs of one now.
+    fn looked(&self) -> bool {
+        self.looked_um == self.pos_um && self.looked_how == self.how()
+    }
+
+    /// [`settle`](Self::settle) when something may be due.
+    #[inline(never)] // Rare: kept out of the callers.
+    fn apply(&mut self, sc: &Scenario) {
+        self.flags &= DIRTY;
         let now = self.now;
         if let Motion::Avoiding { left_ms: 0, target } = self.motion {
-            if let Some(o) = target.and_then(|i| self.obstacles.get_mut(usize::from(i))) {
-                if o.phase == Phase::Present {
-                    o.phase = Phase::Avoided;
+            if let Some(i) = target.map(usize::from) {
+                if self.obstacles.get(i).is_some_and(Obstacle::blocks) {
+                    self.set_phase(i, Phase::Avoided);
                 }
             }
             self.motion = Motion::Idle;
             self.emit(WorldEvent::AvoidDone(target));
         }
-        for i in 0..self.obstacles.len() {
-            let Some(o) = self.obstacles.get(i).copied() else {
+        // None is due before `due_ms`.
+        let due = if self.due_ms <= now {
+            self.obstacles.len()
+        } else {
+            0
+        };
+        for i in 0..due {
+            let Some(o) = self.obstacles.get(i) else {
                 continue;
             };
+            let (kind, ahead_um) = (o.kind, o.ahead_um);
             let index = i as u8;
             if o.phase == Phase::Present && o.removal_ms() <= now {
                 self.set_phase(i, Phase::Removed);
@@ -559,57 +640,121 @@ impl<L: WorldLog> State<L> {
                     self.set_phase(i, Phase::Skipped);
                     self.emit(WorldEvent::Skipped(index));
                 } else {
-                    let at_um = self.pos_um.saturating_add(i64::from(o.ahead_um));
+                    let at_um = self.pos_um.saturating_add(i64::from(ahead_um));
                     if let Some(o) = self.obstacles.get_mut(i) {
                         o.pos_um = at_um;
-                        o.phase = Phase::Present;
                     }
-                    self.emit(WorldEvent::Appeared {
-                        index,
-                        kind: o.kind,
-                        at_um,
-                    });
+                    self.set_phase(i, Phase::Present);
+                    self.emit(WorldEvent::Appeared { index, kind, at_um });
                 }
             }
         }
-        for i in 0..self.obstacles.len() {
-            let Some(o) = self.obstacles.get(i).copied() else {
+        if due > 0 {
+            self.due_ms = self.first_due(0);
+        }
+        // The certainty pass depends on the position, `how` and the obstacles only, and a second
+        // run on the same ones changes nothing (a fate changed elsewhere leaves `Unmet` for
+        // good, out of its reach): then skip it.
+        if self.looked() {
+            return;
+        }
+        (self.looked_um, self.looked_how) = (self.pos_um, self.how());
+        // Obstacles not present are neither touched nor certain (`set_phase` ended their
+        // certain interval).
+        let nearest = self.nearest_box();
+        for i in bits(self.present) {
+            let Some(&Obstacle {
+                kind,
+                pos_um,
+                fate: Fate::Unmet,
+                ..
+            }) = self.obstacles.get(i)
+            else {
                 continue;
             };
             // Walking into an obstacle nothing registered, with the bumper off, is a
             // collision; with the bumper on, the next bumper sample registers the touch.
-            if self.touching(&o) && o.fate == Fate::Unmet && !self.on[1] && self.moving() {
-                if let Some(o) = self.obstacles.get_mut(i) {
-                    o.fate = Fate::Collided;
-                }
+            let collided = pos_um <= self.pos_um && !self.on[1] && self.moving();
+            let certain = self.certain(kind, pos_um, sc, nearest);
+            let Some(o) = self.obstacles.get_mut(i) else {
+                continue;
+            };
+            if collided {
+                o.fate = Fate::Collided;
+            }
+            o.certain_since = if certain {
+                o.certain_since.or(Some(ms32(now)))
+            } else {
+                None
+            };
+            if collided {
                 self.emit(WorldEvent::Collided(i as u8));
             }
-            if o.fate == Fate::Unmet {
-                let certain = self.certain(&o, sc);
-                if let Some(o) = self.obstacles.get_mut(i) {
-                    o.certain_since = if certain {
-                        o.certain_since.or(Some(ms32(now)))
-                    } else {
-                        None
-                    };
-                }
+        }
+    }
+
+    /// Moves obstacle `i` to `phase`, keeping `present`, `due_ms` and the certainty pass up to
+    /// date.
+    fn set_phase(&mut self, i: usize, phase: Phase) {
+        let Some(o) = self.obstacles.get_mut(i) else {
+            return;
+        };
+        // One no longer present is no longer certain: what the certainty pass, which visits
+        // present ones only, would have found in this same settle.
+        if o.phase == Phase::Present && phase != Phase::Present && o.fate == Fate::Unmet {
+            o.certain_since = None;
+        }
+        o.phase = phase;
+        let bit = 1u32 << i;
+        if phase == Phase::Present {
+            self.present |= bit;
+        } else {
+            self.present &= !bit;
+        }
+        // `apply`, the caller, works it out after its search for what is due.
+        self.due_ms = 0;
+        self.looked_how = 0;
+    }
+
+    /// The earliest appearance or removal due at `from` or later; `u64::MAX`: none.
+    fn first_due(&self, from: u64) -> u64 {
+        let mut first = u64::MAX;
+        for o in &self.obstacles {
+            let t = match o.phase {
+                Phase::Pending => u64::from(o.at_ms),
+                Phase::Present => o.removal_ms(),
+                _ => continue,
+            };
+            if t >= from {
+                first = first.min(t);
             }
         }
+        first
     }
 
-    fn set_phase(&mut self, i: usize, phase: Phase) {
-        if let Some(o) = self.obstacles.get_mut(i) {
-            o.phase = phase;
-        }
-    }
-
+    #[inline]
     fn advance_to(&mut self, t: u64, sc: &Scenario) {
-        // Nothing moved and nothing was commanded since the last settle: nothing to do.
-        if t <= self.now && !self.dirty {
-            return;
+        if t > self.now {
+            self.advance(t, sc);
+        } else if self.flags & DIRTY != 0 {
+            // Commanded since the last settle (else nothing moved: nothing to do).
+            self.resettle(sc);
         }
+    }
+
+    /// [`advance_to`](Self::advance_to) the current instant: most calls, cheaper without
+    /// `advance`'s frame.
+    #[inline(never)] // Kept out of the callers.
+    fn resettle(&mut self, sc: &Scenario) {
         self.settle(sc);
-        self.dirty = false;
+        self.flags &= !DIRTY;
+    }
+
+    /// [`advance_to`](Self::advance_to) when something may have changed.
+    #[inline(never)] // Its frame stays out of the callers'.
+    fn advance(&mut self, t: u64, sc: &Scenario) {
+        self.settle(sc);
+        self.flags &= !DIRTY;
         while self.now < t {
             let next = self.next_event(sc).map_or(t, |n| n.min(t));
             self.integrate(next - self.now, sc);
@@ -676,12 +821,17 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 on_ms: [0; 4],
                 gaps: [Gaps::default(); 4],
                 obstacles: Vec::new(),
+                present: 0,
+                due_ms: 0,
+                looked_um: 0,
+                looked_how: 0,
                 rng: Pcg32::seed_from_u64(scenario.seed),
                 at_door_ms: None,
                 door_open: false,
                 in_kitchen: false,
                 stuck_mm: None,
-                dirty: true,
+                flags: DIRTY,
+                next_ms: 0,
                 hash: TraceHash::new(),
                 log,
             })),
@@ -720,7 +870,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
             let mut s = cell.borrow_mut();
             s.advance_to(now, self.scenario);
             let r = f(&mut s, self.scenario);
-            s.dirty = true;
+            s.flags = DIRTY;
             r
         })
     }
@@ -757,7 +907,14 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// When the world next changes by itself.
     pub fn next_event(&self) -> Option<Instant> {
-        self.view(|s, sc| s.next_event(sc))
+        let now = Instant::now().as_millis();
+        // As `view`, but the answer is kept: it changes nothing else.
+        self.state
+            .lock(|cell| {
+                let mut s = cell.borrow_mut();
+                s.advance_to(now, self.scenario);
+                s.next_event(self.scenario)
+            })
             .map(Instant::from_millis)
     }
 
@@ -785,10 +942,8 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     pub fn begin_avoid(&self) {
         self.with(|s, sc| {
             let target = s
-                .obstacles
-                .iter()
-                .enumerate()
-                .filter(|(_, o)| o.blocks() && o.pos_um >= s.pos_um && o.sensed)
+                .present_obstacles()
+                .filter(|(_, o)| o.pos_um >= s.pos_um && o.sensed)
                 .min_by_key(|(_, o)| o.pos_um)
                 .map(|(i, _)| i as u8);
             s.motion = Motion::Avoiding {
@@ -943,8 +1098,8 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 let certain = certain_at(&sonar, d);
                 let registered = sonar.registers(mm);
                 // Every box at that distance is what the echo came from.
-                for (i, o) in s.obstacles.iter().enumerate() {
-                    if o.blocks() && o.kind == Kind::Box && o.pos_um - s.pos_um == d {
+                for (i, o) in s.present_obstacles() {
+                    if o.kind == Kind::Box && o.pos_um - s.pos_um == d {
                         echo.certain |= u32::from(certain) << i;
                         echo.registers |= u32::from(registered) << i;
                     }
@@ -971,9 +1126,9 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
             }
             // What the read saw counts only for obstacles still there: one taken away while the
             // echo travelled cannot be registered any more.
-            for i in 0..s.obstacles.len() {
+            for i in bits((echo.certain | echo.registers) & s.present) {
                 let bit = 1u32 << i;
-                let Some(o) = s.obstacles.get_mut(i).filter(|o| o.blocks()) else {
+                let Some(o) = s.obstacles.get_mut(i) else {
                     continue;
                 };
                 if echo.certain & bit != 0 {
@@ -994,9 +1149,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
             s.log.read_started(Device::Bumper);
             Touch {
                 touching: s
-                    .obstacles
-                    .iter()
-                    .enumerate()
+                    .present_obstacles()
                     .filter(|(_, o)| s.touching(o))
                     .fold(0, |acc, (i, _)| acc | 1 << i),
             }
@@ -1007,14 +1160,10 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// touched that is still there), else 1.
     pub fn bumper_deliver(&self, touch: Touch) -> u8 {
         self.with(|s, _| {
-            let mut level = 1;
-            for i in 0..s.obstacles.len() {
-                if touch.touching & (1 << i) == 0 {
-                    continue;
-                }
-                // Contact with an obstacle taken away meanwhile is still contact felt.
-                level = 2;
-                let Some(o) = s.obstacles.get_mut(i).filter(|o| o.blocks()) else {
+            // Contact with an obstacle taken away meanwhile is still contact felt.
+            let level = if touch.touching != 0 { 2 } else { 1 };
+            for i in bits(touch.touching & s.present) {
+                let Some(o) = s.obstacles.get_mut(i) else {
                     continue;
                 };
                 o.certain_samples = o.certain_samples.saturating_add(1);
