@@ -31,10 +31,12 @@
 use core::cell::Cell;
 use core::convert::Infallible;
 use core::future::{Future, pending, poll_fn};
-use core::pin::{Pin, pin};
+use core::pin::Pin;
 use core::task::{Context, Poll};
 
 use embassy_futures::join::join_array;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, TimeoutError, Timer, with_timeout};
 use pin_project_lite::pin_project;
 
@@ -255,31 +257,19 @@ impl<
 
     /// Awaits `inner` unless the command of `epoch` ends first, or `deadline` passes: every
     /// await of a sampler in one future, one lock a poll. The end of the command is checked
-    /// first, then `inner`, then the deadline (as `with_timeout` would).
-    async fn bounded<F: Future>(
+    /// first, then `inner`, then the deadline (as `with_timeout` would). Built in place.
+    fn bounded<F: Future>(
         &self,
         epoch: u32,
         deadline: Option<Instant>,
         inner: F,
-    ) -> Bound<F::Output> {
-        let mut inner = pin!(inner);
-        let mut timer = deadline.map(Timer::at);
-        poll_fn(|cx| {
-            if self
-                .poll_sensing(cx, |s| (s.epoch.get() != epoch).then_some(()))
-                .is_ready()
-            {
-                return Poll::Ready(Bound::Ended);
-            }
-            if let Poll::Ready(out) = inner.as_mut().poll(cx) {
-                return Poll::Ready(Bound::Done(out));
-            }
-            match timer.as_mut().map(|t| Pin::new(t).poll(cx)) {
-                Some(Poll::Ready(())) => Poll::Ready(Bound::TimedOut),
-                _ => Poll::Pending,
-            }
-        })
-        .await
+    ) -> Bounded<'_, Mutex<P::Mutex, Shared<NS>>, F> {
+        Bounded {
+            shared: &self.shared,
+            epoch,
+            inner,
+            timer: deadline.map(Timer::at),
+        }
     }
 
     /// Whether a read of `sensor` started at `at`.
@@ -443,6 +433,47 @@ impl<
             }
         });
         self.notify();
+    }
+}
+
+pin_project! {
+    /// A sampler's await ([`Engine::bounded`]).
+    #[must_use = "futures do nothing unless polled"]
+    struct Bounded<'s, S, F> {
+        shared: &'s S,
+        epoch: u32,
+        #[pin]
+        inner: F,
+        timer: Option<Timer>,
+    }
+}
+
+impl<const NS: usize, M: RawMutex, F: Future> Future for Bounded<'_, Mutex<M, Shared<NS>>, F> {
+    type Output = Bound<F::Output>;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+        let this = self.project();
+        let epoch = *this.epoch;
+        // Registered in the same lock as the check: a new command in between is not missed.
+        let ended = this.shared.lock(|s| {
+            if s.epoch.get() != epoch {
+                return true;
+            }
+            if let Ok(mut w) = s.sensing.try_borrow_mut() {
+                w.register(cx.waker());
+            }
+            false
+        });
+        if ended {
+            return Poll::Ready(Bound::Ended);
+        }
+        if let Poll::Ready(out) = this.inner.poll(cx) {
+            return Poll::Ready(Bound::Done(out));
+        }
+        match this.timer.as_mut().map(|t| Pin::new(t).poll(cx)) {
+            Some(Poll::Ready(())) => Poll::Ready(Bound::TimedOut),
+            _ => Poll::Pending,
+        }
     }
 }
 
