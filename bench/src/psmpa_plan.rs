@@ -84,12 +84,7 @@ impl Sensor for Platform {
     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> {
         let mm = self.sonar.borrow_mut().sample();
         // The condition, decided on this sample: `path_clear` holds or not.
-        let holds = if path_clear(mm) {
-            FactSet::ALL
-        } else {
-            FactSet::EMPTY
-        };
-        Ok(Some(Reading::new(Value::Mm(mm), holds)))
+        Ok(Some(Reading::of(Value::Mm(mm), path_clear(mm))))
     }
 }
 

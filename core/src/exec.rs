@@ -238,6 +238,28 @@ impl ActionIo<'_> {
         poll_fn(|cx| self.monitor.poll_changed(cx, since)).await
     }
 
+    /// Waits until [`version`](Self::version) differs from `since` or the instant `at` comes,
+    /// whichever is first: `Some(new version)`, or `None` at the deadline. The loop of a
+    /// behaviour that reacts to percepts and also has its own next instant.
+    pub async fn changed_until(&self, since: u32, at: Option<Instant>) -> Option<u32> {
+        let deadline = async {
+            match at {
+                Some(at) => Timer::at(at).await,
+                None => core::future::pending().await,
+            }
+        };
+        match select(self.changed(since), deadline).await {
+            Either::First(v) => Some(v),
+            Either::Second(()) => None,
+        }
+    }
+
+    /// [`changed_until`](Self::changed_until) `timeout` from now.
+    pub async fn changed_within(&self, since: u32, timeout: Duration) -> Option<u32> {
+        self.changed_until(since, Some(Instant::now().saturating_add(timeout)))
+            .await
+    }
+
     /// Asks for a sample of an on-demand sensor running beside the action. Under SMPA the
     /// request is served in the next sense phase.
     pub fn request(&self, sensor: SensorId) {

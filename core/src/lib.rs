@@ -61,6 +61,7 @@ pub mod platform;
 pub mod runtime;
 pub mod sense;
 pub mod store;
+pub mod text;
 pub mod timing;
 pub mod trace;
 
@@ -78,4 +79,5 @@ pub use platform::{
 };
 pub use runtime::{Capacity, Caps, LoadedOf, MissionOf, Runtime};
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
+pub use text::{Described, FactNames};
 pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};

@@ -118,6 +118,25 @@ impl<S: Copy, A: Copy, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> 
     }
 }
 
+impl<S: PartialEq, A: PartialEq, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
+    /// The sensor a behaviour is bound to (the first, if several): from a device to its id.
+    /// O(NS).
+    pub fn sensor_id(&self, behaviour: &S) -> Option<SensorId> {
+        self.sensors
+            .iter()
+            .position(|s| s == behaviour)
+            .and_then(SensorId::new)
+    }
+
+    /// The action a behaviour is bound to (the first, if several). O(NA).
+    pub fn action_id(&self, behaviour: &A) -> Option<ActionId> {
+        self.actions
+            .iter()
+            .position(|a| a == behaviour)
+            .and_then(ActionId::new)
+    }
+}
+
 /// Where in a mission file something is wrong.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -1108,6 +1127,10 @@ mod tests {
                 .unwrap()
         );
         assert_eq!(m.bindings.action(open), Some(9));
+        // And back, from a behaviour to its id.
+        assert_eq!(m.bindings.sensor_id(&13), Some(handle));
+        assert_eq!(m.bindings.action_id(&9), Some(open));
+        assert_eq!(m.bindings.sensor_id(&99), None);
         let plan = &m.mission.library.plans()[0];
         assert_eq!(plan.name, "GetIn Kitchen");
         assert_eq!(plan.body.len(), 3);

@@ -67,6 +67,17 @@ impl Reading {
         Ok(())
     }
 
+    /// A reading of `value` that decides every fact of `per(s)` one way: all hold when `holds`,
+    /// none otherwise (a switch, a threshold on a distance).
+    pub const fn of(value: Value, holds: bool) -> Self {
+        Self::new(value, if holds { FactSet::ALL } else { FactSet::EMPTY })
+    }
+
+    /// A yes/no sensor's reading: [`Value::Bool`] and, when `true`, every fact of `per(s)`.
+    pub const fn flag(on: bool) -> Self {
+        Self::of(Value::Bool(on), on)
+    }
+
     /// The reading with the pair `(key, value)` added ([`put`](Self::put)).
     pub fn with(mut self, key: Key, value: Value) -> Result<Self, PairRejected> {
         self.put(key, value).map(|()| self)

@@ -14,7 +14,6 @@
 //! * A locked kitchen door fails "open door"; the control loop then plans again from what the
 //!   robot now believes and takes the back door.
 
-use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::{NoopRawMutex, RawMutex};
 use embassy_time::{Duration, Instant, Timer};
@@ -402,11 +401,7 @@ pub struct Nao<'w, 's, L: WorldLog, M: RawMutex = NoopRawMutex> {
 impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
     /// The robot in `world`, running `robot`'s behaviours.
     pub fn new(world: &'w World<'s, L, M>, robot: &Robot<'_>) -> Self {
-        let find = |which: NaoSensor| {
-            (0..robot.mission.domain.sensors().len())
-                .filter_map(SensorId::new)
-                .find(|s| robot.bindings.sensor(*s) == Some(which))
-        };
+        let find = |which: NaoSensor| robot.bindings.sensor_id(&which);
         let timeout = |id: Option<SensorId>| {
             id.and_then(|id| robot.mission.domain.sensor(id))
                 .map_or(SensorAction::DEFAULT_TIMEOUT, |s| s.timeout)
@@ -529,14 +524,7 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
                     world.walk_to(place);
                 }
             }
-            let wake = world.next_event();
-            let sleep = async {
-                match wake {
-                    Some(at) => Timer::at(at).await,
-                    None => core::future::pending().await,
-                }
-            };
-            if let Either::First(v) = select(io.changed(version), sleep).await {
+            if let Some(v) = io.changed_until(version, world.next_event()).await {
                 version = v;
             }
         }
@@ -544,9 +532,7 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
 
     /// "open door": press the handle (an on-demand sample), then push the door if it gives.
     async fn open_door(&self, io: &ActionIo<'_>) -> Outcome {
-        let handle = (0..4)
-            .filter_map(SensorId::new)
-            .find(|s| self.bindings.sensor(*s) == Some(NaoSensor::Handle));
+        let handle = self.bindings.sensor_id(&NaoSensor::Handle);
         if let Some(handle) = handle {
             let asked = Instant::now();
             io.request(handle);

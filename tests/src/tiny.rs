@@ -2,7 +2,6 @@
 
 use core::cell::RefCell;
 
-use embassy_futures::select::select;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
@@ -218,15 +217,8 @@ impl TinyWorld {
                     Duration::from_millis(left_um.div_ceil(SPEED_MM_S))
                 })
             };
-            let wait = async {
-                match eta {
-                    Some(d) => Timer::after(d).await,
-                    None => core::future::pending().await,
-                }
-            };
-            if let embassy_futures::select::Either::First(v) =
-                select(io.changed(version), wait).await
-            {
+            let wake = eta.map(|d| Instant::now().saturating_add(d));
+            if let Some(v) = io.changed_until(version, wake).await {
                 version = v;
             }
         }
@@ -253,10 +245,9 @@ impl Sensor for TinyWorld {
         self.advance();
         if sensor == self.ids.range {
             let blocked = self.blocked(Instant::now());
-            let clear = FactSet::single(psmpa_core::FactId::new(0).unwrap());
             let mm = if blocked { 300 } else { 2550 };
             // Light: about 6.67 ns per mm, there and back.
-            let reading = Reading::new(Value::Mm(mm), if blocked { FactSet::EMPTY } else { clear })
+            let reading = Reading::of(Value::Mm(mm), !blocked)
                 .with(TIME_OF_FLIGHT, Value::Int(mm * 20 / 3))
                 .map_err(|_| SensorFault::Device(0))?;
             Ok(Some(reading))

@@ -45,8 +45,7 @@ fn names<const NS: usize, const NA: usize>(
     d: &psmpa_core::Domain<'_, NS, NA>,
     set: psmpa_core::FactSet,
 ) -> String {
-    let v: Vec<&str> = set.iter().filter_map(|f| d.fact_name(f)).collect();
-    format!("{{{}}}", v.join(", "))
+    d.names(set).to_string()
 }
 
 fn sensors<'a, const NS: usize, const NA: usize>(

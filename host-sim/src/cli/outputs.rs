@@ -18,45 +18,10 @@ fn secs(ms: u64) -> f64 {
     ms as f64 / 1000.0
 }
 
-/// A core trace event in words, with the mission's names.
+/// A core trace event in words, with the mission's names (the core's [`FetchTea::describe`]),
+/// and the robot's own events spelled out.
 pub fn describe(mission: &FetchTea<'_>, e: &TraceEvent) -> String {
-    let d = &mission.domain;
-    let action = |a: psmpa_core::ActionId| d.action(a).map_or("?", |a| a.name);
-    let sensor = |s: psmpa_core::SensorId| d.sensor(s).map_or("?", |s| s.name);
-    let plan = |p: psmpa_core::PlanId| mission.library.get(p).map_or("generated plan", |p| p.name);
     match *e {
-        TraceEvent::ModelEstablished { beliefs } => format!("model established {beliefs:?}"),
-        TraceEvent::PlanSelected { plan: p, .. } => format!("plan selected: {}", plan(p)),
-        TraceEvent::PlanSucceeded { plan: p } => format!("plan succeeded: {}", plan(p)),
-        TraceEvent::PlanFailed { plan: p, reason } => {
-            format!("plan failed: {} ({reason:?})", plan(p))
-        }
-        TraceEvent::StateEntered {
-            action: a, sensors, ..
-        } => format!(
-            "state entered: {} with [{}]",
-            action(a),
-            sensors.iter().map(sensor).collect::<Vec<_>>().join(" ")
-        ),
-        TraceEvent::StateLeft {
-            action: a, outcome, ..
-        } => format!("state left: {} {outcome:?}", action(a)),
-        TraceEvent::PhaseStarted { phase, .. } => format!("{phase:?} phase"),
-        TraceEvent::SensorOn { sensor: s } => format!("{} on", sensor(s)),
-        TraceEvent::SensorOff { sensor: s } => format!("{} off", sensor(s)),
-        TraceEvent::Sample {
-            sensor: s, value, ..
-        } => format!("{} sample {value:?}", sensor(s)),
-        TraceEvent::SampleLost { sensor: s } => format!("{} sample lost", sensor(s)),
-        TraceEvent::SensorFailed { sensor: s, fault } => format!("{} fault {fault:?}", sensor(s)),
-        TraceEvent::PreconditionViolated { action: a, .. } => {
-            format!("precondition of {} violated", action(a))
-        }
-        TraceEvent::PreconditionRestored { action: a } => {
-            format!("precondition of {} restored", action(a))
-        }
-        TraceEvent::EffectsApplied { action: a, .. } => format!("effects of {} applied", action(a)),
-        TraceEvent::GoalReached { .. } => "goal reached".to_owned(),
         TraceEvent::User { code, .. } if code == codes::AVOID => {
             "walk: stop and side-step".to_owned()
         }
@@ -64,12 +29,7 @@ pub fn describe(mission: &FetchTea<'_>, e: &TraceEvent) -> String {
         TraceEvent::User { code, .. } if code == codes::LOCKED => {
             "open door: the handle does not give, the door is locked".to_owned()
         }
-        TraceEvent::PlanGenerated { length, expanded } => {
-            format!(
-                "no library plan applies: the planner generated {length} actions ({expanded} nodes expanded)"
-            )
-        }
-        other => format!("{other:?}"),
+        other => mission.describe(other).to_string(),
     }
 }
 

@@ -1,0 +1,268 @@
+//! Names instead of indices: display adapters that print fact sets, failures and trace events
+//! with the names of a domain or a mission. No allocation: they write into the formatter.
+//!
+//! ```
+//! # use psmpa_core::{Domain, FactSet};
+//! let mut d: Domain<'_, 1, 1> = Domain::new();
+//! let clear = d.add_fact("path_clear").unwrap();
+//! let door = d.add_fact("at_door").unwrap();
+//! let set = FactSet::single(clear).with(door);
+//! assert_eq!(format!("{}", d.names(set)), "{path_clear, at_door}");
+//! ```
+
+use core::fmt;
+
+use crate::action::SensorSet;
+use crate::domain::Domain;
+use crate::exec::Failure;
+use crate::facts::FactSet;
+use crate::mission::Mission;
+use crate::plan::PlanId;
+use crate::trace::TraceEvent;
+
+/// A fact set printed with its facts' names ([`Domain::names`]); `Debug` prints the same.
+#[derive(Clone, Copy)]
+pub struct FactNames<'d, 'a, const NS: usize, const NA: usize> {
+    domain: &'d Domain<'a, NS, NA>,
+    set: FactSet,
+}
+
+impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
+    /// `set` with the names of its facts: `{path_clear, at_door}`. A fact the domain does not
+    /// declare prints as its index.
+    pub fn names(&self, set: FactSet) -> FactNames<'_, 'a, NS, NA> {
+        FactNames { domain: self, set }
+    }
+}
+
+impl<const NS: usize, const NA: usize> fmt::Display for FactNames<'_, '_, NS, NA> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("{")?;
+        for (i, fact) in self.set.iter().enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            match self.domain.fact_name(fact) {
+                Some(name) => f.write_str(name)?,
+                None => write!(f, "#{}", fact.index())?,
+            }
+        }
+        f.write_str("}")
+    }
+}
+
+impl<const NS: usize, const NA: usize> fmt::Debug for FactNames<'_, '_, NS, NA> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(self, f)
+    }
+}
+
+/// A failure or trace event printed with a mission's names ([`Mission::describe`],
+/// [`Mission::describe_failure`]).
+pub struct Described<'m, 'a, T, const NS: usize, const NA: usize, const NP: usize, const L: usize> {
+    mission: &'m Mission<'a, NS, NA, NP, L>,
+    what: T,
+}
+
+impl<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>
+    Mission<'a, NS, NA, NP, L>
+{
+    /// A trace event in words, with this mission's names: "state entered: go to door with
+    /// [sonar bumper]", "precondition of go to door violated: {path_clear}".
+    pub fn describe(&self, event: TraceEvent) -> Described<'_, 'a, TraceEvent, NS, NA, NP, L> {
+        Described {
+            mission: self,
+            what: event,
+        }
+    }
+
+    /// A failure in words, with this mission's names.
+    pub fn describe_failure(&self, failure: Failure) -> Described<'_, 'a, Failure, NS, NA, NP, L> {
+        Described {
+            mission: self,
+            what: failure,
+        }
+    }
+}
+
+/// The names the adapters print.
+struct Names<'m, 'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>(
+    &'m Mission<'a, NS, NA, NP, L>,
+);
+
+impl<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>
+    Names<'_, 'a, NS, NA, NP, L>
+{
+    fn action(&self, a: crate::ActionId) -> &'a str {
+        self.0.domain.action(a).map_or("?", |a| a.name)
+    }
+    fn sensor(&self, s: crate::SensorId) -> &'a str {
+        self.0.domain.sensor(s).map_or("?", |s| s.name)
+    }
+    fn plan(&self, p: PlanId) -> &'a str {
+        self.0.library.get(p).map_or("generated plan", |p| p.name)
+    }
+    fn sensors(&self, f: &mut fmt::Formatter<'_>, set: SensorSet) -> fmt::Result {
+        f.write_str("[")?;
+        for (i, s) in set.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            f.write_str(self.sensor(s))?;
+        }
+        f.write_str("]")
+    }
+}
+
+impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> fmt::Display
+    for Described<'_, '_, Failure, NS, NA, NP, L>
+{
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let n = Names(self.mission);
+        let facts = |set| self.mission.domain.names(set);
+        match self.what {
+            Failure::ActionFailed { action } => write!(f, "{} failed", n.action(action)),
+            Failure::ActionInterrupted { action } => {
+                write!(f, "{} was interrupted", n.action(action))
+            }
+            Failure::PreconditionUnmet { action, missing } => write!(
+                f,
+                "{} could not start: {} did not hold",
+                n.action(action),
+                facts(missing)
+            ),
+            Failure::PreconditionViolated { action, missing } => write!(
+                f,
+                "{} stopped: {} stayed false longer than its max_violation",
+                n.action(action),
+                facts(missing)
+            ),
+            Failure::SensorUnavailable { sensor } => {
+                write!(f, "sensor {} is unavailable", n.sensor(sensor))
+            }
+            Failure::SensorFault { sensor, fault } => {
+                write!(f, "sensor {} failed: {fault:?}", n.sensor(sensor))
+            }
+            Failure::StoreFull { key } => write!(f, "a data store is full (key {})", key.0),
+            Failure::InvalidFsm { state } => write!(f, "the FSM has no state {state}"),
+            Failure::SensingStalled => f.write_str("the sensing side does not run"),
+        }
+    }
+}
+
+impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> fmt::Display
+    for Described<'_, '_, TraceEvent, NS, NA, NP, L>
+{
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use TraceEvent as E;
+        let n = Names(self.mission);
+        let facts = |set| self.mission.domain.names(set);
+        match self.what {
+            E::ModelEstablished { beliefs } => write!(f, "model established {}", facts(beliefs)),
+            E::PlanGenerated { length, expanded } => write!(
+                f,
+                "no library plan applies: the planner generated {length} actions ({expanded} nodes expanded)"
+            ),
+            E::PlanSelected { plan, .. } => write!(f, "plan selected: {}", n.plan(plan)),
+            E::PlanSucceeded { plan } => write!(f, "plan succeeded: {}", n.plan(plan)),
+            E::PlanFailed { plan, reason } => write!(
+                f,
+                "plan failed: {} ({})",
+                n.plan(plan),
+                self.mission.describe_failure(reason)
+            ),
+            E::StateEntered {
+                action, sensors, ..
+            } => {
+                write!(f, "state entered: {} with ", n.action(action))?;
+                n.sensors(f, sensors)
+            }
+            E::StateLeft {
+                action, outcome, ..
+            } => match outcome {
+                Some(o) => write!(f, "state left: {} {o:?}", n.action(action)),
+                None => write!(f, "state left: {} cut short", n.action(action)),
+            },
+            E::PhaseStarted { phase, .. } => write!(f, "{phase:?} phase"),
+            E::SensorOn { sensor } => write!(f, "{} on", n.sensor(sensor)),
+            E::SensorOff { sensor } => write!(f, "{} off", n.sensor(sensor)),
+            E::Sample {
+                sensor,
+                value,
+                holds,
+            } => write!(
+                f,
+                "{} sample {value:?}, holds {}",
+                n.sensor(sensor),
+                facts(holds)
+            ),
+            E::SampleLost { sensor } => write!(f, "{} sample lost", n.sensor(sensor)),
+            E::SensorFailed { sensor, fault } => {
+                write!(f, "{} fault {fault:?}", n.sensor(sensor))
+            }
+            E::PreconditionViolated { action, missing } => write!(
+                f,
+                "precondition of {} violated: {} false",
+                n.action(action),
+                facts(missing)
+            ),
+            E::PreconditionRestored { action } => {
+                write!(f, "precondition of {} restored", n.action(action))
+            }
+            E::EffectsApplied { action, beliefs } => write!(
+                f,
+                "effects of {} applied: {}",
+                n.action(action),
+                facts(beliefs)
+            ),
+            E::GoalReached { beliefs } => write!(f, "goal reached: {}", facts(beliefs)),
+            E::User { code, value } => write!(f, "user event {code}: {value}"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::format;
+
+    use crate::mission::{AnyBehaviour, Loaded, load};
+    use crate::{FactSet, Failure, Reading, TraceEvent, Value};
+
+    const MISSION: &str = r#"{"name": "m", "facts": ["clear", "done"], "events": ["go"],
+        "sensors": [{"name": "sonar", "per": ["clear"], "mode": "cyclic", "period_ms": 50}],
+        "actions": [{"name": "walk", "pre": ["clear"], "add": ["done"]}],
+        "plans": [{"name": "p", "trigger": "go", "body": ["walk"]}],
+        "task": {"event": "go", "goal": ["done"]}}"#;
+
+    #[test]
+    fn events_and_failures_read_with_the_missions_names() {
+        let m: Loaded<'_, (), (), 1, 1, 1, 1> = load(MISSION.as_bytes(), &AnyBehaviour).unwrap();
+        let m = &m.mission;
+        let d = &m.domain;
+        let clear = d.facts(&["clear"]).unwrap();
+        let walk = d.action_id("walk").unwrap();
+        let violated = TraceEvent::PreconditionViolated {
+            action: walk,
+            missing: clear,
+        };
+        assert_eq!(
+            format!("{}", m.describe(violated)),
+            "precondition of walk violated: {clear} false"
+        );
+        let failed = Failure::PreconditionViolated {
+            action: walk,
+            missing: clear,
+        };
+        assert_eq!(
+            format!("{}", m.describe_failure(failed)),
+            "walk stopped: {clear} stayed false longer than its max_violation"
+        );
+        // An undeclared fact prints as its index.
+        let odd = clear.with(crate::FactId::new(5).unwrap());
+        assert_eq!(format!("{:?}", d.names(odd)), "{clear, #5}");
+        // A reading from a bool decides all of per(s) one way.
+        assert_eq!(Reading::of(Value::Mm(5), true).holds, FactSet::ALL);
+        assert_eq!(Reading::flag(false).holds, FactSet::EMPTY);
+        assert_eq!(Reading::flag(true).value, Value::Bool(true));
+    }
+}
