@@ -35,6 +35,8 @@ fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
         "{text}"
     );
     assert!(text.contains("δ2  = enter kitchen"), "{text}");
+    // Per-action tolerances and negative contexts are shown where a mission sets them.
+    assert!(!text.contains("max_violation"), "{text}");
     assert!(
         text.contains("go to door → open door → enter kitchen (3 actions"),
         "{text}"
@@ -49,7 +51,7 @@ fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
 #[test]
 fn bad_missions_are_rejected_with_one_clear_line() {
     let good = fetch_tea();
-    let cases: [(&str, &str, &[&str]); 13] = [
+    let cases: [(&str, &str, &[&str]); 16] = [
         (
             r#""pre": ["door_open", "at_door"]"#,
             r#""pre": ["door_opened", "at_door"]"#,
@@ -114,6 +116,27 @@ fn bad_missions_are_rejected_with_one_clear_line() {
             r#""events": ["fetch_tea"]"#,
             r#""events": [[[[[[[[["fetch_tea"]]]]]]]]]"#,
             &["nested deeper than 8 levels"],
+        ),
+        (
+            r#""context": ["door_unlocked"],"#,
+            r#""context": ["door_unlocked"], "context_not": ["door_unlocked"],"#,
+            &[
+                "plans[0].context_not",
+                "`door_unlocked` is required both true (`context`) and false (`context_not`)",
+            ],
+        ),
+        (
+            r#""add": ["at_door"],"#,
+            r#""add": ["at_door"], "max_violation_ms": 5000000000,"#,
+            &[
+                "actions[0].max_violation_ms",
+                "more than 4294967295 milliseconds",
+            ],
+        ),
+        (
+            r#""add": ["at_door"],"#,
+            r#""add": ["at_door"], "max_violation_ms": "soon","#,
+            &["actions[0].max_violation_ms", "wrong type"],
         ),
     ];
     for (i, (from, to, expected)) in cases.iter().enumerate() {
@@ -182,4 +205,32 @@ fn an_unreachable_goal_and_an_unbound_behaviour_name_their_cause() {
     let stderr = String::from_utf8(out.stderr).unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(stderr.contains("no behaviour called `a1`"), "{stderr}");
+}
+
+/// An action's own `max_violation_ms` and a plan's `context_not` are read and shown.
+#[test]
+fn per_action_tolerance_and_negative_context_are_shown() {
+    let mission = fetch_tea()
+        .replacen(
+            r#""add": ["at_door"],"#,
+            r#""add": ["at_door"], "max_violation_ms": 0,"#,
+            1,
+        )
+        .replacen(
+            r#""context": ["door_unlocked"],"#,
+            r#""context": ["door_unlocked"], "context_not": ["door_open"],"#,
+            1,
+        );
+    let path = file("tolerance.json", &mission);
+    let out = bin().arg("check").arg(&path).output().unwrap();
+    assert_success(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("(trigger fetch_tea, context {door_unlocked}, context_not {door_open})"),
+        "{text}"
+    );
+    assert!(
+        text.contains("failure → failed, max_violation 0 ms"),
+        "{text}"
+    );
 }

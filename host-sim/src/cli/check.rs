@@ -94,9 +94,14 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
     );
     for (i, plan) in m.library.plans().iter().enumerate() {
         let Some(id) = PlanId::new(i) else { break };
+        let not = if plan.context_not.is_empty() {
+            String::new()
+        } else {
+            format!(", context_not {}", names(d, plan.context_not))
+        };
         let _ = writeln!(
             out,
-            "\nplan \"{}\" (trigger {}, context {})",
+            "\nplan \"{}\" (trigger {}, context {}{not})",
             plan.name,
             d.event_name(plan.trigger).unwrap_or("?"),
             names(d, plan.context)
@@ -120,9 +125,14 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
                     } else {
                         format!("δ{k}  = {action}")
                     };
+                    let tolerance = d
+                        .action(state.action)
+                        .and_then(|a| a.max_violation)
+                        .map(|t| format!(", max_violation {} ms", t.as_millis()))
+                        .unwrap_or_default();
                     let _ = writeln!(
                         out,
-                        "  {kind:<48} success → {}, failure → {}",
+                        "  {kind:<48} success → {}, failure → {}{tolerance}",
                         target(state.on_success),
                         target(state.on_failure)
                     );
