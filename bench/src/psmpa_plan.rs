@@ -131,7 +131,7 @@ pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
         max_violation: Duration::from_ticks(0),
         ..Config::default()
     };
-    let runtime: BenchRuntime<'_> = Runtime::new(mission, platform, (), config);
+    let runtime = BenchRuntime::new(mission, platform, (), config);
     let before = platform.steps.get();
     let done = psmpa_sim::backend::simulate_split(
         runtime.sensing(),

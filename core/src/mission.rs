@@ -270,10 +270,9 @@ impl fmt::Display for LoadError<'_> {
             }
             Problem::Period => f.write_str("needs a whole number of milliseconds of at least 1"),
             Problem::Millis => f.write_str("more than 4294967295 milliseconds"),
-            Problem::Contradiction(n) => write!(
-                f,
-                "fact `{n}` is required both true (`context`) and false (`context_not`): the plan could never apply"
-            ),
+            Problem::Contradiction(n) => {
+                write!(f, "fact `{n}` is in both `context` and `context_not`")
+            }
             Problem::UnreachableGoal(n) => {
                 write!(
                     f,
@@ -1285,7 +1284,7 @@ mod tests {
                     r#""trigger": "go""#,
                     r#""trigger": "go", "context": ["a"], "context_not": ["a"]"#,
                 ),
-                "plans[0].context_not: fact `a` is required both true (`context`) and false (`context_not`): the plan could never apply",
+                "plans[0].context_not: fact `a` is in both `context` and `context_not`",
             ),
             (
                 with(

@@ -23,9 +23,7 @@
 //! type DockRuntime = Runtime<'static, Dock, DockCaps>;
 //! ```
 
-use core::ops::Deref;
-
-use crate::exec::{Config, Engine};
+use crate::exec::Engine;
 use crate::mission::{Bindings, Loaded, Mission};
 use crate::platform::Platform;
 use crate::trace::TraceSink;
@@ -67,60 +65,11 @@ pub type LoadedOf<'a, R, C> = <C as Capacity>::Loaded<
 >;
 
 /// The P-SMPA runtime of one robot: platform `P`, capacities `C` ([`Caps`]), trace sink `T`
-/// (none by default). Everything it does is the [`Engine`]'s, reached through `Deref`:
+/// (none by default). A name for the [`Engine`] of those capacities, which does the work:
 /// [`sensing`](Engine::sensing), [`run`](Engine::run), [`beliefs`](Engine::beliefs), ...
+/// Build it through a concrete name (`DockRuntime::new(&mission, &dock, (), config)`).
 ///
 /// Everything lives inside this value; put it in a `static` (with a `StaticCell`) or on the
 /// stack of the task that runs it. With `P::Mutex = CriticalSectionRawMutex` and a `Sync`
 /// platform it is `Sync`: a `&'static Runtime` can be shared by tasks at two priorities.
-pub struct Runtime<'r, P: Platform + 'r, C: Capacity, T: TraceSink = ()> {
-    engine: C::Engine<'r, P, T>,
-}
-
-impl<
-    'r,
-    P: Platform + 'r,
-    T: TraceSink,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-> Runtime<'r, P, Caps<NS, NA, NP, L, K>, T>
-{
-    /// A runtime for `mission` on `platform`, tracing into `sink` (`()` for none). The
-    /// beliefs start at the task's initial state `τ0`.
-    pub fn new(
-        mission: &'r Mission<'r, NS, NA, NP, L>,
-        platform: &'r P,
-        sink: T,
-        config: Config,
-    ) -> Self {
-        Self {
-            engine: Engine::new(mission, platform, sink, config),
-        }
-    }
-
-    /// Gives the runtime up and returns the trace sink.
-    pub fn into_sink(self) -> T {
-        self.engine.into_sink()
-    }
-}
-
-impl<
-    'r,
-    P: Platform + 'r,
-    T: TraceSink,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-> Deref for Runtime<'r, P, Caps<NS, NA, NP, L, K>, T>
-{
-    type Target = Engine<'r, P, T, NS, NA, NP, L, K>;
-
-    fn deref(&self) -> &Self::Target {
-        &self.engine
-    }
-}
+pub type Runtime<'r, P, C, T = ()> = <C as Capacity>::Engine<'r, P, T>;

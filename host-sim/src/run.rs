@@ -13,7 +13,7 @@ use core::task::{Context, Poll};
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, Timer};
-use psmpa_core::{ControlError, Report, Runtime, TraceSink};
+use psmpa_core::{ControlError, Report, TraceSink};
 
 use crate::robot::{self, Arch, MissionError, Nao, Robot};
 use crate::scenario::Scenario;
@@ -262,8 +262,12 @@ pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
 ) -> (Summary, L, T) {
     let world: World<'_, L, P::Mutex> = World::new(scenario, log);
     let nao = Nao::new(&world, robot).with_compute(P::compute);
-    let runtime: robot::NaoRuntime<'_, '_, '_, L, T, P::Mutex> =
-        Runtime::new(&robot.mission, &nao, sink, robot::config(scenario, arch));
+    let runtime = robot::NaoRuntime::<'_, '_, '_, L, T, P::Mutex>::new(
+        &robot.mission,
+        &nao,
+        sink,
+        robot::config(scenario, arch),
+    );
     let ending = {
         let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
         // Built where they stay: neither side is ever copied.

@@ -122,7 +122,7 @@ fn bad_missions_are_rejected_with_one_clear_line() {
             r#""context": ["door_unlocked"], "context_not": ["door_unlocked"],"#,
             &[
                 "plans[0].context_not",
-                "`door_unlocked` is required both true (`context`) and false (`context_not`)",
+                "fact `door_unlocked` is in both `context` and `context_not`",
             ],
         ),
         (

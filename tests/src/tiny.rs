@@ -304,7 +304,7 @@ pub fn runtime<'r, const K: usize>(
     world: &'r TinyWorld,
     config: Config,
 ) -> TinyRuntime<'r, K> {
-    Runtime::new(mission, world, Recorder::default(), config)
+    TinyRuntime::new(mission, world, Recorder::default(), config)
 }
 
 /// SMPA with 1 s sense and 3 s act phases.

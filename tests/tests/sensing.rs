@@ -206,7 +206,7 @@ fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
 }
 
 fn run_mission(robot: &Robot, mission: Pair) -> (Vec<(Instant, TraceEvent)>, Instant) {
-    let rt: PairRuntime<'_> = Runtime::new(&mission, robot, Recorder::default(), Config::default());
+    let rt = PairRuntime::new(&mission, robot, Recorder::default(), Config::default());
     let done = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
     done.output.unwrap();
     let trace = rt.into_sink().0;
@@ -359,8 +359,7 @@ fn a_read_cancelled_by_the_end_of_a_state_is_taken_again_by_the_next() {
 fn a_control_loop_without_its_sensing_side_fails_clearly_instead_of_hanging() {
     let robot = Robot::new(0, 200);
     let (mission, _) = mission();
-    let rt: PairRuntime<'_> =
-        Runtime::new(&mission, &robot, Recorder::default(), Config::default());
+    let rt = PairRuntime::new(&mission, &robot, Recorder::default(), Config::default());
     // Nobody runs `rt.sensing()`.
     let done = simulate(rt.run(), LIMIT).unwrap();
     assert_eq!(
@@ -404,8 +403,8 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
     impl Platform for Stateless {
         type Mutex = CriticalSectionRawMutex;
     }
-    let rt: Runtime<'_, Stateless, Caps<2, 2, 1, 2, 4>> =
-        Runtime::new(&mission, &Stateless, (), Config::default());
+    type StatelessRuntime<'r> = Runtime<'r, Stateless, Caps<2, 2, 1, 2, 4>>;
+    let rt = StatelessRuntime::new(&mission, &Stateless, (), Config::default());
     shared(&rt);
     sendable(&rt.sensing());
 }

@@ -225,6 +225,6 @@ mod product {
         }
         let (mission, parts) = (&*mission, &*parts);
         let stubs = &*stubs.write(Stubs { mission, parts });
-        runtime.write(Runtime::new(mission, stubs, (), Config::default()))
+        runtime.write(ProductRuntime::new(mission, stubs, (), Config::default()))
     }
 }
