@@ -20,9 +20,13 @@ struct Budget {
     flash_enforced: bool,
 }
 
-/// The simulator-carrying firmware: a small real part's share for the mission.
+/// The simulator-carrying firmware, a QEMU harness (its board has 4 MiB): a small real part's
+/// share for the mission and the simulated world. 64 KiB until the API issue: per-action
+/// tolerances, negative contexts and the one-lock sensing side took 0.8 KB, the world's event
+/// index (which halves a host simulation's instructions) 1 KB. The product image's budgets
+/// are unchanged.
 const FIRMWARE: Budget = Budget {
-    flash: 64 * 1024,
+    flash: 72 * 1024,
     ram_with_stack: 16 * 1024,
     flash_enforced: true,
 };
