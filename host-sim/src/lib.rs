@@ -1,7 +1,8 @@
 //! # psmpa-sim: the host side of psmpa
 //!
 //! * [`backend`] (feature `std`): runs `psmpa-core` futures to completion in virtual time, on a
-//!   real `embassy_executor::raw::Executor`, deterministically and on any number of threads.
+//!   poll loop of two priorities (sensing above deciding), deterministically and on any number
+//!   of threads. The core spawns nothing, so no executor is needed.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 

@@ -3,7 +3,8 @@
 //!
 //! `no_std`: the firmware awaits [`run`] inside an embassy task, the host inside
 //! [`backend::simulate`](crate::backend::simulate). Each places the runtime's sensing side
-//! through [`Sides`]: the host on its higher-priority executor, the firmware on its own.
+//! through [`Sides`]: the host at its poll loop's higher priority, the firmware on its own
+//! interrupt executor.
 
 use core::future::Future;
 use core::marker::PhantomData;

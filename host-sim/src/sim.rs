@@ -60,8 +60,8 @@ pub struct Recorded {
     pub trace: TraceRecord,
 }
 
-/// The host's placement of a runtime's two sides: sensing on the backend's higher-priority
-/// executor ([`beside`]).
+/// The host's placement of a runtime's two sides: sensing at the backend's higher
+/// priority ([`beside`]).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Prioritized;
 
