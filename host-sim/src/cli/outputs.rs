@@ -18,7 +18,7 @@ fn secs(ms: u64) -> f64 {
     ms as f64 / 1000.0
 }
 
-/// A core trace event in words, with the mission's names (the core's [`FetchTea::describe`]),
+/// A core trace event in words, with the mission's names (the core's [`psmpa_core::Mission::describe`]),
 /// and the robot's own events spelled out.
 pub fn describe(mission: &FetchTea<'_>, e: &TraceEvent) -> String {
     match *e {
