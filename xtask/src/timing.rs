@@ -68,7 +68,7 @@ const HOST_STEPS: &[(&str, &str)] = &[
     ),
     (
         "precondition check",
-        "Engine<P,T,_,_,_,_,_>>::check_precondition",
+        "psmpa_core::sense::check",
     ),
     (
         "behaviour step (one poll)",
