@@ -66,10 +66,7 @@ const HOST_STEPS: &[(&str, &str)] = &[
         "sensing side: one poll (samples)",
         "psmpa_sim::run::poll_erased",
     ),
-    (
-        "precondition check",
-        "psmpa_core::sense::check",
-    ),
+    ("precondition check", "psmpa_core::sense::check"),
     (
         "behaviour step (one poll)",
         "as psmpa_core::platform::Actuator>::run::{{closure}}",
