@@ -17,8 +17,8 @@
 //! * [`Policy::PSmpa`]: a parallel state `δ'_i` has its sensors switched on and sampled once,
 //!   then runs the actuator behaviour while they keep sampling. When a percept makes `pre(a_i)`
 //!   false the behaviour is told at once ([`ActionIo::violation`]); if it stays false longer
-//!   than [`Config::max_violation`] the runtime stops the behaviour and takes the failure
-//!   edge. The sensors are switched off when the action ends.
+//!   than the action's [`max_violation`](ActuatorAction::max_violation) (or
+//!   [`Config::max_violation`]) the runtime stops the behaviour and takes the failure edge. The sensors are switched off when the action ends.
 //! * [`Policy::Smpa`]: the baseline. The same state alternates a sense phase (sensors on,
 //!   actuators held) and an act phase (behaviour polled, sensors off). Only the policy differs:
 //!   the actions, sensors, behaviours and precondition checks are the same code.
@@ -119,8 +119,8 @@ pub enum Failure {
         /// The facts that did not hold.
         missing: FactSet,
     },
-    /// A percept made `pre(a)` false and it stayed false longer than
-    /// [`Config::max_violation`].
+    /// A percept made `pre(a)` false and it stayed false longer than the action's
+    /// [`max_violation`](ActuatorAction::max_violation) (or [`Config::max_violation`]).
     PreconditionViolated {
         /// The action.
         action: ActionId,
@@ -672,8 +672,8 @@ impl<
     }
 
     /// Watches the running action under command `epoch`: returns the first failure the
-    /// sensing side reports, or the violation of `pre(a)` once it has lasted
-    /// [`Config::max_violation`]. Never returns while all is well. One lock a poll; woken by
+    /// sensing side reports, or the violation of `pre(a)` once it has lasted the action's
+    /// `max_violation` (or [`Config::max_violation`]). Never returns while all is well. One lock a poll; woken by
     /// every delivery, and by a timer at the deadline of a violation.
     async fn watch(&self, epoch: u32, action: ActionId) -> Failure {
         let max = self
