@@ -196,16 +196,14 @@ impl<
         let known_false = self.known_false();
         let mut skipped = PlanSet::EMPTY;
         while let Some(plan) = library.select(task.event, beliefs, excluded.union(skipped)) {
-            let body = library
-                .get(plan)
-                .map(|p| p.body.clone())
-                .unwrap_or_default();
+            let body = library.get(plan).map_or(&[][..], |p| &p.body);
             let blocked = body
                 .first()
                 .and_then(|a| self.mission.domain.action(*a))
                 .is_some_and(|a| a.pre.intersects(known_false));
             if !blocked {
-                return Ok((plan, body));
+                // Copied once, for the plan that runs.
+                return Ok((plan, body.iter().copied().collect()));
             }
             if skipped.contains(plan) {
                 break; // An id without a bit: never the case in a library.

@@ -33,6 +33,7 @@ use core::task::{Context, Poll};
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_sync::waitqueue::WakerRegistration;
 use embassy_time::{Duration, Instant, Timer};
 
@@ -352,6 +353,26 @@ impl<const NS: usize> Shared<NS> {
     }
 }
 
+/// A wait on the shared state `shared`: `done` decides, and when it says not yet the waker is
+/// registered with the side's wakers (`wakers`), in the same lock, so that a side that preempts
+/// in between cannot wake nobody.
+pub(crate) fn poll_shared<M: RawMutex, const NS: usize, R>(
+    shared: &Mutex<M, Shared<NS>>,
+    cx: &Context<'_>,
+    wakers: impl FnOnce(&Shared<NS>) -> &RefCell<WakerRegistration>,
+    done: impl FnOnce(&Shared<NS>) -> Option<R>,
+) -> Poll<R> {
+    shared.lock(|s| match done(s) {
+        Some(r) => Poll::Ready(r),
+        None => {
+            if let Ok(mut w) = wakers(s).try_borrow_mut() {
+                w.register(cx.waker());
+            }
+            Poll::Pending
+        }
+    })
+}
+
 fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
     match outcome {
         Outcome::Success => Ok(()),
@@ -542,42 +563,22 @@ impl<
         });
     }
 
-    /// A wait on the shared state: `done` decides, and when it says not yet the waker is
-    /// registered with the side's wakers (`wakers`), in the same lock, so that a side that
-    /// preempts in between cannot wake nobody.
-    fn poll_shared<R>(
-        &self,
-        cx: &mut Context<'_>,
-        wakers: impl FnOnce(&Shared<NS>) -> &RefCell<WakerRegistration>,
-        done: impl FnOnce(&Shared<NS>) -> Option<R>,
-    ) -> Poll<R> {
-        self.shared.lock(|s| match done(s) {
-            Some(r) => Poll::Ready(r),
-            None => {
-                if let Ok(mut w) = wakers(s).try_borrow_mut() {
-                    w.register(cx.waker());
-                }
-                Poll::Pending
-            }
-        })
-    }
-
-    /// [`poll_shared`](Self::poll_shared) for the deciding side.
+    /// [`poll_shared`] for the deciding side.
     fn poll_deciding<R>(
         &self,
         cx: &mut Context<'_>,
         done: impl FnOnce(&Shared<NS>) -> Option<R>,
     ) -> Poll<R> {
-        self.poll_shared(cx, |s| &s.deciding, done)
+        poll_shared(&self.shared, cx, |s| &s.deciding, done)
     }
 
-    /// [`poll_shared`](Self::poll_shared) for a sampler.
+    /// [`poll_shared`] for a sampler.
     pub(crate) fn poll_sensing<R>(
         &self,
         cx: &mut Context<'_>,
         done: impl FnOnce(&Shared<NS>) -> Option<R>,
     ) -> Poll<R> {
-        self.poll_shared(cx, |s| &s.sensing, done)
+        poll_shared(&self.shared, cx, |s| &s.sensing, done)
     }
 
     /// The sensors that failed and are out of service: a state that needs one fails at once

@@ -42,7 +42,7 @@ use pin_project_lite::pin_project;
 
 use crate::action::{ActionId, SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::Domain;
-use crate::exec::{Engine, Failure, Mode, Shared, Violation};
+use crate::exec::{Engine, Failure, Mode, Shared, Violation, poll_shared};
 use crate::facts::FactSet;
 use crate::platform::{Platform, Reading, SensorFault};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
@@ -454,17 +454,13 @@ impl<const NS: usize, M: RawMutex, F: Future> Future for Bounded<'_, Mutex<M, Sh
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
         let this = self.project();
         let epoch = *this.epoch;
-        // Registered in the same lock as the check: a new command in between is not missed.
-        let ended = this.shared.lock(|s| {
-            if s.epoch.get() != epoch {
-                return true;
-            }
-            if let Ok(mut w) = s.sensing.try_borrow_mut() {
-                w.register(cx.waker());
-            }
-            false
-        });
-        if ended {
+        let ended = poll_shared(
+            this.shared,
+            cx,
+            |s| &s.sensing,
+            |s| (s.epoch.get() != epoch).then_some(()),
+        );
+        if ended.is_ready() {
             return Poll::Ready(Bound::Ended);
         }
         if let Poll::Ready(out) = this.inner.poll(cx) {

@@ -26,7 +26,12 @@ fn run_with(
     let (mission, ids) = tiny::mission(failing_plan);
     let mut world = TinyWorld::new(ids, windows);
     tweak(&mut world);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(policy));
+    run_on(&mission, &world, policy)
+}
+
+/// Runs `mission` on `world` under `policy` to its end.
+fn run_on(mission: &tiny::TinyMission, world: &TinyWorld, policy: Policy) -> Run {
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(mission, world, tiny::config(policy));
     let done = simulate_split(rt.sensing(), rt.run(), LIMIT).expect("simulation completes");
     let hash = rt.trace_hash().value();
     Run {
@@ -581,17 +586,18 @@ fn zero_length_smpa_phases_do_not_livelock() {
 
 /// Runs `mission` on the tiny world with obstacles in `windows`, P-SMPA.
 fn run_mission(mission: &tiny::TinyMission, ids: Ids, windows: &[(u64, u64)]) -> Run {
-    let world = TinyWorld::new(ids, windows);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(mission, &world, tiny::config(Policy::PSmpa));
-    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).expect("simulation completes");
-    let hash = rt.trace_hash().value();
-    Run {
-        result: done.output,
-        trace: rt.into_sink().0,
-        hash,
-        notes: world.notes(),
-        elapsed: done.elapsed,
-    }
+    run_on(mission, &TinyWorld::new(ids, windows), Policy::PSmpa)
+}
+
+/// The plans selected, in order, by index.
+fn selected_plans(trace: &[(Instant, TraceEvent)]) -> Vec<usize> {
+    trace
+        .iter()
+        .filter_map(|(_, e)| match e {
+            TraceEvent::PlanSelected { plan, .. } => Some(plan.index()),
+            _ => None,
+        })
+        .collect()
 }
 
 fn plan_failures(trace: &[(Instant, TraceEvent)]) -> Vec<(Instant, Failure)> {
@@ -676,22 +682,13 @@ fn a_negative_context_chooses_the_other_plan() {
         )
         .unwrap();
     mission.library = library;
-    let selected = |r: &Run| -> Vec<usize> {
-        r.trace
-            .iter()
-            .filter_map(|(_, e)| match e {
-                TraceEvent::PlanSelected { plan, .. } => Some(plan.index()),
-                _ => None,
-            })
-            .collect()
-    };
     // The path is clear at the start: "detour" does not apply, "get-in" runs to the goal.
     let clear_path = run_mission(&mission, ids, &[]);
     assert_eq!(clear_path.result.unwrap().plans_failed, 0);
-    assert_eq!(selected(&clear_path), [1]);
+    assert_eq!(selected_plans(&clear_path.trace), [1]);
     // A box at the start: the initial model shows the path blocked, "detour" applies.
     let blocked = run_mission(&mission, ids, &[(0, 60_000)]);
-    assert_eq!(selected(&blocked).first(), Some(&0));
+    assert_eq!(selected_plans(&blocked.trace).first(), Some(&0));
 }
 
 /// A plan whose first action needs a fact a percept has already shown false is not started:
@@ -733,13 +730,5 @@ fn a_plan_known_to_be_inapplicable_is_skipped() {
         )
         .unwrap();
     let r = run_mission(&mission, ids, &[(0, 60_000)]);
-    let started: Vec<usize> = r
-        .trace
-        .iter()
-        .filter_map(|(_, e)| match e {
-            TraceEvent::PlanSelected { plan, .. } => Some(plan.index()),
-            _ => None,
-        })
-        .collect();
-    assert_eq!(started.first(), Some(&2));
+    assert_eq!(selected_plans(&r.trace).first(), Some(&2));
 }

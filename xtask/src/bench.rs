@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use serde::Deserialize;
 
-use crate::firmware;
+use crate::{callgrind, firmware};
 
 /// Criterion options: shorter than its defaults, enough for stable medians here.
 const CRITERION: &[&str] = &["--warm-up-time", "1", "--measurement-time", "4", "--noplot"];
@@ -171,24 +171,6 @@ struct Count {
     instructions: u64,
 }
 
-/// Fails, naming the package, when valgrind is not installed.
-fn check_valgrind() -> Result<(), String> {
-    match Command::new("valgrind")
-        .arg("--version")
-        .stdout(Stdio::null())
-        .status()
-    {
-        Ok(s) if s.success() => Ok(()),
-        Ok(s) => Err(format!("`valgrind --version` failed ({s})")),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(
-            "valgrind is not installed; the instruction count needs it: `apt-get install valgrind` \
-             (scripts/test.sh installs it)"
-                .to_owned(),
-        ),
-        Err(e) => Err(format!("cannot run valgrind: {e}")),
-    }
-}
-
 /// Builds `profile_plan` with the `bench` profile, so it shares every compiled crate with
 /// `cargo bench` (and with `--release`: the two profiles are the same); returns its path.
 fn build_profile_plan() -> Result<PathBuf, String> {
@@ -221,23 +203,8 @@ fn build_profile_plan() -> Result<PathBuf, String> {
 /// Runs `exe` (`profile_plan`) for `plans` plans under callgrind.
 fn callgrind(root: &Path, exe: &Path, plans: u32) -> Result<Count, String> {
     let out_file = root.join(format!("target/callgrind.profile_plan.{plans}.out"));
-    let out = Command::new("valgrind")
-        .current_dir(root)
-        .arg("--tool=callgrind")
-        .arg(format!("--callgrind-out-file={}", out_file.display()))
-        .arg(exe)
-        .arg(plans.to_string())
-        .stdin(Stdio::null())
-        .output()
-        .map_err(|e| format!("cannot run valgrind: {e}"))?;
-    if !out.status.success() {
-        return Err(format!(
-            "profile_plan {plans} failed under callgrind: {}",
-            String::from_utf8_lossy(&out.stderr)
-        ));
-    }
+    let stdout = callgrind::run(root, &out_file, &[], exe, &[&plans.to_string()])?;
     // "N action steps in M plans"
-    let stdout = String::from_utf8_lossy(&out.stdout);
     let (steps, ran) = stdout
         .lines()
         .find_map(|l| {
@@ -295,7 +262,7 @@ fn instructions_line(per_step: f64) -> String {
 /// psmpa's plan workload in instructions per action step: two callgrind runs of
 /// `profile_plan`, the difference of their counts over the difference of their steps.
 fn instructions_per_step(root: &Path) -> Result<f64, String> {
-    check_valgrind()?;
+    callgrind::check()?;
     let exe = build_profile_plan()?;
     let mut counts = Vec::new();
     for plans in CALLGRIND_PLANS {
@@ -349,7 +316,7 @@ pub fn run(no_run: bool) -> Result<(), String> {
 /// Runs the benches, the sweep and the instruction count.
 fn measure(root: &Path) -> Result<Extra, String> {
     // Before minutes of benches: a missing valgrind fails at once.
-    check_valgrind()?;
+    callgrind::check()?;
     let text = cargo_bench(&[
         "-p",
         "psmpa-bench",

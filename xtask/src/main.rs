@@ -13,6 +13,7 @@
 //!   reaction-latency bound of every sensor, checked against the measured reactions.
 
 mod bench;
+mod callgrind;
 mod firmware;
 mod size;
 mod stack;

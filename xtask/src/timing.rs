@@ -35,7 +35,7 @@ use psmpa_core::timing::{Blocking, Job, utilisation_ppm};
 use psmpa_sim::robot::{fetch_tea, latency_bounds};
 use serde::Serialize;
 
-use crate::firmware;
+use crate::{callgrind, firmware};
 
 /// Exception entry and exit on a Cortex-M4, cycles: outside what the handler measures.
 const EXCEPTION_CYCLES: u64 = 24;
@@ -87,25 +87,14 @@ fn host_costs(scenarios: &[&str]) -> Result<Vec<HostCost>, String> {
     let mut totals: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
     for name in scenarios {
         let out_file = root.join(format!("target/callgrind.{name}.out"));
-        let out = std::process::Command::new("valgrind")
-            .current_dir(&root)
-            .args([
-                "--tool=callgrind",
-                "--compress-strings=no",
-                "--compress-pos=no",
-            ])
-            .arg(format!("--callgrind-out-file={}", out_file.display()))
-            .arg(&sim)
-            .args(["run", "--arch", "psmpa"])
-            .arg(format!("scenarios/{name}.json"))
-            .output()
-            .map_err(|e| format!("cannot run valgrind ({e}): scripts/test.sh installs it"))?;
-        if !out.status.success() {
-            return Err(format!(
-                "valgrind failed on {name}: {}",
-                String::from_utf8_lossy(&out.stderr)
-            ));
-        }
+        let scenario = format!("scenarios/{name}.json");
+        callgrind::run(
+            &root,
+            &out_file,
+            &["--compress-strings=no", "--compress-pos=no"],
+            &sim,
+            &["run", "--arch", "psmpa", &scenario],
+        )?;
         let text = std::fs::read_to_string(&out_file).map_err(|e| e.to_string())?;
         // `cfn=` names the callee, `calls=` counts the calls, and the next line holds the
         // position and the inclusive cost of those calls.
