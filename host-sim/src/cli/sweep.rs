@@ -151,6 +151,25 @@ impl ArchStats {
         self.sensor_on_ms += t.on_ms[0] + t.on_ms[1];
     }
 
+    /// Adds the totals of `other`.
+    fn merge(&mut self, other: &Self) {
+        let sum = |a: Option<u64>, b: Option<u64>| match (a, b) {
+            (None, None) => None,
+            (a, b) => Some(a.unwrap_or(0) + b.unwrap_or(0)),
+        };
+        self.scenarios += other.scenarios;
+        self.interferences += other.interferences;
+        self.detected += other.detected;
+        self.detectable = sum(self.detectable, other.detectable);
+        self.missed_detectable = sum(self.missed_detectable, other.missed_detectable);
+        self.collisions += other.collisions;
+        self.reached_door += other.reached_door;
+        self.goal += other.goal;
+        self.time_ms += other.time_ms;
+        self.max_reaction_ms = self.max_reaction_ms.max(other.max_reaction_ms);
+        self.sensor_on_ms += other.sensor_on_ms;
+    }
+
     /// Detected / interferences.
     pub fn detection_rate(&self) -> f64 {
         crate::cli::report::rate(self.detected as u32, self.interferences as u32)
@@ -174,8 +193,8 @@ pub struct SweepStats {
     pub time_ratio_total: Option<f64>,
 }
 
-/// The most scenarios one sweep runs: every run's summary is kept until the statistics are
-/// made (about 200 bytes a scenario), so the bound keeps a sweep within a few hundred MB.
+/// The most scenarios one sweep runs. A sweep keeps its totals and one time ratio a scenario
+/// (8 bytes, for the median): 8 MB at this bound.
 pub const MAX_RUNS: u64 = 1_000_000;
 
 /// Which architectures a sweep runs.
@@ -183,8 +202,54 @@ pub fn arches(only: Option<Arch>) -> Vec<Arch> {
     only.map_or_else(|| Arch::ALL.to_vec(), |a| vec![a])
 }
 
+/// What a sweep keeps of the scenarios run so far (on one thread, then merged).
+#[derive(Default)]
+struct Partial {
+    psmpa: Option<ArchStats>,
+    smpa: Option<ArchStats>,
+    ratios: Vec<f64>,
+}
+
+impl Partial {
+    /// Adds the runs of one scenario.
+    fn add(mut self, summaries: &[Summary]) -> Self {
+        // Detectability is a property of each obstacle of the scenario, measured on the
+        // P-SMPA run (whose sensors run for the whole walk).
+        let detectable: Option<Vec<bool>> = summaries
+            .iter()
+            .find(|s| s.arch == Arch::PSmpa)
+            .map(|s| s.obstacles.iter().map(|o| o.detectable).collect());
+        let mut times = [None, None];
+        for s in summaries {
+            let slot = match s.arch {
+                Arch::PSmpa => &mut self.psmpa,
+                Arch::Smpa => &mut self.smpa,
+            };
+            slot.get_or_insert_with(ArchStats::default)
+                .add(s, detectable.as_deref());
+            times[usize::from(s.arch == Arch::Smpa)] = Some(s.time_cost_ms);
+        }
+        if let [Some(p), Some(s)] = times {
+            self.ratios.push(s as f64 / p.max(1) as f64);
+        }
+        self
+    }
+
+    fn merge(mut self, other: Self) -> Self {
+        for (mine, theirs) in [(&mut self.psmpa, other.psmpa), (&mut self.smpa, other.smpa)] {
+            match (mine.as_mut(), theirs) {
+                (Some(m), Some(t)) => m.merge(&t),
+                (None, t) => *mine = t,
+                (Some(_), None) => {}
+            }
+        }
+        self.ratios.extend(other.ratios);
+        self
+    }
+}
+
 /// Runs `runs` scenarios from `seed` under `arches` (in parallel), with a progress bar when
-/// `progress`.
+/// `progress`. Memory holds the totals and one ratio a scenario, not the runs.
 pub fn sweep(
     seed: u64,
     runs: u64,
@@ -202,48 +267,32 @@ pub fn sweep(
     } else {
         ProgressBar::hidden()
     };
-    let results: Vec<Result<Vec<Summary>, RunError>> = (0..runs)
+    let kept = (0..runs)
         .into_par_iter()
         .map(|i| {
             let sc = scenario(seed, i);
-            let out = arches.iter().map(|&a| run_summary(&sc, a)).collect();
+            let out: Result<Vec<Summary>, RunError> =
+                arches.iter().map(|&a| run_summary(&sc, a)).collect();
             bar.inc(1);
             out
         })
-        .collect();
+        .try_fold(Partial::default, |kept, summaries| {
+            summaries.map(|s| kept.add(&s))
+        })
+        .try_reduce(Partial::default, |a, b| Ok(a.merge(b)));
     bar.finish_and_clear();
+    let mut kept = kept?;
 
     let mut stats = SweepStats {
         seed,
         runs,
+        psmpa: kept.psmpa,
+        smpa: kept.smpa,
         ..SweepStats::default()
     };
-    let mut ratios = Vec::new();
-    for result in results {
-        let summaries = result?;
-        // Detectability is a property of each obstacle of the scenario, measured on the
-        // P-SMPA run (whose sensors run for the whole walk).
-        let detectable: Option<Vec<bool>> = summaries
-            .iter()
-            .find(|s| s.arch == Arch::PSmpa)
-            .map(|s| s.obstacles.iter().map(|o| o.detectable).collect());
-        let mut times = [None, None];
-        for s in &summaries {
-            let slot = match s.arch {
-                Arch::PSmpa => &mut stats.psmpa,
-                Arch::Smpa => &mut stats.smpa,
-            };
-            slot.get_or_insert_with(ArchStats::default)
-                .add(s, detectable.as_deref());
-            times[usize::from(s.arch == Arch::Smpa)] = Some(s.time_cost_ms);
-        }
-        if let [Some(p), Some(s)] = times {
-            ratios.push(s as f64 / p.max(1) as f64);
-        }
-    }
-    if !ratios.is_empty() {
-        ratios.sort_by(f64::total_cmp);
-        stats.time_ratio_median = ratios.get(ratios.len() / 2).copied();
+    if !kept.ratios.is_empty() {
+        kept.ratios.sort_by(f64::total_cmp);
+        stats.time_ratio_median = kept.ratios.get(kept.ratios.len() / 2).copied();
     }
     if let (Some(p), Some(s)) = (stats.psmpa, stats.smpa) {
         stats.time_ratio_total = Some(s.time_ms as f64 / p.time_ms.max(1) as f64);
