@@ -1,17 +1,23 @@
 //! `psmpa-sim`: the P-SMPA simulator's command line. The contract (`SIMULATION.md`): exit
-//! status 0 when the simulation ran, whatever its outcome; 2 for bad input, with one line on
-//! stderr naming the file and what is wrong; never a panic.
+//! status 0 when the simulation ran, whatever its outcome (and when standard output was closed
+//! by its reader); 2 for bad input or an output that cannot be written, with one line on
+//! stderr naming the file and what is wrong; never a panic. Reading and writing go through
+//! [`files`].
 
-use std::fs::File;
+use std::cell::RefCell;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use psmpa_sim::cli::files::{self, Output, Stop};
+use psmpa_sim::cli::outputs::{Streams, TraceStream, WorldStream};
 use psmpa_sim::cli::{check, outputs, report, sweep, table1};
 use psmpa_sim::load;
 use psmpa_sim::robot::Arch;
-use psmpa_sim::sim::{run_recorded, run_summary};
+use psmpa_sim::run::Summary;
+use psmpa_sim::scenario::Scenario;
+use psmpa_sim::sim::{Recorded, TraceRecord, WorldRecord, run_logged, run_recorded, run_summary};
 
 #[derive(Parser)]
 #[command(
@@ -85,7 +91,7 @@ enum Command {
     },
     /// Runs randomized scenarios and prints summary statistics.
     Sweep {
-        /// Number of scenarios (at most 1,000,000: the results are kept for the median).
+        /// Number of scenarios (at most 1,000,000).
         #[arg(long, default_value_t = 1000,
               value_parser = clap::value_parser!(u64).range(1..=psmpa_sim::cli::sweep::MAX_RUNS))]
         runs: u64,
@@ -101,28 +107,11 @@ enum Command {
     },
 }
 
-/// A failure and the exit status it gets.
-struct Fail(u8, String);
-
-fn bad_input(message: impl ToString) -> Fail {
-    Fail(2, message.to_string())
+fn create(path: Option<&Path>) -> Result<Option<Output>, Stop> {
+    path.map(Output::create).transpose().map_err(Stop::Bad)
 }
 
-fn internal(message: impl ToString) -> Fail {
-    Fail(1, message.to_string())
-}
-
-fn write_to(path: &Path, mut file: File, content: &[u8]) -> Result<(), Fail> {
-    file.write_all(content)
-        .map_err(|e| bad_input(format!("{}: cannot write: {e}", path.display())))
-}
-
-fn write_file(path: &Path, content: &[u8]) -> Result<(), Fail> {
-    std::fs::write(path, content)
-        .map_err(|e| bad_input(format!("{}: cannot write: {e}", path.display())))
-}
-
-fn run(cli: Cli) -> Result<(), Fail> {
+fn run(cli: Cli) -> Result<(), Stop> {
     match cli.command {
         Command::Run {
             scenario,
@@ -132,102 +121,106 @@ fn run(cli: Cli) -> Result<(), Fail> {
             plot,
             timeline,
         } => {
-            let sc = load::load(&scenario).map_err(bad_input)?;
+            let bytes = files::read_input(&scenario, "scenario").map_err(Stop::Bad)?;
+            let sc = load::parse(&scenario, &bytes).map_err(Stop::bad)?;
             let arch = Arch::from(arch);
-            // Outputs are opened first: a bad path fails before any result is printed.
-            let open = |path: &Option<PathBuf>| -> Result<Option<(PathBuf, File)>, Fail> {
-                path.as_ref()
-                    .map(|p| {
-                        File::create(p)
-                            .map(|f| (p.clone(), f))
-                            .map_err(|e| bad_input(format!("{}: cannot write: {e}", p.display())))
-                    })
-                    .transpose()
-            };
-            let (trace, timeline) = (open(&trace)?, open(&timeline)?);
-            let plot = open(&plot)?.map(|(p, _)| p);
-            let recorded = if trace.is_some() || timeline.is_some() || plot.is_some() {
-                Some(run_recorded(&sc, arch).map_err(internal)?)
+            let mut named = vec![("the scenario", scenario.as_path())];
+            for (flag, path) in [
+                ("--trace", &trace),
+                ("--plot", &plot),
+                ("--timeline", &timeline),
+            ] {
+                named.extend(path.as_deref().map(|p| (flag, p)));
+            }
+            files::distinct(&named).map_err(Stop::Bad)?;
+            if plot.is_some() {
+                outputs::plot_fits(&sc).map_err(Stop::Bad)?;
+            }
+            // Outputs are opened before the run: a bad path fails before anything runs.
+            let (trace, timeline) = (create(trace.as_deref())?, create(timeline.as_deref())?);
+            let plot = create(plot.as_deref())?;
+            let (summary, done) = if trace.is_none() && timeline.is_none() && plot.is_none() {
+                // Nothing to write: keep no event log.
+                (run_summary(&sc, arch).map_err(Stop::internal)?, Vec::new())
             } else {
-                None
+                let streams =
+                    RefCell::new(Streams::new(&sc, arch, trace, timeline, plot.is_some()));
+                let (summary, _, _) =
+                    run_logged(&sc, arch, WorldStream(&streams), TraceStream(&streams))
+                        .map_err(Stop::internal)?;
+                let (done, world) = streams
+                    .into_inner()
+                    .finish(summary.time_cost_ms)
+                    .map_err(Stop::Bad)?;
+                let mut done = done;
+                if let Some(out) = plot {
+                    done.push(plot_both(out, world, &summary, &sc)?);
+                }
+                (summary, done)
             };
-            let summary = match &recorded {
-                Some(rec) => rec.summary.clone(),
-                // Nothing to write: keep no event log (a long run would fill memory).
-                None => run_summary(&sc, arch).map_err(internal)?,
-            };
-            if json {
+            files::commit_all(done).map_err(Stop::Bad)?;
+            let text = if json {
                 let j = report::RunJson::new(&sc, &summary);
-                println!("{}", serde_json::to_string(&j).map_err(internal)?);
+                serde_json::to_string(&j).map_err(Stop::internal)? + "\n"
             } else {
-                print!("{}", report::human(&sc, &summary));
-            }
-            if let Some(rec) = recorded {
-                if let Some((path, file)) = trace {
-                    write_to(&path, file, outputs::trace_csv(&sc, &rec).as_bytes())?;
-                }
-                if let Some((path, file)) = timeline {
-                    let doc = serde_json::to_vec_pretty(&outputs::timeline(&sc, &rec))
-                        .map_err(internal)?;
-                    write_to(&path, file, &doc)?;
-                }
-                if let Some(path) = plot {
-                    let other = run_recorded(
-                        &sc,
-                        if arch == Arch::PSmpa {
-                            Arch::Smpa
-                        } else {
-                            Arch::PSmpa
-                        },
-                    )
-                    .map_err(internal)?;
-                    let mut both = [rec, other];
-                    both.sort_by_key(|r| r.summary.arch != Arch::PSmpa);
-                    outputs::plot(&path, &sc, &both)
-                        .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
-                }
-            }
+                report::human(&sc, &summary)
+            };
+            files::print(text.as_bytes())?;
         }
         Command::Check {
             mission,
             dot,
             any_platform,
         } => {
-            let bytes = std::fs::read(&mission).map_err(|e| {
-                bad_input(format!("{}: cannot read the file: {e}", mission.display()))
-            })?;
+            let bytes = files::read_input(&mission, "mission").map_err(Stop::Bad)?;
+            if let Some(dot) = &dot {
+                files::distinct(&[("the mission", &mission), ("--dot", dot)]).map_err(Stop::Bad)?;
+            }
+            let dot = create(dot.as_deref())?;
             // The mission borrows its names from the file for the life of the process.
             let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-            let (report, graph) = check::check(&mission, bytes, any_platform).map_err(bad_input)?;
-            print!("{report}");
-            if let Some(path) = dot {
-                write_file(&path, graph.as_bytes())?;
+            let (report, graph) = check::check(&mission, bytes, any_platform).map_err(Stop::Bad)?;
+            if let Some(mut out) = dot {
+                let _ = out.write_all(graph.as_bytes());
+                files::commit_all([out]).map_err(Stop::Bad)?;
             }
+            files::print(report.as_bytes())?;
         }
         Command::Table1 { json, plots } => {
-            let rows = table1::compute().map_err(internal)?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&rows).map_err(internal)?);
-            } else {
-                print!("{}", table1::render(&rows));
+            if let Some(dir) = &plots {
+                if dir.exists() && !dir.is_dir() {
+                    return Err(Stop::bad(format!(
+                        "{}: not a folder (--plots names a folder to write the plots into)",
+                        dir.display()
+                    )));
+                }
+                std::fs::create_dir_all(dir).map_err(|e| {
+                    Stop::bad(format!("{}: cannot create the folder: {e}", dir.display()))
+                })?;
             }
+            let rows = table1::compute().map_err(Stop::internal)?;
+            let mut done = Vec::new();
             if let Some(dir) = plots {
-                std::fs::create_dir_all(&dir)
-                    .map_err(|e| bad_input(format!("{}: {e}", dir.display())))?;
-                for sc in table1::scenarios().map_err(internal)? {
-                    let runs = [
-                        run_recorded(&sc, Arch::PSmpa),
-                        run_recorded(&sc, Arch::Smpa),
-                    ];
-                    let runs: Vec<_> = runs
-                        .into_iter()
-                        .collect::<Result<_, _>>()
-                        .map_err(internal)?;
+                for sc in table1::scenarios().map_err(Stop::internal)? {
                     let path = dir.join(format!("{}.svg", sc.name.as_str()));
-                    outputs::plot(&path, &sc, &runs)
-                        .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
+                    let mut out = Output::create(&path).map_err(Stop::Bad)?;
+                    let runs = [
+                        run_recorded(&sc, Arch::PSmpa).map_err(Stop::internal)?,
+                        run_recorded(&sc, Arch::Smpa).map_err(Stop::internal)?,
+                    ];
+                    let svg = outputs::plot(&sc, &runs)
+                        .map_err(|e| Stop::bad(format!("{}: {e}", path.display())))?;
+                    let _ = out.write_all(svg.as_bytes());
+                    done.push(out);
                 }
             }
+            files::commit_all(done).map_err(Stop::Bad)?;
+            let text = if json {
+                serde_json::to_string_pretty(&rows).map_err(Stop::internal)? + "\n"
+            } else {
+                table1::render(&rows)
+            };
+            files::print(text.as_bytes())?;
         }
         Command::Sweep {
             runs,
@@ -236,27 +229,106 @@ fn run(cli: Cli) -> Result<(), Fail> {
             json,
         } => {
             let arches = sweep::arches(arch.map(Arch::from));
-            let stats = sweep::sweep(seed, runs, &arches, !json).map_err(internal)?;
-            if json {
-                println!(
-                    "{}",
-                    serde_json::to_string_pretty(&stats).map_err(internal)?
-                );
+            let stats = sweep::sweep(seed, runs, &arches, !json).map_err(Stop::internal)?;
+            let text = if json {
+                serde_json::to_string_pretty(&stats).map_err(Stop::internal)? + "\n"
             } else {
-                print!("{}", sweep::render(&stats));
-            }
+                sweep::render(&stats)
+            };
+            files::print(text.as_bytes())?;
         }
     }
     Ok(())
 }
 
+/// Draws the plot of a streamed run beside a recorded run of the other architecture, and
+/// adds it to the outputs to commit.
+fn plot_both(
+    out: Output,
+    world: Option<WorldRecord>,
+    summary: &Summary,
+    sc: &Scenario,
+) -> Result<Output, Stop> {
+    let mut out = out;
+    let other = match summary.arch {
+        Arch::PSmpa => Arch::Smpa,
+        Arch::Smpa => Arch::PSmpa,
+    };
+    let this = Recorded {
+        summary: summary.clone(),
+        world: world.unwrap_or_default(),
+        trace: TraceRecord::default(),
+    };
+    let mut both = [this, run_recorded(sc, other).map_err(Stop::internal)?];
+    both.sort_by_key(|r| r.summary.arch != Arch::PSmpa);
+    let svg = outputs::plot(sc, &both)
+        .map_err(|e| Stop::bad(format!("{}: {e}", out.path().display())))?;
+    // An `Output` keeps a write error for its commit.
+    let _ = out.write_all(svg.as_bytes());
+    Ok(out)
+}
+
+/// One line on standard error; control characters (from a file name or an argument) are
+/// shown escaped, never sent to the terminal.
+fn say(message: &str) {
+    let _ = writeln!(
+        std::io::stderr().lock(),
+        "psmpa-sim: {}",
+        report::printable(message)
+    );
+}
+
+/// clap's message for a bad command line, in one line; help and version as clap prints them.
+fn usage_error(e: &clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    let text = e.render().to_string();
+    match e.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+            return match files::print(text.as_bytes()) {
+                Ok(()) | Err(Stop::ClosedPipe) => ExitCode::SUCCESS,
+                Err(Stop::Bad(m) | Stop::Internal(m)) => {
+                    say(&m);
+                    ExitCode::from(2)
+                }
+            };
+        }
+        ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            say("no command given: run, check, table1 or sweep (see psmpa-sim --help)");
+        }
+        _ => {
+            // "error: ..." and its notes and tips, up to the usage clap would print.
+            let mut line = String::new();
+            for l in text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more"))
+                .filter(|l| !l.is_empty())
+            {
+                if !line.is_empty() {
+                    line.push_str(if line.ends_with(':') { " " } else { "; " });
+                }
+                line.push_str(l.strip_prefix("error: ").unwrap_or(l));
+            }
+            say(&format!("{line} (see psmpa-sim --help)"));
+        }
+    }
+    ExitCode::from(2)
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(&e),
+    };
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(Fail(code, message)) => {
-            eprintln!("psmpa-sim: {message}");
-            ExitCode::from(code)
+        Ok(()) | Err(Stop::ClosedPipe) => ExitCode::SUCCESS,
+        Err(Stop::Bad(message)) => {
+            say(&message);
+            ExitCode::from(2)
+        }
+        Err(Stop::Internal(message)) => {
+            say(&message);
+            ExitCode::from(1)
         }
     }
 }

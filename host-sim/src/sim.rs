@@ -84,28 +84,32 @@ const SLACK: Duration = Duration::from_secs(1);
 
 /// Runs `scenario` under `arch` with nothing recorded (fast path for sweeps and benchmarks).
 pub fn run_summary(scenario: &Scenario, arch: Arch) -> Result<Summary, RunError> {
-    let limit = Duration::from_millis(scenario.max_ms) + SLACK;
-    // SAFETY: `simulate` pins the run on its own stack and drops it before it returns.
-    let run = unsafe { run(&Prioritized, scenario, arch, (), ()) };
-    let done = simulate(run, limit).map_err(RunError::Sim)?;
-    done.output.map(|(s, (), ())| s).map_err(RunError::Mission)
+    run_logged(scenario, arch, (), ()).map(|(s, (), ())| s)
 }
 
-/// Runs `scenario` under `arch` recording the world and the trace.
-pub fn run_recorded(scenario: &Scenario, arch: Arch) -> Result<Recorded, RunError> {
+/// Runs `scenario` under `arch`, logging the world into `log` and tracing the runtime into
+/// `sink` as the run goes; gives both back with the summary.
+pub fn run_logged<L: WorldLog, T: TraceSink>(
+    scenario: &Scenario,
+    arch: Arch,
+    log: L,
+    sink: T,
+) -> Result<(Summary, L, T), RunError> {
     let limit = Duration::from_millis(scenario.max_ms) + SLACK;
     // SAFETY: `simulate` pins the run on its own stack and drops it before it returns.
-    let run = unsafe {
-        run(
-            &Prioritized,
-            scenario,
-            arch,
-            WorldRecord::default(),
-            TraceRecord::default(),
-        )
-    };
+    let run = unsafe { run(&Prioritized, scenario, arch, log, sink) };
     let done = simulate(run, limit).map_err(RunError::Sim)?;
-    let (summary, world, trace) = done.output.map_err(RunError::Mission)?;
+    done.output.map_err(RunError::Mission)
+}
+
+/// Runs `scenario` under `arch` recording the world and the trace in memory.
+pub fn run_recorded(scenario: &Scenario, arch: Arch) -> Result<Recorded, RunError> {
+    let (summary, world, trace) = run_logged(
+        scenario,
+        arch,
+        WorldRecord::default(),
+        TraceRecord::default(),
+    )?;
     Ok(Recorded {
         summary,
         world,

@@ -383,6 +383,9 @@ pub struct ObstacleReport {
     pub fate: Fate,
     /// Put down (not due after the robot reached the kitchen door, nor after the run ended).
     pub placed: bool,
+    /// Due after the robot reached the door, so not put down. An interference neither placed
+    /// nor skipped was due after the run ended.
+    pub skipped: bool,
     /// Certain to register in at least one delivered sample (see the module doc).
     pub detectable: bool,
     /// Reaction latency, when detected and reacted to.
@@ -1264,6 +1267,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 .map(|o| ObstacleReport {
                     fate: o.fate,
                     placed: matches!(o.phase, Phase::Present | Phase::Removed | Phase::Avoided),
+                    skipped: o.phase == Phase::Skipped,
                     detectable: o.certain_samples > 0,
                     reaction_ms: o.reaction_ms.map(u64::from),
                 })

@@ -2,6 +2,7 @@
 //! timeline outputs.
 
 pub mod check;
+pub mod files;
 pub mod outputs;
 pub mod report;
 pub mod sweep;

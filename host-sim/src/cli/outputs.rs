@@ -1,18 +1,22 @@
 //! Outputs a user can look at: the trace as CSV, the sensor readings as an SVG plot (like the
 //! paper's Figs. 5 and 6), and the behaviours as a Chrome trace-event timeline (Perfetto).
 
-use std::fmt::Write as _;
-use std::path::Path;
+use std::cell::RefCell;
+use std::collections::{HashMap, VecDeque};
+use std::io::{self, Write};
+
+use embassy_time::Instant;
 
 use plotters::prelude::*;
-use psmpa_core::{Phase, TraceEvent};
+use psmpa_core::{Phase, TraceEvent, TraceSink};
 use serde_json::json;
 
+use crate::cli::files::Output;
 use crate::cli::report::arch_title;
-use crate::robot::{FetchTea, codes};
+use crate::robot::{Arch, FetchTea, codes};
 use crate::scenario::{Kind, Scenario};
-use crate::sim::Recorded;
-use crate::world::{Device, WorldEvent};
+use crate::sim::{Recorded, WorldRecord};
+use crate::world::{Device, WorldEvent, WorldLog};
 
 fn secs(ms: u64) -> f64 {
     ms as f64 / 1000.0
@@ -53,53 +57,111 @@ fn world_text(e: &WorldEvent) -> String {
     }
 }
 
-/// The trace as CSV: `time_s,sonar_m,bumper,position_m,source,event`. World events and runtime
-/// events are merged in time order; readings show 0 while a sensor is off, as on the robot.
-pub fn trace_csv(scenario: &Scenario, rec: &Recorded) -> String {
-    let mission = crate::robot::fetch_tea(scenario).map(|r| r.mission).ok();
-    let mut out = String::from("time_s,sonar_m,bumper,position_m,source,event\n");
-    let (mut sonar, mut bumper, mut pos) = (0.0f64, 0u32, 0i64);
-    let mut world = rec.world.0.iter().peekable();
-    let mut core = rec.trace.0.iter().peekable();
-    loop {
-        let next_world = world.peek().map(|w| w.0);
-        let next_core = core.peek().map(|c| c.0.as_millis());
-        let (t, source, text) = match (next_world, next_core) {
-            (None, None) => break,
-            (Some(w), c) if c.is_none_or(|c| w <= c) => {
-                let Some(&(t, p, e)) = world.next() else {
-                    break;
-                };
-                pos = p;
-                match e {
-                    WorldEvent::Sample(Device::Sonar, mm) => sonar = f64::from(mm) / 1000.0,
-                    WorldEvent::Sample(Device::Bumper, level) => bumper = level,
-                    WorldEvent::SensorOff(Device::Sonar) => sonar = 0.0,
-                    WorldEvent::SensorOff(Device::Bumper) => bumper = 0,
-                    _ => {}
-                }
-                (t, "world", world_text(&e))
-            }
-            _ => {
-                let Some((t, e)) = core.next() else { break };
-                let text = mission
-                    .as_ref()
-                    .map_or_else(|| format!("{e:?}"), |m| describe(m, e));
-                (t.as_millis(), "runtime", text)
-            }
-        };
-        let _ = writeln!(
+/// Runtime events held back by [`TraceCsv`] at most: the world logs what happened since it
+/// was last looked at only when it is next looked at, so a runtime event may be followed by
+/// world events from before it. Past this many the oldest is written anyway (memory stays
+/// bounded; the rows may then be out of time order by that much).
+const HOLD: usize = 1 << 16;
+
+/// The trace as CSV, written row by row while the run goes (memory does not grow with the
+/// run): `time_s,sonar_m,bumper,position_m,source,event`. World and runtime events are merged
+/// in time order (the world's first at the same millisecond); readings show 0 while a sensor
+/// is off, as on the robot.
+pub struct TraceCsv<W: Write> {
+    out: W,
+    mission: Option<FetchTea<'static>>,
+    sonar: f64,
+    bumper: u32,
+    pos: i64,
+    held: VecDeque<(u64, TraceEvent)>,
+    error: Option<io::Error>,
+}
+
+impl<W: Write> TraceCsv<W> {
+    /// Starts the CSV of a run of `scenario` with its header.
+    pub fn new(out: W, scenario: &Scenario) -> Self {
+        let mut csv = Self {
             out,
+            mission: crate::robot::fetch_tea(scenario).map(|r| r.mission).ok(),
+            sonar: 0.0,
+            bumper: 0,
+            pos: 0,
+            held: VecDeque::new(),
+            error: None,
+        };
+        let header = csv
+            .out
+            .write_all(b"time_s,sonar_m,bumper,position_m,source,event\n");
+        csv.keep(header);
+        csv
+    }
+
+    fn keep(&mut self, result: io::Result<()>) {
+        if let Err(e) = result {
+            self.error.get_or_insert(e);
+        }
+    }
+
+    fn row(&mut self, t: u64, source: &str, text: &str) {
+        let written = writeln!(
+            self.out,
             "{:.3},{:.3},{},{:.4},{},\"{}\"",
             secs(t),
-            sonar,
-            bumper,
-            pos as f64 / 1e6,
+            self.sonar,
+            self.bumper,
+            self.pos as f64 / 1e6,
             source,
             text.replace('"', "'")
         );
+        self.keep(written);
     }
-    out
+
+    fn release(&mut self, before: Option<u64>) {
+        while let Some(&(t, e)) = self.held.front() {
+            if before.is_some_and(|b| t >= b) {
+                break;
+            }
+            self.held.pop_front();
+            let text = self
+                .mission
+                .as_ref()
+                .map_or_else(|| format!("{e:?}"), |m| describe(m, &e));
+            self.row(t, "runtime", &text);
+        }
+    }
+
+    /// A world event.
+    pub fn world(&mut self, t: u64, pos: i64, e: WorldEvent) {
+        self.release(Some(t));
+        self.pos = pos;
+        match e {
+            WorldEvent::Sample(Device::Sonar, mm) => self.sonar = f64::from(mm) / 1000.0,
+            WorldEvent::Sample(Device::Bumper, level) => self.bumper = level,
+            WorldEvent::SensorOff(Device::Sonar) => self.sonar = 0.0,
+            WorldEvent::SensorOff(Device::Bumper) => self.bumper = 0,
+            _ => {}
+        }
+        self.row(t, "world", &world_text(&e));
+    }
+
+    /// A runtime event.
+    pub fn runtime(&mut self, at: Instant, e: &TraceEvent) {
+        if self.held.len() >= HOLD {
+            if let Some(&(t, _)) = self.held.front() {
+                self.release(Some(t.saturating_add(1)));
+            }
+        }
+        self.held.push_back((at.as_millis(), *e));
+    }
+
+    /// Writes what is held and gives the writer back, or the first write error.
+    pub fn finish(mut self) -> io::Result<W> {
+        self.release(None);
+        match self.error {
+            Some(e) => Err(e),
+            None => Ok(self.out),
+        }
+    }
 }
 
 /// Step series of one device's readings (0 while off), in seconds and reading units.
@@ -121,10 +183,23 @@ fn readings(rec: &Recorded, device: Device, scale: f64) -> Vec<(f64, f64)> {
 }
 
 /// Plots sonar and bumper readings over time for both architectures (the paper's Figs. 5 and
-/// 6): the threshold line, the instants obstacles were put down (box blue, ball orange),
+/// 6), as an SVG document: the threshold line, the instants obstacles were put down (box blue, ball orange),
 /// detections (green) and collisions (red).
-pub fn plot(path: &Path, scenario: &Scenario, runs: &[Recorded]) -> Result<(), String> {
-    let root = SVGBackend::new(path, (1200, 330 * runs.len() as u32)).into_drawing_area();
+pub fn plot(scenario: &Scenario, runs: &[Recorded]) -> Result<String, String> {
+    let mut svg = String::new();
+    draw(
+        SVGBackend::with_string(&mut svg, (1200, 330 * runs.len() as u32)).into_drawing_area(),
+        scenario,
+        runs,
+    )?;
+    Ok(svg)
+}
+
+fn draw(
+    root: DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    scenario: &Scenario,
+    runs: &[Recorded],
+) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let rows = root.split_evenly((runs.len(), 2));
     let end = runs
@@ -251,119 +326,152 @@ pub fn plot(path: &Path, scenario: &Scenario, runs: &[Recorded]) -> Result<(), S
     root.present().map_err(|e| e.to_string())
 }
 
-/// The run as a Chrome trace-event JSON document: one track per behaviour (plan, action
-/// state, each sensor, SMPA phase, the robot's legs) plus instants for obstacles.
-pub fn timeline(scenario: &Scenario, rec: &Recorded) -> serde_json::Value {
-    let mission = crate::robot::fetch_tea(scenario).map(|r| r.mission).ok();
-    let name = |e: &TraceEvent| {
-        mission
-            .as_ref()
-            .map_or_else(|| format!("{e:?}"), |m| describe(m, e))
-    };
-    let us = |ms: u64| ms * 1000;
-    let mut events = vec![
-        json!({"ph": "M", "pid": 1, "name": "process_name", "args": {"name": format!("{} under {}", scenario.name.as_str(), arch_title(rec.summary.arch))}}),
-    ];
-    let tracks = [
-        "plan",
-        "action state",
-        "sonar",
-        "bumper",
-        "camera",
-        "SMPA phase",
-        "legs",
-        "obstacles",
-    ];
-    for (tid, track) in tracks.iter().enumerate() {
-        events.push(json!({"ph": "M", "pid": 1, "tid": tid + 1, "name": "thread_name", "args": {"name": track}}));
-    }
-    let mut open: std::collections::HashMap<(usize, String), u64> =
-        std::collections::HashMap::new();
-    let mut span = |events: &mut Vec<serde_json::Value>,
-                    tid: usize,
-                    label: String,
-                    t: u64,
-                    begin: bool| {
-        if begin {
-            open.insert((tid, label), t);
-        } else if let Some(start) = open.remove(&(tid, label.clone())) {
-            events.push(json!({"ph": "X", "pid": 1, "tid": tid, "name": label, "ts": us(start), "dur": us(t - start)}));
+/// Tracks of the timeline, by thread id from 1.
+const TRACKS: [&str; 8] = [
+    "plan",
+    "action state",
+    "sonar",
+    "bumper",
+    "camera",
+    "SMPA phase",
+    "legs",
+    "obstacles",
+];
+
+/// The run as a Chrome trace-event JSON document (open in Perfetto), written event by event
+/// while the run goes: one track per behaviour (plan, action state, each sensor, SMPA phase,
+/// the robot's legs) plus instants for obstacles. Memory holds only the spans still open.
+pub struct Timeline<W: Write> {
+    out: W,
+    mission: Option<FetchTea<'static>>,
+    open: HashMap<(usize, String), u64>,
+    phase: Option<(&'static str, u64)>,
+    legs: Option<(&'static str, u64)>,
+    error: Option<io::Error>,
+}
+
+fn us(ms: u64) -> u64 {
+    ms.saturating_mul(1000)
+}
+
+impl<W: Write> Timeline<W> {
+    /// Starts the timeline of a run of `scenario` under `arch`.
+    pub fn new(out: W, scenario: &Scenario, arch: Arch) -> Self {
+        let mut t = Self {
+            out,
+            mission: crate::robot::fetch_tea(scenario).map(|r| r.mission).ok(),
+            open: HashMap::new(),
+            phase: None,
+            legs: None,
+            error: None,
+        };
+        let head = t.out.write_all(b"{\"traceEvents\": [\n");
+        t.keep(head);
+        let process = format!("{} under {}", scenario.name.as_str(), arch_title(arch));
+        t.event(&json!({"ph": "M", "pid": 1, "name": "process_name", "args": {"name": process}}));
+        for (tid, track) in TRACKS.iter().enumerate() {
+            t.event(&json!({"ph": "M", "pid": 1, "tid": tid + 1, "name": "thread_name", "args": {"name": track}}));
         }
-    };
-    let mut phase: Option<(String, u64)> = None;
-    for (at, e) in &rec.trace.0 {
+        t
+    }
+
+    fn keep(&mut self, result: io::Result<()>) {
+        if let Err(e) = result {
+            self.error.get_or_insert(e);
+        }
+    }
+
+    fn event(&mut self, e: &serde_json::Value) {
+        // Every event ends with a comma; `finish` closes the list with one more event.
+        let written = serde_json::to_writer(&mut self.out, e)
+            .map_err(io::Error::from)
+            .and_then(|()| self.out.write_all(b",\n"));
+        self.keep(written);
+    }
+
+    fn span(&mut self, tid: usize, label: String, t: u64, begin: bool) {
+        if begin {
+            self.open.insert((tid, label), t);
+        } else if let Some(start) = self.open.remove(&(tid, label.clone())) {
+            self.complete(tid, &label, start, t);
+        }
+    }
+
+    fn complete(&mut self, tid: usize, label: &str, start: u64, end: u64) {
+        self.event(&json!({"ph": "X", "pid": 1, "tid": tid, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
+    }
+
+    fn instant(&mut self, tid: usize, label: String, t: u64) {
+        self.event(&json!({"ph": "i", "s": "t", "pid": 1, "tid": tid, "name": label, "ts": us(t)}));
+    }
+
+    fn plan_name(&self, plan: psmpa_core::PlanId) -> String {
+        self.mission
+            .as_ref()
+            .and_then(|m| m.library.get(plan))
+            .map_or("plan".to_owned(), |p| p.name.to_owned())
+    }
+
+    /// A runtime event.
+    pub fn runtime(&mut self, at: Instant, e: &TraceEvent) {
         let t = at.as_millis();
-        let d = mission.as_ref().map(|m| &m.domain);
+        let name = |e: &TraceEvent| {
+            self.mission
+                .as_ref()
+                .map_or_else(|| format!("{e:?}"), |m| describe(m, e))
+        };
+        let d = self.mission.as_ref().map(|m| &m.domain);
         match *e {
             TraceEvent::PlanSelected { plan, .. } => {
-                let label = mission
-                    .as_ref()
-                    .and_then(|m| m.library.get(plan))
-                    .map_or("plan".to_owned(), |p| p.name.to_owned());
-                span(&mut events, 1, label, t, true);
+                let label = self.plan_name(plan);
+                self.span(1, label, t, true);
             }
             TraceEvent::PlanSucceeded { plan } | TraceEvent::PlanFailed { plan, .. } => {
                 if matches!(e, TraceEvent::PlanFailed { .. }) {
-                    events.push(json!({"ph": "i", "s": "t", "pid": 1, "tid": 1, "name": name(e), "ts": us(t)}));
+                    let text = name(e);
+                    self.instant(1, text, t);
                 }
-                let label = mission
-                    .as_ref()
-                    .and_then(|m| m.library.get(plan))
-                    .map_or("plan".to_owned(), |p| p.name.to_owned());
-                span(&mut events, 1, label, t, false);
+                let label = self.plan_name(plan);
+                self.span(1, label, t, false);
             }
             TraceEvent::StateEntered { action, .. } | TraceEvent::StateLeft { action, .. } => {
                 let label = d
                     .and_then(|d| d.action(action))
                     .map_or("action".to_owned(), |a| a.name.to_owned());
-                span(
-                    &mut events,
-                    2,
-                    label,
-                    t,
-                    matches!(e, TraceEvent::StateEntered { .. }),
-                );
+                self.span(2, label, t, matches!(e, TraceEvent::StateEntered { .. }));
             }
             TraceEvent::SensorOn { sensor } | TraceEvent::SensorOff { sensor } => {
                 let tid = 3 + sensor.index().min(2);
                 let label = d
                     .and_then(|d| d.sensor(sensor))
                     .map_or("sensor".to_owned(), |s| format!("{} on", s.name));
-                span(
-                    &mut events,
-                    tid,
-                    label,
-                    t,
-                    matches!(e, TraceEvent::SensorOn { .. }),
-                );
+                self.span(tid, label, t, matches!(e, TraceEvent::SensorOn { .. }));
             }
             TraceEvent::PhaseStarted { phase: p, .. } => {
-                if let Some((label, start)) = phase.take() {
-                    events.push(json!({"ph": "X", "pid": 1, "tid": 6, "name": label, "ts": us(start), "dur": us(t - start)}));
+                if let Some((label, start)) = self.phase.take() {
+                    self.complete(6, label, start, t);
                 }
-                phase = Some((
-                    match p {
-                        Phase::Sense => "sense",
-                        Phase::Act => "act",
-                    }
-                    .to_owned(),
-                    t,
-                ));
+                let label = match p {
+                    Phase::Sense => "sense",
+                    Phase::Act => "act",
+                };
+                self.phase = Some((label, t));
             }
             TraceEvent::PreconditionViolated { .. } | TraceEvent::PreconditionRestored { .. } => {
-                events.push(
-                    json!({"ph": "i", "s": "t", "pid": 1, "tid": 2, "name": name(e), "ts": us(t)}),
-                );
+                let text = name(e);
+                self.instant(2, text, t);
             }
             _ => {}
         }
-        if let (TraceEvent::StateLeft { .. }, Some((label, start))) = (e, phase.clone()) {
-            events.push(json!({"ph": "X", "pid": 1, "tid": 6, "name": label, "ts": us(start), "dur": us(t - start)}));
-            phase = None;
+        if matches!(e, TraceEvent::StateLeft { .. }) {
+            if let Some((label, start)) = self.phase.take() {
+                self.complete(6, label, start, t);
+            }
         }
     }
-    let mut legs: Option<(&'static str, u64)> = None;
-    for &(t, _, e) in &rec.world.0 {
+
+    /// A world event.
+    pub fn world(&mut self, t: u64, e: WorldEvent) {
         let next = match e {
             WorldEvent::Walk => Some("walking"),
             WorldEvent::AvoidStarted(_) => Some("side step"),
@@ -372,32 +480,45 @@ pub fn timeline(scenario: &Scenario, rec: &Recorded) -> serde_json::Value {
             | WorldEvent::Removed(_)
             | WorldEvent::Detected(..)
             | WorldEvent::Collided(_) => {
-                events.push(json!({"ph": "i", "s": "t", "pid": 1, "tid": 8, "name": world_text(&e), "ts": us(t)}));
-                continue;
+                self.instant(8, world_text(&e), t);
+                return;
             }
-            _ => continue,
+            _ => return,
         };
-        if let Some((label, start)) = legs.take() {
+        if let Some((label, start)) = self.legs.take() {
             if t > start {
-                events.push(json!({"ph": "X", "pid": 1, "tid": 7, "name": label, "ts": us(start), "dur": us(t - start)}));
+                self.complete(7, label, start, t);
             }
         }
-        legs = next.map(|l| (l, t));
+        self.legs = next.map(|l| (l, t));
     }
-    // Close what was still running when the run ended (at max_s, or on an error).
-    let end = rec.summary.time_cost_ms;
-    let mut still_open: Vec<((usize, String), u64)> = open.into_iter().collect();
-    still_open.sort();
-    for ((tid, label), start) in still_open {
-        events.push(json!({"ph": "X", "pid": 1, "tid": tid, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
+
+    /// Closes what was still running when the run ended at `end_ms` (at `max_s`, or on an
+    /// error), ends the document and gives the writer back, or the first write error.
+    pub fn finish(mut self, end_ms: u64) -> io::Result<W> {
+        let mut still_open: Vec<((usize, String), u64)> = self.open.drain().collect();
+        still_open.sort();
+        for ((tid, label), start) in still_open {
+            self.complete(tid, &label, start, end_ms);
+        }
+        if let Some((label, start)) = self.phase.take() {
+            self.complete(6, label, start, end_ms);
+        }
+        if let Some((label, start)) = self.legs.take() {
+            self.complete(7, label, start, end_ms);
+        }
+        // A last event so that the list needs no comma bookkeeping: the run's end.
+        let end =
+            json!({"ph": "i", "s": "g", "pid": 1, "tid": 1, "name": "run ended", "ts": us(end_ms)});
+        let tail = serde_json::to_writer(&mut self.out, &end)
+            .map_err(io::Error::from)
+            .and_then(|()| self.out.write_all(b"\n], \"displayTimeUnit\": \"ms\"}\n"));
+        self.keep(tail);
+        match self.error {
+            Some(e) => Err(e),
+            None => Ok(self.out),
+        }
     }
-    if let Some((label, start)) = phase {
-        events.push(json!({"ph": "X", "pid": 1, "tid": 6, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
-    }
-    if let Some((label, start)) = legs {
-        events.push(json!({"ph": "X", "pid": 1, "tid": 7, "name": label, "ts": us(start), "dur": us(end.saturating_sub(start))}));
-    }
-    json!({"traceEvents": events, "displayTimeUnit": "ms"})
 }
 
 /// `text` with control characters replaced: XML 1.0 allows none but tab and line breaks, even
@@ -406,4 +527,97 @@ fn printable(text: &str) -> String {
     text.chars()
         .map(|c| if c.is_control() { '\u{fffd}' } else { c })
         .collect()
+}
+
+/// The most sensor samples a run may take, up to `max_s`, for `--plot`: every sample is kept
+/// for the plot and drawn (two runs, a few hundred bytes a sample in all).
+pub const PLOT_SAMPLES: u64 = 1_000_000;
+
+/// Refuses `--plot` up front for a scenario whose runs may take more than [`PLOT_SAMPLES`]
+/// samples.
+pub fn plot_fits(scenario: &Scenario) -> Result<(), String> {
+    let per = |period_ms: u64| scenario.max_ms / period_ms.max(1);
+    let samples = per(scenario.sonar.period_ms).saturating_add(per(scenario.bumper_period_ms));
+    if samples > PLOT_SAMPLES {
+        return Err(format!(
+            "--plot: up to {samples} sensor samples in {} s, more than the {PLOT_SAMPLES} a \
+             plot holds: shorten max_s, lengthen the sensor periods, or leave out --plot \
+             (--trace and --timeline have no limit)",
+            scenario.max_ms / 1000
+        ));
+    }
+    Ok(())
+}
+
+/// The outputs a run writes while it goes, shared by the world's log and the runtime's
+/// trace sink ([`WorldStream`], [`TraceStream`]).
+pub struct Streams {
+    csv: Option<TraceCsv<Output>>,
+    timeline: Option<Timeline<Output>>,
+    world: Option<WorldRecord>,
+}
+
+impl Streams {
+    /// Streams a run of `scenario` under `arch` into the trace CSV and the timeline given,
+    /// and keeps the world's events when `keep_world` (for a plot).
+    pub fn new(
+        scenario: &Scenario,
+        arch: Arch,
+        csv: Option<Output>,
+        timeline: Option<Output>,
+        keep_world: bool,
+    ) -> Self {
+        Self {
+            csv: csv.map(|o| TraceCsv::new(o, scenario)),
+            timeline: timeline.map(|o| Timeline::new(o, scenario, arch)),
+            world: keep_world.then(WorldRecord::default),
+        }
+    }
+
+    /// Ends the outputs of a run that ended at `end_ms`; gives back the outputs to commit
+    /// and the world's events if kept.
+    pub fn finish(self, end_ms: u64) -> Result<(Vec<Output>, Option<WorldRecord>), String> {
+        let fail = |e: io::Error| format!("cannot write: {e}");
+        let mut outputs = Vec::new();
+        if let Some(csv) = self.csv {
+            outputs.push(csv.finish().map_err(fail)?);
+        }
+        if let Some(timeline) = self.timeline {
+            outputs.push(timeline.finish(end_ms).map_err(fail)?);
+        }
+        Ok((outputs, self.world))
+    }
+}
+
+/// The world's side of [`Streams`].
+pub struct WorldStream<'a>(pub &'a RefCell<Streams>);
+
+impl WorldLog for WorldStream<'_> {
+    fn log(&mut self, at_ms: u64, pos_um: i64, event: WorldEvent) {
+        let mut s = self.0.borrow_mut();
+        if let Some(csv) = &mut s.csv {
+            csv.world(at_ms, pos_um, event);
+        }
+        if let Some(timeline) = &mut s.timeline {
+            timeline.world(at_ms, event);
+        }
+        if let Some(world) = &mut s.world {
+            world.log(at_ms, pos_um, event);
+        }
+    }
+}
+
+/// The runtime's side of [`Streams`].
+pub struct TraceStream<'a>(pub &'a RefCell<Streams>);
+
+impl TraceSink for TraceStream<'_> {
+    fn record(&mut self, at: Instant, event: &TraceEvent) {
+        let mut s = self.0.borrow_mut();
+        if let Some(csv) = &mut s.csv {
+            csv.runtime(at, event);
+        }
+        if let Some(timeline) = &mut s.timeline {
+            timeline.runtime(at, event);
+        }
+    }
 }

@@ -126,7 +126,7 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
     let _ = writeln!(
         out,
         "scenario {} under {}",
-        j.scenario,
+        printable(&j.scenario),
         arch_title(summary.arch)
     );
     let _ = writeln!(out, "  interferences    {}", j.interferences);
@@ -172,7 +172,8 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
         .enumerate()
     {
         let what = match report.fate {
-            _ if !report.placed => "not put down (due after the robot reached the door)".to_owned(),
+            _ if report.skipped => "not put down (due after the robot reached the door)".to_owned(),
+            _ if !report.placed => "not put down (the run ended before it was due)".to_owned(),
             Fate::Unmet => "not met (taken away before the robot came near)".to_owned(),
             Fate::Detected(d) => format!(
                 "detected by the {}{}",
@@ -201,4 +202,22 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
 
 fn device(d: Device) -> &'static str {
     d.name()
+}
+
+/// `text` with control characters escaped (`\u{1b}`), so that a name from a file never
+/// reaches a terminal raw.
+pub fn printable(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.chars().any(char::is_control) {
+        return text.into();
+    }
+    text.chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect::<String>()
+        .into()
 }

@@ -1,0 +1,283 @@
+//! The command line's reading and writing, in one place: an input that is not a small regular
+//! file, an output that cannot be written, and a closed standard output all end in one line
+//! and an exit status; no output file is ever left half-written.
+
+use std::fs::{File, Metadata, OpenOptions};
+use std::io::{self, BufWriter, Read as _, Write};
+use std::path::{Path, PathBuf};
+
+use tempfile::NamedTempFile;
+
+/// The largest input read: scenarios and missions are a few kilobytes, and a file that never
+/// ends (`/dev/zero`) must not fill memory.
+pub const MAX_INPUT: u64 = 1 << 20;
+
+/// Why a command stopped before the end.
+#[derive(Debug)]
+pub enum Stop {
+    /// Bad input, or an output that could not be written: exit 2 with this line.
+    Bad(String),
+    /// A run that could not be completed (it deadlocked): exit 1 with this line.
+    Internal(String),
+    /// Standard output was closed by its reader (`| head`): nothing is lost that was asked
+    /// for, so the command ends quietly with status 0.
+    ClosedPipe,
+}
+
+impl Stop {
+    /// Bad input, or an output that could not be written.
+    pub fn bad(message: impl ToString) -> Self {
+        Self::Bad(message.to_string())
+    }
+
+    /// A run that could not be completed.
+    pub fn internal(message: impl ToString) -> Self {
+        Self::Internal(message.to_string())
+    }
+}
+
+fn kind(meta: &Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt as _;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+    }
+    if meta.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Reads the input file at `path`, `what` it should be (`"scenario"`, `"mission"`): a regular
+/// file of at most [`MAX_INPUT`] bytes. A FIFO, device or directory is refused before it is
+/// opened (opening a FIFO waits for a writer forever; a device may never end).
+pub fn read_input(path: &Path, what: &str) -> Result<Vec<u8>, String> {
+    let at = |message: String| format!("{}: {message}", path.display());
+    let refuse = |meta: &Metadata| {
+        at(format!(
+            "is {}, not a {what} file: give the path of a file",
+            kind(meta)
+        ))
+    };
+    let meta = std::fs::metadata(path).map_err(|e| at(format!("cannot read the file: {e}")))?;
+    if !meta.is_file() {
+        return Err(refuse(&meta));
+    }
+    let file = File::open(path).map_err(|e| at(format!("cannot read the file: {e}")))?;
+    // What was opened, in case the path changed since it was looked at.
+    let meta = file
+        .metadata()
+        .map_err(|e| at(format!("cannot read the file: {e}")))?;
+    if !meta.is_file() {
+        return Err(refuse(&meta));
+    }
+    let too_large = || {
+        at(format!(
+            "the file is larger than {} MiB, the limit for a {what} file",
+            MAX_INPUT >> 20
+        ))
+    };
+    if meta.len() > MAX_INPUT {
+        return Err(too_large());
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_INPUT + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| at(format!("cannot read the file: {e}")))?;
+    if bytes.len() as u64 > MAX_INPUT {
+        return Err(too_large());
+    }
+    Ok(bytes)
+}
+
+/// Writes `bytes` to standard output: a closed pipe is [`Stop::ClosedPipe`], any other
+/// failure (`>/dev/full`) one line.
+pub fn print(bytes: &[u8]) -> Result<(), Stop> {
+    let mut out = io::stdout().lock();
+    out.write_all(bytes)
+        .and_then(|()| out.flush())
+        .map_err(|e| match e.kind() {
+            io::ErrorKind::BrokenPipe => Stop::ClosedPipe,
+            _ => Stop::bad(format!("standard output: cannot write: {e}")),
+        })
+}
+
+/// Where an output's bytes go until it is committed.
+enum Sink {
+    /// A temporary file beside the target, renamed over it when complete.
+    Staged(BufWriter<NamedTempFile>),
+    /// A device or pipe that already exists (`/dev/null`, `>(gzip > t.gz)`): written in
+    /// place, as there is nothing to rename.
+    Direct(BufWriter<File>),
+}
+
+/// An output file being written. Nothing appears at its path until [`commit`] succeeds; a
+/// write error is kept and reported at [`commit`], and dropping it uncommitted leaves the
+/// target as it was.
+///
+/// [`commit`]: Output::commit
+pub struct Output {
+    path: PathBuf,
+    sink: Sink,
+    error: Option<io::Error>,
+}
+
+impl Output {
+    /// Starts writing the output at `path`; fails at once, with one line, when it could
+    /// never be written (no such folder, a directory, no permission).
+    pub fn create(path: &Path) -> Result<Self, String> {
+        let fail = |e: io::Error| format!("{}: cannot write: {e}", path.display());
+        // Write through a symbolic link to the file it names.
+        let target = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+        let sink = match std::fs::metadata(&target) {
+            Ok(meta) if meta.is_dir() => {
+                return Err(format!("{}: is a directory, not a file", path.display()));
+            }
+            Ok(meta) if !meta.is_file() => Sink::Direct(BufWriter::new(
+                OpenOptions::new().write(true).open(&target).map_err(fail)?,
+            )),
+            _ => {
+                let dir = match target.parent() {
+                    Some(d) if !d.as_os_str().is_empty() => d,
+                    _ => Path::new("."),
+                };
+                let name = target
+                    .file_name()
+                    .ok_or_else(|| format!("{}: not a file name", path.display()))?;
+                let mut builder = tempfile::Builder::new();
+                let prefix = format!(".{}.", name.to_string_lossy());
+                builder.prefix(&prefix).suffix(".part");
+                #[cfg(unix)]
+                {
+                    // As any new file: 0666 less the umask (a temporary file is 0600).
+                    use std::os::unix::fs::PermissionsExt as _;
+                    builder.permissions(std::fs::Permissions::from_mode(0o666));
+                }
+                let file = builder.tempfile_in(dir).map_err(|e| {
+                    // tempfile ends its message with the temporary path (`... at path
+                    // "/d/.x.part"`): name the path the user gave instead.
+                    let message = e.to_string();
+                    let cause = message.split(" at path ").next().unwrap_or(&message);
+                    format!("{}: cannot write: {cause}", path.display())
+                })?;
+                Sink::Staged(BufWriter::new(file))
+            }
+        };
+        Ok(Self {
+            path: target,
+            sink,
+            error: None,
+        })
+    }
+
+    /// The path the output is for.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Writes everything buffered; the first error, if any, as one line.
+    pub fn finish(&mut self) -> Result<(), String> {
+        let flushed = match &mut self.sink {
+            Sink::Staged(w) => w.flush(),
+            Sink::Direct(w) => w.flush(),
+        };
+        if let Err(e) = flushed {
+            self.error.get_or_insert(e);
+        }
+        match &self.error {
+            Some(e) => Err(format!("{}: cannot write: {e}", self.path.display())),
+            None => Ok(()),
+        }
+    }
+
+    /// Puts the complete output in place.
+    pub fn commit(mut self) -> Result<(), String> {
+        self.finish()?;
+        let fail = |e: io::Error| format!("{}: cannot write: {e}", self.path.display());
+        match self.sink {
+            Sink::Staged(w) => {
+                let file = w.into_inner().map_err(|e| fail(e.into_error()))?;
+                file.persist(&self.path)
+                    .map(drop)
+                    .map_err(|e| fail(e.error))
+            }
+            Sink::Direct(_) => Ok(()),
+        }
+    }
+}
+
+impl Write for Output {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        // After a failure the rest is dropped here and the failure reported at `flush`: a
+        // streaming writer must not stop the run it records.
+        if self.error.is_some() {
+            return Ok(buf.len());
+        }
+        let written = match &mut self.sink {
+            Sink::Staged(w) => w.write_all(buf),
+            Sink::Direct(w) => w.write_all(buf),
+        };
+        if let Err(e) = written {
+            self.error = Some(e);
+        }
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Writes complete outputs: every one is flushed first, so a full disk fails before any is
+/// put in place, then each is renamed over its target.
+pub fn commit_all(outputs: impl IntoIterator<Item = Output>) -> Result<(), String> {
+    let mut outputs: Vec<Output> = outputs.into_iter().collect();
+    for o in &mut outputs {
+        o.finish()?;
+    }
+    outputs.into_iter().try_for_each(Output::commit)
+}
+
+/// The file a path names: symbolic links and `..` resolved where the file or its folder
+/// exists, so two spellings of one file compare equal.
+fn identity(path: &Path) -> PathBuf {
+    if let Ok(p) = std::fs::canonicalize(path) {
+        return p;
+    }
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    match (abs.parent(), abs.file_name()) {
+        (Some(dir), Some(name)) => std::fs::canonicalize(dir).map_or(abs.clone(), |d| d.join(name)),
+        _ => abs,
+    }
+}
+
+/// Refuses, before anything runs, two outputs that name the same file, or an output that
+/// names the input: each `(what, path)` is an option (`--trace`) or the input's role.
+pub fn distinct(named: &[(&str, &Path)]) -> Result<(), String> {
+    for (i, (a, pa)) in named.iter().enumerate() {
+        let id = identity(pa);
+        // Devices (`/dev/null`) may take several outputs.
+        if std::fs::metadata(&id).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+            continue;
+        }
+        for (b, pb) in named.iter().skip(i + 1) {
+            if identity(pb) == id {
+                return Err(format!(
+                    "{}: named by both {a} and {b}: give each output its own file",
+                    pb.display()
+                ));
+            }
+        }
+    }
+    Ok(())
+}

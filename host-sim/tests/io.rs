@@ -1,0 +1,440 @@
+//! The command line's reading and writing under hostile conditions (issue 16): closed pipes,
+//! full disks, devices and FIFOs as inputs, outputs that collide or fail. Each ends in exit
+//! status 0 (a closed pipe) or 2 with one line, and leaves no partial file.
+
+mod common;
+
+use common::{assert_success, bin, file};
+
+use std::io::Read as _;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn repo(path: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(path)
+}
+
+fn sonar8() -> PathBuf {
+    repo("scenarios/sonar-8.json")
+}
+
+/// A fresh folder for one test.
+fn folder(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("psmpa-io-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Waits at most 20 s for `child` (a hang fails the test instead of stalling it).
+fn finish(mut child: Child) -> Output {
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(20) {
+            let _ = child.kill();
+            panic!("the command did not end within 20 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// Exit status 2, nothing on stdout, one line on stderr containing each of `expected`.
+fn assert_refused(out: &Output, expected: &[&str]) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
+    assert!(out.stdout.is_empty(), "nothing printed before the failure");
+    assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for e in expected {
+        assert!(stderr.contains(e), "expected `{e}` in: {stderr}");
+    }
+}
+
+/// The commands that print something, each with the arguments to print a lot or a little.
+fn printing_commands() -> Vec<Vec<String>> {
+    let s = sonar8().display().to_string();
+    let m = repo("missions/fetch-tea.json").display().to_string();
+    let args = |a: &[&str]| a.iter().map(|x| (*x).to_owned()).collect::<Vec<_>>();
+    vec![
+        args(&["run", &s, "--arch", "psmpa"]),
+        args(&["run", &s, "--arch", "psmpa", "--json"]),
+        args(&["table1"]),
+        args(&["table1", "--json"]),
+        args(&["sweep", "--runs", "4"]),
+        args(&["check", &m]),
+    ]
+}
+
+#[test]
+fn a_closed_pipe_ends_the_command_quietly() {
+    for args in printing_commands() {
+        // The reader goes away before anything is written ...
+        let mut child = bin()
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let out = finish(child);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {stderr}");
+        assert!(stderr.is_empty(), "{args:?}: {stderr}");
+        // ... or after one byte (`| head -c1`).
+        let mut child = bin()
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut stdout = child.stdout.take().unwrap();
+        let mut byte = [0u8];
+        stdout.read_exact(&mut byte).unwrap();
+        drop(stdout);
+        let out = finish(child);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {stderr}");
+        assert!(stderr.is_empty(), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn a_full_standard_output_is_one_line_and_status_2() {
+    for args in printing_commands() {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let out = bin().args(&args).stdout(full).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{args:?}: {stderr}");
+        assert!(stderr.contains("standard output"), "{stderr}");
+        assert!(stderr.contains("No space left"), "{stderr}");
+    }
+}
+
+#[test]
+fn devices_and_folders_are_refused_before_they_are_read() {
+    for (input, what) in [
+        ("/dev/zero", "a device"),
+        ("/dev/urandom", "a device"),
+        ("/tmp", "a directory"),
+    ] {
+        let out = finish(
+            bin()
+                .args(["run", input, "--arch", "psmpa"])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        assert_refused(&out, &[input, what, "scenario"]);
+        let out = finish(
+            bin()
+                .args(["check", input])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        assert_refused(&out, &[input, what, "mission"]);
+    }
+}
+
+#[test]
+fn a_file_larger_than_the_limit_is_refused_unread() {
+    // Valid JSON up to the limit (leading spaces), so only the size is at fault.
+    let mut big = " ".repeat(1 << 20);
+    big.push_str(r#"{"name": "x", "interferences": []}"#);
+    let path = file("big.json", &big);
+    let out = bin()
+        .arg("run")
+        .arg(&path)
+        .args(["--arch", "psmpa"])
+        .output()
+        .unwrap();
+    assert_refused(&out, &["big.json", "larger than 1 MiB"]);
+    let out = bin().arg("check").arg(&path).output().unwrap();
+    assert_refused(&out, &["big.json", "larger than 1 MiB", "mission"]);
+}
+
+#[test]
+fn a_fifo_is_refused_without_waiting_for_a_writer() {
+    let dir = folder("fifo");
+    let fifo = dir.join("f");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    for args in [vec!["run", "f", "--arch", "psmpa"], vec!["check", "f"]] {
+        let child = bin()
+            .current_dir(&dir)
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        assert_refused(&finish(child), &["f: is a FIFO"]);
+    }
+}
+
+/// Runs `sonar-8` under P-SMPA with `extra` arguments, in `dir`.
+fn run_in(dir: &Path, extra: &[&str]) -> Output {
+    bin()
+        .current_dir(dir)
+        .arg("run")
+        .arg(sonar8())
+        .args(["--arch", "psmpa"])
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn two_outputs_naming_one_file_are_refused_before_the_run() {
+    let dir = folder("same");
+    let out = run_in(
+        dir.as_path(),
+        &["--trace", "same.out", "--timeline", "same.out"],
+    );
+    assert_refused(&out, &["same.out", "--trace", "--timeline"]);
+    // Another spelling of the same file, and the plot.
+    std::fs::write(dir.join("x"), "keep").unwrap();
+    let out = run_in(dir.as_path(), &["--trace", "x", "--plot", "./x"]);
+    assert_refused(&out, &["--trace", "--plot"]);
+    assert_eq!(std::fs::read_to_string(dir.join("x")).unwrap(), "keep");
+    assert_eq!(names_in(&dir), ["x"], "nothing else written");
+    // An output over the input.
+    let copy = dir.join("s.json");
+    std::fs::copy(sonar8(), &copy).unwrap();
+    let before = std::fs::read(&copy).unwrap();
+    let out = bin()
+        .arg("run")
+        .arg(&copy)
+        .args(["--arch", "psmpa", "--trace"])
+        .arg(&copy)
+        .output()
+        .unwrap();
+    assert_refused(&out, &["the scenario", "--trace"]);
+    assert_eq!(std::fs::read(&copy).unwrap(), before);
+    let mission = dir.join("m.json");
+    std::fs::copy(repo("missions/fetch-tea.json"), &mission).unwrap();
+    let out = bin()
+        .arg("check")
+        .arg(&mission)
+        .arg("--dot")
+        .arg(&mission)
+        .output()
+        .unwrap();
+    assert_refused(&out, &["the mission", "--dot"]);
+}
+
+#[test]
+fn a_failing_output_leaves_every_other_file_as_it_was() {
+    let dir = folder("partial");
+    std::fs::write(dir.join("left.csv"), "keep").unwrap();
+    let out = run_in(&dir, &["--trace", "left.csv", "--plot", "nodir/p.svg"]);
+    assert_refused(&out, &["nodir/p.svg", "No such file"]);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("left.csv")).unwrap(),
+        "keep"
+    );
+    // A device that fills up: the failure, and no report before it.
+    let out = run_in(&dir, &["--trace", "left.csv", "--timeline", "/dev/full"]);
+    assert_refused(&out, &["/dev/full", "No space left"]);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("left.csv")).unwrap(),
+        "keep"
+    );
+    assert_eq!(names_in(&dir), ["left.csv"], "no temporary file left");
+    // A plot folder that is a file.
+    let out = bin()
+        .args(["table1", "--plots"])
+        .arg(dir.join("left.csv"))
+        .output()
+        .unwrap();
+    assert_refused(&out, &["left.csv", "not a folder"]);
+}
+
+#[test]
+fn outputs_appear_complete_and_a_device_takes_them_in_place() {
+    let dir = folder("complete");
+    let out = run_in(
+        &dir,
+        &[
+            "--trace",
+            "t.csv",
+            "--timeline",
+            "/dev/null",
+            "--plot",
+            "/dev/null",
+        ],
+    );
+    assert_success(&out);
+    assert_eq!(names_in(&dir), ["t.csv"]);
+    let csv = std::fs::read_to_string(dir.join("t.csv")).unwrap();
+    // Rows in time order, world and runtime merged.
+    let times: Vec<f64> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert!(times.windows(2).all(|w| w[0] <= w[1]), "time order");
+    assert!(csv.contains(",world,") && csv.contains(",runtime,"));
+}
+
+#[test]
+fn a_long_run_streams_its_trace() {
+    // 120 s of 1 ms samples of two sensors: about 240,000 rows, each written as it happens.
+    let dir = folder("long");
+    let scenario = dir.join("long.json");
+    std::fs::write(
+        &scenario,
+        r#"{"name": "long", "door_m": 1000, "max_s": 120, "robot": {"speed_mps": 0.001},
+            "sonar": {"period_ms": 1}, "bumper": {"period_ms": 1}, "interferences": []}"#,
+    )
+    .unwrap();
+    let out = bin()
+        .arg("run")
+        .arg(&scenario)
+        .args(["--arch", "psmpa", "--trace"])
+        .arg(dir.join("t.csv"))
+        .arg("--timeline")
+        .arg(dir.join("t.json"))
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let csv = std::fs::read_to_string(dir.join("t.csv")).unwrap();
+    assert!(
+        csv.lines().count() > 200_000,
+        "{} rows",
+        csv.lines().count()
+    );
+    let last = csv.lines().last().unwrap();
+    assert!(last.starts_with("120.000,"), "the run's end: {last}");
+    let doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("t.json")).unwrap()).unwrap();
+    let events = doc["traceEvents"].as_array().unwrap();
+    assert!(
+        events
+            .iter()
+            .any(|e| e["name"] == "sonar on" && e["dur"] == 120_000_000)
+    );
+    // The plot keeps every sample, so it is refused up front for a run that may be long.
+    let longer = dir.join("longer.json");
+    std::fs::write(
+        &longer,
+        std::fs::read_to_string(&scenario)
+            .unwrap()
+            .replace("\"max_s\": 120", "\"max_s\": 86400"),
+    )
+    .unwrap();
+    let start = Instant::now();
+    let out = bin()
+        .arg("run")
+        .arg(&longer)
+        .args(["--arch", "psmpa", "--plot"])
+        .arg(dir.join("p.svg"))
+        .output()
+        .unwrap();
+    assert_refused(&out, &["--plot", "172800000 sensor samples"]);
+    assert!(start.elapsed() < Duration::from_secs(10), "refused at once");
+}
+
+#[test]
+fn an_interference_due_after_the_run_says_so() {
+    let short = file(
+        "short.json",
+        &std::fs::read_to_string(repo("scenarios/sonar-6.json"))
+            .unwrap()
+            .replace("\"max_s\": 600", "\"max_s\": 0.001"),
+    );
+    let out = bin()
+        .arg("run")
+        .arg(&short)
+        .args(["--arch", "psmpa"])
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("not put down (the run ended before it was due)"),
+        "{text}"
+    );
+    assert!(!text.contains("reached the door"), "{text}");
+    // Due while the robot stands at the door (it arrives at 5 s and opens the door until
+    // 7 s): that reason, not the run's end.
+    let late = file(
+        "late.json",
+        r#"{"name": "late", "door_m": 0.5, "interferences": [{"kind": "box", "at_s": 6}]}"#,
+    );
+    let out = bin()
+        .arg("run")
+        .arg(&late)
+        .args(["--arch", "psmpa"])
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("not put down (due after the robot reached the door)"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_bad_command_line_is_one_line() {
+    let s = sonar8().display().to_string();
+    for args in [
+        vec!["run"],
+        vec!["--bogus"],
+        vec!["run", &s, "--arch", "foo"],
+        vec![],
+        vec!["sweep", "--runs", "0"],
+        vec!["run", &s, "--arch", "psmpa", "--tarce", "x"],
+    ] {
+        let out = bin().args(&args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{args:?}: {stderr}");
+        assert!(stderr.contains("--help"), "{stderr}");
+    }
+    // Help still prints in full, on stdout.
+    let out = bin().args(["run", "--help"]).output().unwrap();
+    assert_success(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("--timeline"));
+}
+
+#[test]
+fn control_characters_never_reach_the_terminal() {
+    let odd = file(
+        "odd.json",
+        r#"{"name": "a\u001b[31mred", "interferences": []}"#,
+    );
+    let out = bin()
+        .arg("run")
+        .arg(&odd)
+        .args(["--arch", "psmpa"])
+        .output()
+        .unwrap();
+    assert_success(&out);
+    assert!(!out.stdout.contains(&0x1b), "ESC printed raw");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("a\\u{1b}[31mred"));
+    let out = bin()
+        .args(["run", "no\u{1b}[31mfile", "--arch", "psmpa"])
+        .output()
+        .unwrap();
+    assert_refused(&out, &["no\\u{1b}[31mfile", "cannot read"]);
+}
