@@ -632,25 +632,47 @@ pub enum Problem {
     ThresholdOutsideRange,
 }
 
+/// A value from a file as a message shows it: `1e308` is not written out in 309 digits.
+struct Shown(f64);
+
+impl fmt::Display for Shown {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let a = self.0.abs();
+        if a >= 1e15 || (a != 0.0 && a < 1e-9) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
+}
+
 impl fmt::Display for Problem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
-            Self::Negative(v) => write!(f, "must not be negative, got {v}"),
-            Self::NotPositive(v) => write!(f, "must be greater than 0, got {v}"),
-            Self::BelowOneMillisecond(v) => write!(f, "must be at least 0.001 s, got {v}"),
-            Self::BelowUnit { value, least } => write!(f, "must be at least {least}, got {value}"),
-            Self::NotWhole(v) => write!(f, "must be a whole number of milliseconds, got {v}"),
+            Self::Negative(v) => write!(f, "must not be negative, got {}", Shown(v)),
+            Self::NotPositive(v) => write!(f, "must be greater than 0, got {}", Shown(v)),
+            Self::BelowOneMillisecond(v) => write!(f, "must be at least 0.001 s, got {}", Shown(v)),
+            Self::BelowUnit { value, least } => {
+                write!(f, "must be at least {least}, got {}", Shown(value))
+            }
+            Self::NotWhole(v) => write!(
+                f,
+                "must be a whole number of milliseconds, got {}",
+                Shown(v)
+            ),
             Self::OutOfRange { value, min, max } => {
-                write!(f, "must lie between {min} and {max}, got {value}")
+                write!(f, "must lie between {min} and {max}, got {}", Shown(value))
             }
             Self::Empty => f.write_str("must not be empty"),
             Self::NotWholeMicros { value, max } => write!(
                 f,
-                "must be a whole number of microseconds from 0 to {max}, got {value}"
+                "must be a whole number of microseconds from 0 to {max}, got {}",
+                Shown(value)
             ),
             Self::NotWholeMillis { value, max } => write!(
                 f,
-                "must be a whole number of milliseconds from 0 to {max}, got {value}"
+                "must be a whole number of milliseconds from 0 to {max}, got {}",
+                Shown(value)
             ),
             Self::ThresholdOutsideRange => {
                 f.write_str("threshold_m must lie above min_m and at most max_m")
@@ -1224,7 +1246,8 @@ mod tests {
         for us in ["-1", "0.5", "100001", "1e300"] {
             let json =
                 std::format!(r#"{{"name":"x","robot":{{"plan_us":{us}}},"interferences":[]}}"#);
-            let shown: f64 = us.parse().unwrap();
+            // As written in the file, `1e300` too (not in 301 digits).
+            let shown = us;
             assert_eq!(
                 err(&json).to_string(),
                 std::format!(

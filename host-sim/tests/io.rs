@@ -438,3 +438,23 @@ fn control_characters_never_reach_the_terminal() {
         .unwrap();
     assert_refused(&out, &["no\\u{1b}[31mfile", "cannot read"]);
 }
+
+#[test]
+fn a_huge_value_is_shown_short() {
+    let path = file(
+        "huge.json",
+        r#"{"name": "x", "door_m": 1e308, "interferences": []}"#,
+    );
+    let out = bin()
+        .arg("run")
+        .arg(&path)
+        .args(["--arch", "psmpa"])
+        .output()
+        .unwrap();
+    assert_refused(&out, &["door_m", "got 1e308"]);
+    assert!(
+        out.stderr.len() < 200,
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
