@@ -11,6 +11,8 @@ pub mod backend;
 #[cfg(feature = "std")]
 pub mod cli;
 #[cfg(feature = "std")]
+pub mod json;
+#[cfg(feature = "std")]
 pub mod load;
 pub mod robot;
 pub mod run;

@@ -1,7 +1,8 @@
 //! Loading scenario files on the host, with errors that name the file and the field or the
 //! line and column.
 //!
-//! The scenario is parsed by `serde-json-core`, the parser the firmware uses. That parser
+//! A file must first be strict JSON ([`json::strict`], which also decodes `\u` escapes). The
+//! scenario is then parsed by `serde-json-core`, the parser the firmware uses. That parser
 //! reports no position and drops serde's messages (its message-keeping feature can panic), so
 //! when it rejects a file the same file is read once more with `serde_json` and
 //! `serde_path_to_error`, only to say where and what.
@@ -9,6 +10,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::json;
 use crate::scenario::{Scenario, ScenarioError, ScenarioFile};
 
 /// A scenario file that could not be used.
@@ -39,24 +41,39 @@ pub fn load(path: &Path) -> Result<Scenario, LoadError> {
 
 /// Validates scenario bytes that came from `file`.
 pub fn parse(file: &Path, bytes: &[u8]) -> Result<Scenario, LoadError> {
-    Scenario::parse(bytes).map_err(|e| LoadError {
+    let fail = |message: String| LoadError {
         file: file.to_path_buf(),
-        message: match e {
+        // Names and keys from the file may hold control characters: never print them raw.
+        message: json::printable(&message).into_owned(),
+    };
+    if let Some(message) = not_an_object(bytes) {
+        return Err(fail(message.into()));
+    }
+    let doc = json::strict(bytes).map_err(|e| fail(e.to_string()))?;
+    Scenario::parse(&doc).map_err(|e| {
+        fail(match e {
+            // The original bytes: serde_json decodes escapes itself, and columns stay true.
             ScenarioError::Json(inner) => diagnose(bytes).unwrap_or_else(|| inner.to_string()),
             invalid @ ScenarioError::Invalid { .. } => invalid.to_string(),
-        },
+        })
     })
+}
+
+/// A file that is empty or starts with something other than an object. Checked before the
+/// JSON itself: a scenario is an object whatever else the file holds (even 10⁶ `[`).
+fn not_an_object(bytes: &[u8]) -> Option<&'static str> {
+    match bytes.iter().find(|b| !b.is_ascii_whitespace()) {
+        None => Some("the file is empty: a scenario is a JSON object `{ ... }`"),
+        // Not ASCII: a byte order mark or bad UTF-8, which `json::strict` names.
+        Some(&b) if b != b'{' && b.is_ascii() => {
+            Some("the top level: expected a JSON object `{ ... }`")
+        }
+        Some(_) => None,
+    }
 }
 
 /// Where and why a file that `serde-json-core` rejected is wrong, according to `serde_json`.
 fn diagnose(bytes: &[u8]) -> Option<String> {
-    match bytes.iter().find(|b| !b.is_ascii_whitespace()) {
-        None => return Some("the file is empty: a scenario is a JSON object `{ ... }`".into()),
-        Some(&b) if b != b'{' => {
-            return Some("the top level: expected a JSON object `{ ... }`".into());
-        }
-        Some(_) => {}
-    }
     // serde_json takes an array for a struct (fields by position), serde-json-core does not.
     let value = serde_json::from_slice::<serde_json::Value>(bytes).ok();
     if let Some(path) = value.as_ref().and_then(array_for_object) {

@@ -13,7 +13,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use psmpa_sim::cli::files::{self, Output, Stop};
 use psmpa_sim::cli::outputs::{Streams, TraceStream, WorldStream};
 use psmpa_sim::cli::{check, outputs, report, sweep, table1};
-use psmpa_sim::load;
+use psmpa_sim::{json, load};
 use psmpa_sim::robot::Arch;
 use psmpa_sim::run::Summary;
 use psmpa_sim::scenario::Scenario;
@@ -184,7 +184,12 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 let _ = out.write_all(graph.as_bytes());
                 files::commit_all([out]).map_err(Stop::Bad)?;
             }
-            files::print(report.as_bytes())?;
+            // Names are shown as the file has them; a control character (DEL, C1) escaped.
+            let shown: String = report
+                .lines()
+                .map(|l| json::printable(l) + "\n")
+                .collect();
+            files::print(shown.as_bytes())?;
         }
         Command::Table1 { json, plots } => {
             if let Some(dir) = &plots {
@@ -274,7 +279,7 @@ fn say(message: &str) {
     let _ = writeln!(
         std::io::stderr().lock(),
         "psmpa-sim: {}",
-        report::printable(message)
+        json::printable(message)
     );
 }
 

@@ -431,12 +431,12 @@ fn control_characters_never_reach_the_terminal() {
         .unwrap();
     assert_success(&out);
     assert!(!out.stdout.contains(&0x1b), "ESC printed raw");
-    assert!(String::from_utf8_lossy(&out.stdout).contains("a\\u{1b}[31mred"));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("a\\u001b[31mred"));
     let out = bin()
         .args(["run", "no\u{1b}[31mfile", "--arch", "psmpa"])
         .output()
         .unwrap();
-    assert_refused(&out, &["no\\u{1b}[31mfile", "cannot read"]);
+    assert_refused(&out, &["no\\u001b[31mfile", "cannot read"]);
 }
 
 #[test]

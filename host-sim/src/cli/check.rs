@@ -9,36 +9,27 @@ use psmpa_core::mission::{self, AnyBehaviour, JsonError, LoadError, Problem, Reg
 use psmpa_core::planner::{Planner, PlanningError, Strategy};
 use psmpa_core::{Fsm, Mission, PlanId, SensorSet, Target};
 
+use crate::json;
 use crate::robot::NaoRegistry;
 
 /// Capacities used when the mission is checked without this robot: the largest the core
 /// supports in a fact set, a sensor set and a plan set.
 type Large<'a> = Mission<'a, 32, 64, 32, 16>;
 
-/// A mission that failed to load, as one line naming the file and what is wrong.
-pub fn error_line(file: &Path, bytes: &[u8], e: &LoadError<'_>) -> String {
-    if !matches!(e.problem, Problem::Json(_)) {
-        return format!("{}: {e}", file.display());
-    }
-    // serde-json-core reports no position: ask serde_json where the text breaks.
-    match serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
-        Err(json) => format!(
-            "{}: {e} (line {}, column {})",
-            file.display(),
-            json.line(),
-            json.column()
-        ),
-        // Well-formed after all: serde-json-core stopped inside a number it cannot read as a
-        // whole number (`1e30`, `1.5`), the only values a mission holds besides names.
-        Ok(_) if e.problem == Problem::Json(JsonError::Syntax) => {
-            let e = LoadError {
-                problem: Problem::Json(JsonError::Number),
-                ..*e
-            };
-            format!("{}: {e}", file.display())
-        }
-        Ok(_) => format!("{}: {e}", file.display()),
-    }
+/// A mission that failed to load, as one line naming the file and what is wrong. The bytes
+/// were strict JSON ([`json::strict`]), so a syntax error from `serde-json-core` can only be a
+/// number it cannot read as a whole number (`1e30`, `1.5`), the only values a mission holds
+/// besides names.
+pub fn error_line(file: &Path, e: &LoadError<'_>) -> String {
+    let e = match e.problem {
+        Problem::Json(JsonError::Syntax) => LoadError {
+            problem: Problem::Json(JsonError::Number),
+            ..*e
+        },
+        _ => *e,
+    };
+    // Names borrow from the file: keep any control character escaped.
+    format!("{}: {}", file.display(), json::printable(&e.to_string()))
 }
 
 fn names<const NS: usize, const NA: usize>(
@@ -253,32 +244,44 @@ fn reachable_then_describe<const NS: usize, const NA: usize, const NP: usize, co
     }
 }
 
-/// Loads `bytes` for this robot (or for any platform) and describes it.
+/// Loads `bytes` for this robot (or for any platform) and describes it. The `'static` bound is
+/// the command line's (it leaks the file); [`check_bytes`] takes any lifetime.
 pub fn check(
     file: &Path,
     bytes: &'static [u8],
     any_platform: bool,
 ) -> Result<(String, String), String> {
+    check_bytes(file, bytes, any_platform)
+}
+
+/// [`check`] for bytes of any lifetime: the file must be strict JSON ([`json::strict`]); its
+/// decoded text is loaded, and only owned text comes out.
+pub fn check_bytes(
+    file: &Path,
+    bytes: &[u8],
+    any_platform: bool,
+) -> Result<(String, String), String> {
     fn with<R: Registry>(
         file: &Path,
-        bytes: &'static [u8],
+        bytes: &[u8],
         registry: &R,
         large: bool,
     ) -> Result<(String, String), String> {
         if large {
             let loaded: mission::Loaded<'_, R::Sensor, R::Action, 32, 64, 32, 16> =
-                mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
+                mission::load(bytes, registry).map_err(|e| error_line(file, &e))?;
             let m: Large<'_> = loaded.mission;
             reachable_then_describe(file, &m)
         } else {
             let loaded: mission::Loaded<'_, R::Sensor, R::Action, 4, 8, 4, 6> =
-                mission::load(bytes, registry).map_err(|e| error_line(file, bytes, &e))?;
+                mission::load(bytes, registry).map_err(|e| error_line(file, &e))?;
             reachable_then_describe(file, &loaded.mission)
         }
     }
+    let doc = json::strict(bytes).map_err(|e| format!("{}: {e}", file.display()))?;
     if any_platform {
-        with(file, bytes, &AnyBehaviour, true)
+        with(file, &doc, &AnyBehaviour, true)
     } else {
-        with(file, bytes, &NaoRegistry, false)
+        with(file, &doc, &NaoRegistry, false)
     }
 }

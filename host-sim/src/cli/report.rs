@@ -126,7 +126,8 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
     let _ = writeln!(
         out,
         "scenario {} under {}",
-        printable(&j.scenario),
+        // An escaped control character in the name (`\u001b`) is valid JSON: never print it raw.
+        crate::json::printable(&j.scenario),
         arch_title(summary.arch)
     );
     let _ = writeln!(out, "  interferences    {}", j.interferences);
@@ -202,22 +203,4 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
 
 fn device(d: Device) -> &'static str {
     d.name()
-}
-
-/// `text` with control characters escaped (`\u{1b}`), so that a name from a file never
-/// reaches a terminal raw.
-pub fn printable(text: &str) -> std::borrow::Cow<'_, str> {
-    if !text.chars().any(char::is_control) {
-        return text.into();
-    }
-    text.chars()
-        .map(|c| {
-            if c.is_control() {
-                c.escape_default().to_string()
-            } else {
-                c.to_string()
-            }
-        })
-        .collect::<String>()
-        .into()
 }
