@@ -13,11 +13,11 @@ use clap::{Parser, Subcommand, ValueEnum};
 use psmpa_sim::cli::files::{self, Output, Stop};
 use psmpa_sim::cli::outputs::{Streams, TraceStream, WorldStream};
 use psmpa_sim::cli::{check, outputs, report, sweep, table1};
-use psmpa_sim::{json, load};
 use psmpa_sim::robot::Arch;
 use psmpa_sim::run::Summary;
 use psmpa_sim::scenario::Scenario;
 use psmpa_sim::sim::{Recorded, TraceRecord, WorldRecord, run_logged, run_recorded, run_summary};
+use psmpa_sim::{json, load};
 
 #[derive(Parser)]
 #[command(
@@ -185,10 +185,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 files::commit_all([out]).map_err(Stop::Bad)?;
             }
             // Names are shown as the file has them; a control character (DEL, C1) escaped.
-            let shown: String = report
-                .lines()
-                .map(|l| json::printable(l) + "\n")
-                .collect();
+            let shown: String = report.lines().map(|l| json::printable(l) + "\n").collect();
             files::print(shown.as_bytes())?;
         }
         Command::Table1 { json, plots } => {
