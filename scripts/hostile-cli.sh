@@ -1,0 +1,49 @@
+#!/bin/bash
+# The hostile inputs of issue 16 against a built psmpa-sim: for each, the exit status, the wall
+# time and peak memory (/usr/bin/time) and the first line on stderr. Every one should end in
+# status 0 (a closed pipe) or 2 with one line, at once, in a few MB.
+#   cargo build --release -p psmpa-sim && bash scripts/hostile-cli.sh
+set -u
+root=$(cd "$(dirname "$0")/.." && pwd)
+B=${B:-$root/target/release/psmpa-sim}
+S=$root/scenarios/sonar-8.json
+M=$root/missions/fetch-tea.json
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+cd "$work"
+t() {
+    local label="$1"
+    shift
+    /usr/bin/time -o tm -f "%e s %M KB" bash -c "$*" >out 2>err
+    local status
+    status=$(grep -o 'status [0-9]*' tm | cut -d' ' -f2)
+    printf '%-5s status %s  %s  %s\n' "$label" "${status:-0}" "$(tail -1 tm)" "$(head -1 err)"
+}
+t 1 "{ sleep .3; $B table1; } | true; exit \${PIPESTATUS[0]}"
+t 1 "$B table1 --json | head -c1 >/dev/null; exit \${PIPESTATUS[0]}"
+t 2 "$B run $S --arch psmpa --json >/dev/full"
+t 3 "$B run /dev/zero --arch psmpa"
+t 3 "$B check /dev/urandom"
+mkfifo f
+t 4 "$B run f --arch psmpa"
+printf '{"name": "long", "door_m": 1000, "max_s": 86400, "robot": {"speed_mps": 0.001}, "sonar": {"period_ms": 1}, "bumper": {"period_ms": 1}, "interferences": []}' >long.json
+t 5 "$B run long.json --arch psmpa --plot p.svg"
+t 6 "$B run $S --arch psmpa --trace same.out --timeline same.out"
+sed 's/"sonar-8"/"\\ud83d\\ude00"/' "$S" >s7.json
+t 7 "$B run s7.json --arch psmpa >/dev/null"
+sed 's/"door_m": 5.3/"door_m": +1/' "$S" >s8.json
+t 8 "$B run s8.json --arch psmpa"
+sed 's/"fetch-tea"/"a\x01b"/' "$M" >m8.json
+t 8 "$B check m8.json"
+sed 's/"fetch-tea"/"a\xffb"/' "$M" >m9.json
+t 9 "$B check m9.json"
+sed 's/"name": "fetch-tea",/"name": "fetch-tea", "name": "x",/' "$M" >m10.json
+t 10 "$B check m10.json"
+echo keep >left.csv
+t 11 "$B run $S --arch psmpa --trace left.csv --plot nodir/p.svg"
+echo "      left.csv after: $(cat left.csv)"
+t 11 "$B run $S --arch psmpa --trace /dev/full"
+sed 's/"max_s": 600/"max_s": 0.001/' "$root/scenarios/sonar-6.json" >s12.json
+t 12 "$B run s12.json --arch psmpa | grep -m1 'not put down' >&2"
+t clap "$B run --arch"
+echo "files left: $(ls -A | grep -v -e '^tm$' -e '^out$' -e '^err$' | tr '\n' ' ')"
