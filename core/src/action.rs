@@ -31,16 +31,19 @@ impl SensorId {
     }
 }
 
-/// Index of an actuator-based action in its domain, `0..=255`.
+/// How many actuator-based actions a domain can index: an [`ActionId`] is 16 bits.
+pub const MAX_ACTIONS: usize = 1 << 16;
+
+/// Index of an actuator-based action in its domain, `0..MAX_ACTIONS`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ActionId(u8);
+pub struct ActionId(u16);
 
 impl ActionId {
-    /// The action with index `index`, or `None` when `index > 255`.
+    /// The action with index `index`, or `None` when `index >= MAX_ACTIONS`.
     pub const fn new(index: usize) -> Option<Self> {
-        if index <= u8::MAX as usize {
-            Some(Self(index as u8))
+        if index < MAX_ACTIONS {
+            Some(Self(index as u16))
         } else {
             None
         }

@@ -111,8 +111,15 @@ fn push_name<'a, const N: usize>(
 }
 
 impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
-    /// An empty domain.
+    /// An empty domain. A capacity of more actions than an [`ActionId`] indexes does not
+    /// compile.
     pub const fn new() -> Self {
+        const {
+            assert!(
+                NA <= crate::action::MAX_ACTIONS,
+                "a domain indexes at most MAX_ACTIONS (65,536) actions"
+            );
+        }
         Self {
             facts: Vec::new(),
             events: Vec::new(),

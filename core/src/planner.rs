@@ -16,7 +16,7 @@
 use heapless::Vec;
 use heapless::binary_heap::{BinaryHeap, Min};
 
-use crate::action::{ActionId, ActuatorAction};
+use crate::action::{ActionId, ActuatorAction, MAX_ACTIONS};
 use crate::facts::{FactSet, MAX_FACTS};
 
 /// Estimates of the number of actions still needed (for unit action costs).
@@ -65,6 +65,11 @@ pub enum PlanningError {
         /// The most actions a body holds.
         limit: u32,
     },
+    /// More actions than an [`ActionId`] can index (refused rather than wrapped).
+    TooManyActions {
+        /// The most actions a search takes ([`MAX_ACTIONS`]).
+        limit: u32,
+    },
 }
 
 /// A plan and what finding it cost.
@@ -78,24 +83,26 @@ pub struct Found<const L: usize> {
     pub generated: u32,
 }
 
-const NONE: u16 = u16::MAX;
+const NONE: u32 = u32::MAX;
 const INFINITE: u32 = u32::MAX;
 
+/// 16 bytes: node and action indices as wide as their capacities (`u32` nodes, [`ActionId`]'s
+/// 16 bits), never truncated.
 #[derive(Clone, Copy)]
 struct Node {
     state: FactSet,
-    parent: u16,
-    action: u8,
+    parent: u32,
+    action: u16,
     g: u16,
 }
 
-/// A forward planner with room for `N` search nodes (at most 65 535).
+/// A forward planner with room for `N` search nodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Planner<const N: usize> {
     /// How to search.
     pub strategy: Strategy,
-    /// Most nodes to generate; capped at `N - 1`.
+    /// Most nodes to generate, set per call; capped at `N - 1`.
     pub budget: u32,
 }
 
@@ -111,7 +118,7 @@ impl<const N: usize> Default for Planner<N> {
 /// Visited states: open addressing over `N` slots holding node index + 1. At most `N - 1`
 /// nodes are ever stored, so a probe always ends at a free slot.
 struct Visited<const N: usize> {
-    slots: [u16; N],
+    slots: [u32; N],
 }
 
 impl<const N: usize> Visited<N> {
@@ -122,17 +129,14 @@ impl<const N: usize> Visited<N> {
     }
 
     /// The node holding `state`, or the free slot where it would go.
-    fn find(&self, arena: &[Node], state: FactSet) -> (usize, Option<u16>) {
+    fn find(&self, arena: &[Node], state: FactSet) -> (usize, Option<u32>) {
         let mut slot = Self::start(state);
         for _ in 0..N {
             match self.slots.get(slot).copied() {
                 Some(0) | None => return (slot, None),
                 Some(i) => {
                     let index = i.wrapping_sub(1);
-                    if arena
-                        .get(usize::from(index))
-                        .is_some_and(|n| n.state == state)
-                    {
+                    if arena.get(index as usize).is_some_and(|n| n.state == state) {
                         return (slot, Some(index));
                     }
                 }
@@ -142,9 +146,25 @@ impl<const N: usize> Visited<N> {
         (slot, None)
     }
 
-    fn set(&mut self, slot: usize, node: u16) {
+    fn set(&mut self, slot: usize, node: u32) {
         if let Some(s) = self.slots.get_mut(slot) {
             *s = node.wrapping_add(1);
+        }
+    }
+
+    /// Empties the slots of `arena`'s states, in O(arena + slots used) rather than O(N).
+    /// Every used slot lies on the probe run from some stored state's start slot, and each
+    /// walk clears to the end of its run, so no used slot is left behind.
+    fn clear(&mut self, arena: &[Node]) {
+        for node in arena {
+            let mut slot = Self::start(node.state);
+            for _ in 0..N {
+                match self.slots.get_mut(slot) {
+                    Some(s) if *s != 0 => *s = 0,
+                    _ => break,
+                }
+                slot = slot.wrapping_add(1).checked_rem(N).unwrap_or(0);
+            }
         }
     }
 }
@@ -214,7 +234,7 @@ impl<const N: usize> Planner<N> {
     }
 
     fn limit(&self) -> u32 {
-        let capacity = N.saturating_sub(1).min(usize::from(u16::MAX - 1)) as u32;
+        let capacity = N.saturating_sub(1).min((NONE - 1) as usize) as u32;
         self.budget.min(capacity)
     }
 
@@ -238,7 +258,8 @@ impl<const N: usize> Planner<N> {
 }
 
 /// The space of one search, run in slices: `N` nodes of 16 bytes, a visited table of `N`
-/// slots and an open list of `N` entries, about `34 · N` bytes wherever the caller keeps it
+/// 4-byte slots and an open list of `N` 12-byte entries, about `32 · N` bytes wherever the
+/// caller keeps it
 /// (a `static` on a microcontroller). [`start`](Self::start) sets a search up in place,
 /// [`step`](Self::step) runs it a slice at a time: between two slices the caller may yield, so
 /// that a search never holds a cooperative executor for longer than one slice.
@@ -248,7 +269,7 @@ pub struct Search<const N: usize> {
     goal: FactSet,
     arena: Vec<Node, N>,
     visited: Visited<N>,
-    open: BinaryHeap<(u32, u32, u16), Min, N>,
+    open: BinaryHeap<(u32, u32, u32), Min, N>,
     /// Breadth-first: the next node to expand.
     head: usize,
     expanded: u32,
@@ -279,7 +300,8 @@ impl<const N: usize> Search<N> {
     }
 
     /// Sets up `planner`'s search from `init` to a state where `goal` holds over `actions`, in
-    /// place. O(N) to clear the space, O(NA · |facts|) for a heuristic's first estimate.
+    /// place: O(nodes the last search used) to clear the space, not O(N), and O(NA · |facts|)
+    /// for a heuristic's first estimate.
     pub fn start<const P: usize>(
         &mut self,
         planner: &Planner<P>,
@@ -292,8 +314,8 @@ impl<const N: usize> Search<N> {
             .budget
             .min(Planner::<N>::new(planner.strategy).limit());
         self.goal = goal;
+        self.visited.clear(&self.arena);
         self.arena.clear();
-        self.visited.slots.fill(0);
         self.open.clear();
         self.head = 0;
         self.expanded = 0;
@@ -304,6 +326,12 @@ impl<const N: usize> Search<N> {
             action: 0,
             g: 0,
         };
+        if actions.len() > MAX_ACTIONS {
+            self.early = Some(Err(PlanningError::TooManyActions {
+                limit: MAX_ACTIONS as u32,
+            }));
+            return;
+        }
         if self.limit == 0 || self.arena.push(root).is_err() {
             self.early = Some(Err(PlanningError::Budget {
                 expanded: 0,
@@ -376,7 +404,7 @@ impl<const N: usize> Search<N> {
                     self.head.saturating_sub(1)
                 }
                 Some(_) => match self.open.pop() {
-                    Some((_, _, i)) => usize::from(i),
+                    Some((_, _, i)) => i as usize,
                     None => return Some(Err(PlanningError::Unsolvable { expanded })),
                 },
             };
@@ -385,7 +413,7 @@ impl<const N: usize> Search<N> {
             };
             // A cheaper path to this state was found after it was queued: skip the stale entry.
             if heuristic.is_some()
-                && self.visited.find(&self.arena, node.state).1 != Some(index as u16)
+                && self.visited.find(&self.arena, node.state).1 != Some(index as u32)
             {
                 continue;
             }
@@ -403,7 +431,7 @@ impl<const N: usize> Search<N> {
                 let (slot, known) = self.visited.find(&self.arena, state);
                 if let Some(k) = known {
                     // Seen at least as cheaply: nothing new.
-                    if self.arena.get(usize::from(k)).is_some_and(|n| n.g <= g) {
+                    if self.arena.get(k as usize).is_some_and(|n| n.g <= g) {
                         continue;
                     }
                 }
@@ -420,11 +448,13 @@ impl<const N: usize> Search<N> {
                 if self.arena.len() as u32 >= limit.saturating_add(1) {
                     return Some(Err(PlanningError::Budget { expanded, limit }));
                 }
-                let child = self.arena.len() as u16;
+                // Both fit: the arena holds fewer than `NONE` nodes, and `start` refused more
+                // actions than an `ActionId` indexes.
+                let child = self.arena.len() as u32;
                 let pushed = self.arena.push(Node {
                     state,
-                    parent: index as u16,
-                    action: a as u8,
+                    parent: index as u32,
+                    action: a as u16,
                     g,
                 });
                 if pushed.is_err() {
@@ -433,7 +463,7 @@ impl<const N: usize> Search<N> {
                 self.visited.set(slot, child);
                 if heuristic.is_none() && goal.is_subset(state) {
                     // Breadth-first: the first goal generated is at the least depth.
-                    return Some(extract(&self.arena, usize::from(child), expanded));
+                    return Some(extract(&self.arena, child as usize, expanded));
                 }
                 let score = self.score(g, h);
                 if heuristic.is_some() && self.open.push((score, h, child)).is_err() {
@@ -459,7 +489,7 @@ fn extract<const L: usize>(
         }
         body.push(ActionId::new(usize::from(node.action)).ok_or(too_long)?)
             .map_err(|_| too_long)?;
-        at = usize::from(node.parent);
+        at = node.parent as usize;
     }
     body.reverse();
     Ok(Found {
@@ -890,5 +920,108 @@ mod tests {
             .plan::<2>(d.actions(), FactSet::EMPTY, FactSet::EMPTY)
             .unwrap();
         assert!(found.body.is_empty());
+    }
+
+    /// A chain of `steps` facts (`f0 -> f1 -> ...`) among `total` actions: the step actions
+    /// sit at the given indices, every other action adds a fact nothing needs.
+    fn chain(total: usize, at: &[usize]) -> StdVec<ActuatorAction<'static>> {
+        let f = |i: usize| FactSet::single(crate::facts::FactId::new(i).unwrap());
+        let mut actions: StdVec<ActuatorAction<'static>> = (0..total)
+            .map(|i| ActuatorAction::new("noise", f(0), f(63 - i % 8), FactSet::EMPTY))
+            .collect();
+        for (step, &index) in at.iter().enumerate() {
+            actions[index] = ActuatorAction::new("step", f(step), f(step + 1), FactSet::EMPTY);
+        }
+        actions
+    }
+
+    /// A plan as action indices, checked step by step from `init` to `goal`.
+    fn replay(actions: &[ActuatorAction<'_>], body: &[ActionId], init: FactSet) -> FactSet {
+        body.iter().fold(init, |state, id| {
+            let a = &actions[id.index()];
+            assert!(
+                a.pre.is_subset(state),
+                "action {} not applicable",
+                id.index()
+            );
+            state.apply(a.add, a.del)
+        })
+    }
+
+    #[test]
+    fn actions_past_256_are_planned_with_their_own_ids() {
+        // 600 actions; the plan needs 257, 329 and 566 (once truncated to 1, 73 and 54).
+        let at = [257, 329, 566];
+        let actions = chain(600, &at);
+        let f = |i: usize| FactSet::single(crate::facts::FactId::new(i).unwrap());
+        for strategy in [
+            Strategy::BreadthFirst,
+            Strategy::AStar(Heuristic::Max),
+            Strategy::AStar(Heuristic::Add),
+            Strategy::Greedy(Heuristic::Add),
+            Strategy::AStar(Heuristic::GoalCount),
+        ] {
+            let found = Planner::<4096>::new(strategy)
+                .plan::<8>(&actions, f(0), f(3))
+                .unwrap();
+            let ids: StdVec<usize> = found.body.iter().map(|a| a.index()).collect();
+            assert_eq!(ids, at, "{strategy:?}");
+            assert!(f(3).is_subset(replay(&actions, &found.body, f(0))));
+        }
+    }
+
+    #[test]
+    fn more_actions_than_an_id_indexes_are_refused() {
+        let actions = chain(crate::action::MAX_ACTIONS + 1, &[]);
+        let f = |i: usize| FactSet::single(crate::facts::FactId::new(i).unwrap());
+        assert_eq!(
+            Planner::<16>::default().plan::<4>(&actions, f(0), f(1)),
+            Err(PlanningError::TooManyActions {
+                limit: crate::action::MAX_ACTIONS as u32
+            })
+        );
+    }
+
+    #[test]
+    fn a_search_past_16_bit_node_indices_finds_its_plan() {
+        // 17 independent facts, each set by its own action, the goal all of them: breadth-first
+        // generates about 2^17 = 131,072 states, past the old 65,534-node cap.
+        let f = |i: usize| FactSet::single(crate::facts::FactId::new(i).unwrap());
+        let actions: StdVec<ActuatorAction<'static>> = (0..17)
+            .map(|i| ActuatorAction::new("set", FactSet::EMPTY, f(i), FactSet::EMPTY))
+            .collect();
+        let goal = (0..17).fold(FactSet::EMPTY, |g, i| g.union(f(i)));
+        // The space is large (about 6 MB): built on a thread with room for it.
+        let run = move || {
+            let mut search = Search::<200_000>::new();
+            let planner = Planner::<200_000>::new(Strategy::BreadthFirst);
+            let mut solve = |init: FactSet, goal: FactSet| {
+                search.start(&planner, &actions, init, goal);
+                loop {
+                    if let Some(r) = search.step::<32>(&actions, u32::MAX) {
+                        break r;
+                    }
+                }
+            };
+            let big = solve(FactSet::EMPTY, goal).unwrap();
+            // The same space reused for a small search: cleared, and right.
+            let small = solve(f(0), f(0).union(f(1))).unwrap();
+            (big, small)
+        };
+        let (big, small) = std::thread::Builder::new()
+            .stack_size(64 << 20)
+            .spawn(run)
+            .unwrap()
+            .join()
+            .unwrap();
+        assert_eq!(big.body.len(), 17);
+        assert!(big.generated > 65_535, "{} nodes", big.generated);
+        assert_eq!(small.body.len(), 1);
+    }
+
+    #[test]
+    fn a_search_space_costs_32_bytes_a_node() {
+        // What the README states for RAM: nodes 16 B, visited slot 4 B, open entry 12 B.
+        assert_eq!(core::mem::size_of::<Search<1024>>(), 32 * 1024 + 64);
     }
 }

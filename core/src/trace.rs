@@ -190,9 +190,16 @@ fn bits(i: i32) -> u64 {
     u64::from(u32::from_le_bytes(i.to_le_bytes()))
 }
 
-/// An id as a byte: ids are below their capacity, and capacities fit a byte.
+/// An id as a byte: sensor, plan and event ids are below capacities that fit a byte; an
+/// action id's high byte goes in [`hi`].
 fn id(i: usize) -> u8 {
-    u8::try_from(i).unwrap_or(u8::MAX)
+    (i & 0xff) as u8
+}
+
+/// The high byte of an action id, at byte 5 of a header (0 for the first 256 actions, so
+/// their hashes are what they were when ids were bytes).
+fn hi(action: ActionId) -> u64 {
+    ((action.index() >> 8) as u64 & 0xff) << 40
 }
 
 impl TraceHash {
@@ -255,9 +262,9 @@ impl TraceHash {
         }
     }
 
-    /// A failure as (kind, subject, detail byte, payload).
-    fn failure(f: Failure) -> (u8, u8, u8, u64) {
-        match f {
+    /// A failure as (kind, subject, detail byte, payload, high byte of an action subject).
+    fn failure(f: Failure) -> (u8, u8, u8, u64, u64) {
+        let (kind, subject, detail, payload) = match f {
             Failure::ActionFailed { action } => (0, id(action.index()), 0, 0),
             Failure::ActionInterrupted { action } => (1, id(action.index()), 0, 0),
             Failure::PreconditionUnmet { action, missing } => {
@@ -274,7 +281,15 @@ impl TraceHash {
             Failure::StoreFull { key } => (6, key.0, 0, 0),
             Failure::InvalidFsm { state } => (7, state, 0, 0),
             Failure::SensingStalled => (8, 0, 0, 0),
-        }
+        };
+        let high = match f {
+            Failure::ActionFailed { action }
+            | Failure::ActionInterrupted { action }
+            | Failure::PreconditionUnmet { action, .. }
+            | Failure::PreconditionViolated { action, .. } => hi(action),
+            _ => 0,
+        };
+        (kind, subject, detail, payload, high)
     }
 
     /// Adds one event at time `at` to the hash. O(1): three words.
@@ -285,8 +300,8 @@ impl TraceHash {
             E::PlanSelected { plan, event } => (head(1, id(plan.index()), id(event.index()), 0), 0),
             E::PlanSucceeded { plan } => (head(2, id(plan.index()), 0, 0), 0),
             E::PlanFailed { plan, reason } => {
-                let (kind, subject, detail, payload) = Self::failure(reason);
-                let h = head(3, id(plan.index()), kind, subject) | u64::from(detail) << 32;
+                let (kind, subject, detail, payload, high) = Self::failure(reason);
+                let h = head(3, id(plan.index()), kind, subject) | u64::from(detail) << 32 | high;
                 (h, payload)
             }
             E::StateEntered {
@@ -294,7 +309,7 @@ impl TraceHash {
                 action,
                 sensors,
             } => (
-                head(4, state, id(action.index()), 0),
+                head(4, state, id(action.index()), 0) | hi(action),
                 u64::from(sensors.bits()),
             ),
             E::StateLeft {
@@ -308,14 +323,14 @@ impl TraceHash {
                     Some(Outcome::Failure) => 2,
                     Some(Outcome::Interrupted) => 3,
                 };
-                (head(5, state, id(action.index()), o), 0)
+                (head(5, state, id(action.index()), o) | hi(action), 0)
             }
             E::PhaseStarted { action, phase } => {
                 let p = match phase {
                     Phase::Sense => 0,
                     Phase::Act => 1,
                 };
-                (head(6, id(action.index()), p, 0), 0)
+                (head(6, id(action.index()), p, 0) | hi(action), 0)
             }
             E::SensorOn { sensor } => (head(7, id(sensor.index()), 0, 0), 0),
             E::SensorOff { sensor } => (head(8, id(sensor.index()), 0, 0), 0),
@@ -331,13 +346,17 @@ impl TraceHash {
                 let (kind, code) = Self::fault(fault);
                 (head(10, id(sensor.index()), kind, code), 0)
             }
-            E::PreconditionViolated { action, missing } => {
-                (head(11, id(action.index()), 0, 0), missing.bits())
+            E::PreconditionViolated { action, missing } => (
+                head(11, id(action.index()), 0, 0) | hi(action),
+                missing.bits(),
+            ),
+            E::PreconditionRestored { action } => {
+                (head(12, id(action.index()), 0, 0) | hi(action), 0)
             }
-            E::PreconditionRestored { action } => (head(12, id(action.index()), 0, 0), 0),
-            E::EffectsApplied { action, beliefs } => {
-                (head(13, id(action.index()), 0, 0), beliefs.bits())
-            }
+            E::EffectsApplied { action, beliefs } => (
+                head(13, id(action.index()), 0, 0) | hi(action),
+                beliefs.bits(),
+            ),
             E::GoalReached { beliefs } => (head(14, 0, 0, 0), beliefs.bits()),
             E::User { code, value } => (head(16, 0, 0, 0) | u64::from(code) << 16, bits(value)),
             E::SampleLost { sensor } => (head(17, id(sensor.index()), 0, 0), 0),
