@@ -5,7 +5,7 @@ use core::fmt;
 
 use embassy_time::Duration;
 
-use crate::facts::FactSet;
+use crate::facts::FactSetOf;
 
 /// Most sensor-based actions a domain can hold: the width of a [`SensorSet`].
 pub const MAX_SENSORS: usize = 32;
@@ -163,28 +163,28 @@ pub enum SensorMode {
 /// A sensor-based action `s = <pre(s), per(s)>`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct SensorAction<'a> {
+pub struct SensorAction<'a, const W: usize = 1> {
     /// Name, as missions and traces call it.
     pub name: &'a str,
     /// `pre(s)`: facts that must hold for the sensor to be switched on.
-    pub pre: FactSet,
+    pub pre: FactSetOf<W>,
     /// `per(s)`: the facts this sensor's samples decide.
-    pub per: FactSet,
+    pub per: FactSetOf<W>,
     /// Cyclic, one-shot or on demand.
     pub mode: SensorMode,
     /// A sample that takes longer than this is a [`SensorFault::Timeout`](crate::platform::SensorFault).
     pub timeout: Duration,
 }
 
-impl<'a> SensorAction<'a> {
+impl<'a, const W: usize> SensorAction<'a, W> {
     /// Default time a sample may take before the sensor counts as not answering.
     pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(500);
 
     /// A sensor with no precondition and the default timeout.
-    pub const fn new(name: &'a str, per: FactSet, mode: SensorMode) -> Self {
+    pub const fn new(name: &'a str, per: FactSetOf<W>, mode: SensorMode) -> Self {
         Self {
             name,
-            pre: FactSet::EMPTY,
+            pre: FactSetOf::EMPTY,
             per,
             mode,
             timeout: Self::DEFAULT_TIMEOUT,
@@ -193,7 +193,7 @@ impl<'a> SensorAction<'a> {
 
     /// The same sensor with precondition `pre(s)`.
     #[must_use]
-    pub const fn with_pre(mut self, pre: FactSet) -> Self {
+    pub const fn with_pre(mut self, pre: FactSetOf<W>) -> Self {
         self.pre = pre;
         self
     }
@@ -207,7 +207,7 @@ impl<'a> SensorAction<'a> {
 
     /// Algorithm 2 line 11: this sensor runs beside an action whose precondition is `pre`
     /// when it perceives something and `per(s) ⊆ pre(a)`.
-    pub const fn serves(&self, pre: FactSet) -> bool {
+    pub const fn serves(&self, pre: FactSetOf<W>) -> bool {
         !self.per.is_empty() && self.per.is_subset(pre)
     }
 }
@@ -215,24 +215,29 @@ impl<'a> SensorAction<'a> {
 /// An actuator-based action `a = <pre(a), add(a), del(a)>`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ActuatorAction<'a> {
+pub struct ActuatorAction<'a, const W: usize = 1> {
     /// Name, as missions and traces call it.
     pub name: &'a str,
     /// `pre(a)`: facts that must hold while the action runs.
-    pub pre: FactSet,
+    pub pre: FactSetOf<W>,
     /// `add(a)`: facts the action makes true.
-    pub add: FactSet,
+    pub add: FactSetOf<W>,
     /// `del(a)`: facts the action makes false.
-    pub del: FactSet,
+    pub del: FactSetOf<W>,
     /// How long `pre(a)` may stay false while the action runs before the runtime stops it;
     /// `None`: the runtime's [`Config::max_violation`](crate::exec::Config::max_violation).
     /// A robot at a cliff's edge stops at once (zero); one before a box may wait for it.
     pub max_violation: Option<Duration>,
 }
 
-impl<'a> ActuatorAction<'a> {
+impl<'a, const W: usize> ActuatorAction<'a, W> {
     /// An action from its STRIPS sets.
-    pub const fn new(name: &'a str, pre: FactSet, add: FactSet, del: FactSet) -> Self {
+    pub const fn new(
+        name: &'a str,
+        pre: FactSetOf<W>,
+        add: FactSetOf<W>,
+        del: FactSetOf<W>,
+    ) -> Self {
         Self {
             name,
             pre,

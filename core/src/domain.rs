@@ -10,7 +10,7 @@ use heapless::Vec;
 use crate::action::{
     ActionId, ActuatorAction, MAX_SENSORS, SensorAction, SensorId, SensorMode, SensorSet,
 };
-use crate::facts::{FactId, FactSet, MAX_FACTS};
+use crate::facts::{FactId, FactSetOf, MAX_FACTS};
 
 /// Most trigger events a domain can name.
 pub const MAX_EVENTS: usize = 16;
@@ -76,16 +76,26 @@ pub enum DomainError {
     ZeroPeriod,
 }
 
-/// The planning domain `Δ` with room for `NS` sensor-based and `NA` actuator-based actions.
+/// The planning domain `Δ` with room for `NS` sensor-based and `NA` actuator-based actions
+/// and `NF` facts in fact sets of `W` words (one word and 64 facts by default; `NF` is at
+/// most `64 · W`, else the domain does not compile).
 #[derive(Clone, Debug)]
-pub struct Domain<'a, const NS: usize, const NA: usize> {
-    facts: Vec<&'a str, MAX_FACTS>,
+pub struct Domain<
+    'a,
+    const NS: usize,
+    const NA: usize,
+    const W: usize = 1,
+    const NF: usize = MAX_FACTS,
+> {
+    facts: Vec<&'a str, NF>,
     events: Vec<&'a str, MAX_EVENTS>,
-    sensors: Vec<SensorAction<'a>, NS>,
-    actions: Vec<ActuatorAction<'a>, NA>,
+    sensors: Vec<SensorAction<'a, W>, NS>,
+    actions: Vec<ActuatorAction<'a, W>, NA>,
 }
 
-impl<const NS: usize, const NA: usize> Default for Domain<'_, NS, NA> {
+impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> Default
+    for Domain<'_, NS, NA, W, NF>
+{
     fn default() -> Self {
         Self::new()
     }
@@ -110,7 +120,9 @@ fn push_name<'a, const N: usize>(
     Ok(index)
 }
 
-impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
+impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
+    Domain<'a, NS, NA, W, NF>
+{
     /// An empty domain. A capacity of more actions than an [`ActionId`] indexes does not
     /// compile.
     pub const fn new() -> Self {
@@ -118,6 +130,10 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
             assert!(
                 NA <= crate::action::MAX_ACTIONS,
                 "a domain indexes at most MAX_ACTIONS (65,536) actions"
+            );
+            assert!(
+                NF <= FactSetOf::<W>::CAPACITY,
+                "a domain names at most 64 facts a word of its fact sets"
             );
         }
         Self {
@@ -128,13 +144,30 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
         }
     }
 
+    /// Empties the domain in place (no copy of it on the stack, as assigning a new one makes).
+    pub fn clear(&mut self) {
+        self.facts.clear();
+        self.events.clear();
+        self.sensors.clear();
+        self.actions.clear();
+    }
+
     /// Adds a fact and returns its id.
     pub fn add_fact(&mut self, name: &'a str) -> Result<FactId, DomainError> {
-        let index = push_name(&mut self.facts, Table::Fact, name)?;
-        FactId::new(index).ok_or(DomainError::Full {
+        if name.is_empty() {
+            return Err(DomainError::EmptyName(Table::Fact));
+        }
+        if self.fact_id(name).is_some() {
+            return Err(DomainError::Duplicate(Table::Fact));
+        }
+        let full = DomainError::Full {
             table: Table::Fact,
-            capacity: MAX_FACTS,
-        })
+            capacity: NF,
+        };
+        let index = self.facts.len();
+        let id = FactId::within(index, FactSetOf::<W>::CAPACITY).ok_or(full)?;
+        self.facts.push(name).map_err(|_| full)?;
+        Ok(id)
     }
 
     /// Adds a trigger event and returns its id.
@@ -147,7 +180,7 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
     }
 
     /// Adds a sensor-based action and returns its id.
-    pub fn add_sensor(&mut self, sensor: SensorAction<'a>) -> Result<SensorId, DomainError> {
+    pub fn add_sensor(&mut self, sensor: SensorAction<'a, W>) -> Result<SensorId, DomainError> {
         let full = DomainError::Full {
             table: Table::Sensor,
             capacity: if NS < MAX_SENSORS { NS } else { MAX_SENSORS },
@@ -169,7 +202,7 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
     }
 
     /// Adds an actuator-based action and returns its id.
-    pub fn add_action(&mut self, action: ActuatorAction<'a>) -> Result<ActionId, DomainError> {
+    pub fn add_action(&mut self, action: ActuatorAction<'a, W>) -> Result<ActionId, DomainError> {
         let full = DomainError::Full {
             table: Table::Action,
             capacity: NA,
@@ -190,12 +223,12 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
         self.facts
             .iter()
             .position(|n| *n == name)
-            .and_then(FactId::new)
+            .and_then(|i| FactId::within(i, FactSetOf::<W>::CAPACITY))
     }
 
     /// The set of the facts called `names`.
-    pub fn facts(&self, names: &[&str]) -> Result<FactSet, DomainError> {
-        names.iter().try_fold(FactSet::EMPTY, |set, name| {
+    pub fn facts(&self, names: &[&str]) -> Result<FactSetOf<W>, DomainError> {
+        names.iter().try_fold(FactSetOf::EMPTY, |set, name| {
             self.fact_id(name)
                 .map(|id| set.with(id))
                 .ok_or(DomainError::Unknown(Table::Fact))
@@ -237,7 +270,7 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
     }
 
     /// A sensor-based action.
-    pub fn sensor(&self, id: SensorId) -> Option<&SensorAction<'a>> {
+    pub fn sensor(&self, id: SensorId) -> Option<&SensorAction<'a, W>> {
         self.sensors.get(id.index())
     }
 
@@ -271,7 +304,7 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
     }
 
     /// An actuator-based action.
-    pub fn action(&self, id: ActionId) -> Option<&ActuatorAction<'a>> {
+    pub fn action(&self, id: ActionId) -> Option<&ActuatorAction<'a, W>> {
         self.actions.get(id.index())
     }
 
@@ -286,19 +319,19 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
     }
 
     /// All sensor-based actions, in id order.
-    pub fn sensors(&self) -> &[SensorAction<'a>] {
+    pub fn sensors(&self) -> &[SensorAction<'a, W>] {
         &self.sensors
     }
 
     /// All actuator-based actions, in id order.
-    pub fn actions(&self) -> &[ActuatorAction<'a>] {
+    pub fn actions(&self) -> &[ActuatorAction<'a, W>] {
         &self.actions
     }
 
     /// Algorithm 2 line 11: the sensors `s` with `per(s) ⊆ pre` (and `per(s) ≠ ∅`).
     ///
     /// O(NS).
-    pub fn sensors_serving(&self, pre: FactSet) -> SensorSet {
+    pub fn sensors_serving(&self, pre: FactSetOf<W>) -> SensorSet {
         self.sensors
             .iter()
             .enumerate()
@@ -310,17 +343,18 @@ impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
     /// `∪ per(s)` over a set of sensors: the facts they decide while running.
     ///
     /// O(NS).
-    pub fn perception_of(&self, sensors: SensorSet) -> FactSet {
+    pub fn perception_of(&self, sensors: SensorSet) -> FactSetOf<W> {
         sensors
             .iter()
             .filter_map(|s| self.sensor(s))
-            .fold(FactSet::EMPTY, |acc, s| acc.union(s.per))
+            .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::facts::FactSet;
 
     #[test]
     fn names_are_unique_nonempty_and_bounded() {

@@ -88,10 +88,10 @@ pub struct Fsm<const L: usize> {
 
 impl<const L: usize> Fsm<L> {
     /// Algorithm 2 for one plan. O(L · NS).
-    pub fn compile<const NS: usize, const NA: usize>(
+    pub fn compile<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
         id: PlanId,
-        plan: &Plan<'_, L>,
-        domain: &Domain<'_, NS, NA>,
+        plan: &Plan<'_, L, W>,
+        domain: &Domain<'_, NS, NA, W, NF>,
     ) -> Result<Self, FsmError> {
         let last = plan.body.len().checked_sub(1).ok_or(FsmError::EmptyBody)?;
         let mut states = Vec::new();

@@ -69,7 +69,7 @@ pub use action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, S
 pub use control::{ControlError, Report};
 pub use domain::{Domain, DomainError, EventId};
 pub use exec::{ActionIo, Config, Engine, Failure, Policy, Violation};
-pub use facts::{FactId, FactSet};
+pub use facts::{FactId, FactSet, FactSetOf};
 pub use fsm::{BehaviourState, Fsm, FsmError, Target};
 pub use mission::{Bindings, LoadError, Loaded, Mission, Registry};
 pub use model::{Task, WorldModel};

@@ -37,7 +37,7 @@ use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor
 
 use crate::action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode};
 use crate::domain::{Domain, DomainError, EventId, Table};
-use crate::facts::{FactId, FactSet};
+use crate::facts::{FactId, FactSetOf};
 use crate::model::Task;
 use crate::plan::{Plan, PlanError, PlanLibrary};
 
@@ -45,15 +45,23 @@ use crate::plan::{Plan, PlanError, PlanLibrary};
 /// the task of one robot, with room for `NS` sensors, `NA` actions, `NP` plans of at most `L`
 /// actions each.
 #[derive(Clone, Debug)]
-pub struct Mission<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize> {
+pub struct Mission<
+    'a,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize = 1,
+    const NF: usize = 64,
+> {
     /// Name of the mission.
     pub name: &'a str,
     /// `Δ`: facts, events, `S` and `A`.
-    pub domain: Domain<'a, NS, NA>,
+    pub domain: Domain<'a, NS, NA, W, NF>,
     /// `P`: the plan library.
-    pub library: PlanLibrary<'a, NP, L>,
+    pub library: PlanLibrary<'a, NP, L, W>,
     /// `Π`: what to achieve from where.
-    pub task: Task,
+    pub task: Task<W>,
 }
 
 /// Binds the behaviour names of a mission to what the platform can run.
@@ -103,6 +111,14 @@ impl<S, A, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
             sensors: Vec::new(),
             actions: Vec::new(),
         }
+    }
+}
+
+impl<S, A, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
+    /// Unbinds everything, in place.
+    pub fn clear(&mut self) {
+        self.sensors.clear();
+        self.actions.clear();
     }
 }
 
@@ -287,38 +303,38 @@ impl fmt::Display for LoadError<'_> {
 
 /// What the streaming deserializers need from the mission under construction; object safe so
 /// they carry no capacity parameters.
-trait Build<'a> {
+trait Build<'a, const W: usize> {
     fn at(&self) -> Location;
     fn set_at(&mut self, at: Location);
     /// Records the first problem, at the current location.
     fn record(&mut self, problem: Problem<'a>);
     fn add_fact(&mut self, name: &'a str) -> Result<(), Problem<'a>>;
     fn add_event(&mut self, name: &'a str) -> Result<(), Problem<'a>>;
-    fn fact(&self, name: &'a str) -> Result<FactSet, Problem<'a>>;
+    fn fact(&self, name: &'a str) -> Result<FactSetOf<W>, Problem<'a>>;
     fn event(&self, name: &'a str) -> Result<EventId, Problem<'a>>;
-    fn add_sensor(&mut self, sensor: SensorAction<'a>) -> Result<(), Problem<'a>>;
-    fn add_action(&mut self, action: ActuatorAction<'a>) -> Result<(), Problem<'a>>;
+    fn add_sensor(&mut self, sensor: SensorAction<'a, W>) -> Result<(), Problem<'a>>;
+    fn add_action(&mut self, action: ActuatorAction<'a, W>) -> Result<(), Problem<'a>>;
     fn push_body(&mut self, action: &'a str) -> Result<(), Problem<'a>>;
     fn add_plan(
         &mut self,
         name: &'a str,
         trigger: EventId,
-        context: FactSet,
-        context_not: FactSet,
+        context: FactSetOf<W>,
+        context_not: FactSetOf<W>,
     ) -> Result<(), Problem<'a>>;
     /// The name of a declared fact.
     fn fact_name(&self, fact: FactId) -> &'a str;
-    fn set_task(&mut self, task: Task);
+    fn set_task(&mut self, task: Task<W>);
     fn set_name(&mut self, name: &'a str);
 }
 
 /// Records `problem` and returns the error that stops the parse.
-fn fail<'a, E: de::Error>(b: &mut dyn Build<'a>, problem: Problem<'a>) -> E {
+fn fail<'a, E: de::Error, const W: usize>(b: &mut dyn Build<'a, W>, problem: Problem<'a>) -> E {
     b.record(problem);
     E::custom("mission error")
 }
 
-fn field(b: &mut dyn Build<'_>, field: Option<&'static str>) {
+fn field<const W: usize>(b: &mut dyn Build<'_, W>, field: Option<&'static str>) {
     let mut at = b.at();
     at.field = field;
     b.set_at(at);
@@ -333,9 +349,11 @@ struct Builder<
     const NA: usize,
     const NP: usize,
     const L: usize,
+    const W: usize,
+    const NF: usize,
 > {
     /// Written in place: the mission is never copied while it is built.
-    mission: &'r mut Mission<'a, NS, NA, NP, L>,
+    mission: &'r mut Mission<'a, NS, NA, NP, L, W, NF>,
     bindings: &'r mut Bindings<R::Sensor, R::Action, NS, NA>,
     registry: &'r R,
     at: Location,
@@ -361,8 +379,16 @@ fn domain_problem(e: DomainError, name: &str) -> Problem<'_> {
     }
 }
 
-impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L: usize> Build<'a>
-    for Builder<'a, '_, R, NS, NA, NP, L>
+impl<
+    'a,
+    R: Registry,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> Build<'a, W> for Builder<'a, '_, R, NS, NA, NP, L, W, NF>
 {
     fn at(&self) -> Location {
         self.at
@@ -397,11 +423,11 @@ impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L
             .map_err(|e| domain_problem(e, name))
     }
 
-    fn fact(&self, name: &'a str) -> Result<FactSet, Problem<'a>> {
+    fn fact(&self, name: &'a str) -> Result<FactSetOf<W>, Problem<'a>> {
         self.mission
             .domain
             .fact_id(name)
-            .map(FactSet::single)
+            .map(FactSetOf::single)
             .ok_or(Problem::UnknownFact(name))
     }
 
@@ -412,7 +438,7 @@ impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L
             .ok_or(Problem::UnknownEvent(name))
     }
 
-    fn add_sensor(&mut self, sensor: SensorAction<'a>) -> Result<(), Problem<'a>> {
+    fn add_sensor(&mut self, sensor: SensorAction<'a, W>) -> Result<(), Problem<'a>> {
         let behaviour = self
             .registry
             .sensor(sensor.name)
@@ -430,7 +456,7 @@ impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L
             })
     }
 
-    fn add_action(&mut self, action: ActuatorAction<'a>) -> Result<(), Problem<'a>> {
+    fn add_action(&mut self, action: ActuatorAction<'a, W>) -> Result<(), Problem<'a>> {
         let behaviour = self
             .registry
             .action(action.name)
@@ -468,8 +494,8 @@ impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L
         &mut self,
         name: &'a str,
         trigger: EventId,
-        context: FactSet,
-        context_not: FactSet,
+        context: FactSetOf<W>,
+        context_not: FactSetOf<W>,
     ) -> Result<(), Problem<'a>> {
         let body = core::mem::take(&mut self.body);
         let plan = Plan::new(name, trigger, context, &body)
@@ -496,7 +522,7 @@ impl<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L
             })
     }
 
-    fn set_task(&mut self, task: Task) {
+    fn set_task(&mut self, task: Task<W>) {
         self.mission.task = task;
     }
 
@@ -560,23 +586,23 @@ enum ListKind {
 }
 
 /// A list of names: declared, resolved into a fact set, or collected into a plan body.
-struct NameList<'s, 'a>(&'s mut dyn Build<'a>, ListKind);
+struct NameList<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, ListKind);
 
-impl<'a> DeserializeSeed<'a> for NameList<'_, 'a> {
-    type Value = FactSet;
-    fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<FactSet, D::Error> {
+impl<'a, const W: usize> DeserializeSeed<'a> for NameList<'_, 'a, W> {
+    type Value = FactSetOf<W>;
+    fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<FactSetOf<W>, D::Error> {
         d.deserialize_seq(self)
     }
 }
 
-impl<'a> Visitor<'a> for NameList<'_, 'a> {
-    type Value = FactSet;
+impl<'a, const W: usize> Visitor<'a> for NameList<'_, 'a, W> {
+    type Value = FactSetOf<W>;
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("a list of names")
     }
-    fn visit_seq<S: SeqAccess<'a>>(self, mut seq: S) -> Result<FactSet, S::Error> {
+    fn visit_seq<S: SeqAccess<'a>>(self, mut seq: S) -> Result<FactSetOf<W>, S::Error> {
         let NameList(b, kind) = self;
-        let mut set = FactSet::EMPTY;
+        let mut set = FactSetOf::EMPTY;
         let mut index = 0usize;
         while let Some(name) = seq.next_element_seed(Str)? {
             if matches!(kind, ListKind::DeclareFacts | ListKind::DeclareEvents) {
@@ -590,7 +616,7 @@ impl<'a> Visitor<'a> for NameList<'_, 'a> {
                 ListKind::Facts => b.fact(name).map(|f| set = set.union(f)),
                 ListKind::Body => b.push_body(name),
             };
-            done.map_err(|p| fail::<S::Error>(b, p))?;
+            done.map_err(|p| fail::<S::Error, W>(b, p))?;
             index = index.saturating_add(1);
         }
         Ok(set)
@@ -598,7 +624,7 @@ impl<'a> Visitor<'a> for NameList<'_, 'a> {
 }
 
 /// A list of objects of one section, each read by [`Entry`].
-struct Entries<'s, 'a>(&'s mut dyn Build<'a>, Section);
+struct Entries<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, Section);
 
 #[derive(Clone, Copy)]
 enum Section {
@@ -608,7 +634,7 @@ enum Section {
     Task,
 }
 
-impl<'a> DeserializeSeed<'a> for Entries<'_, 'a> {
+impl<'a, const W: usize> DeserializeSeed<'a> for Entries<'_, 'a, W> {
     type Value = ();
     fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
         match self.1 {
@@ -618,7 +644,7 @@ impl<'a> DeserializeSeed<'a> for Entries<'_, 'a> {
     }
 }
 
-impl<'a> Visitor<'a> for Entries<'_, 'a> {
+impl<'a, const W: usize> Visitor<'a> for Entries<'_, 'a, W> {
     type Value = ();
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("a list of objects")
@@ -640,9 +666,9 @@ impl<'a> Visitor<'a> for Entries<'_, 'a> {
 }
 
 /// One sensor, action, plan or the task.
-struct Entry<'s, 'a>(&'s mut dyn Build<'a>, Section);
+struct Entry<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, Section);
 
-impl<'a> DeserializeSeed<'a> for Entry<'_, 'a> {
+impl<'a, const W: usize> DeserializeSeed<'a> for Entry<'_, 'a, W> {
     type Value = ();
     fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
         d.deserialize_map(self)
@@ -657,12 +683,12 @@ const TASK_KEYS: [&str; 3] = ["event", "init", "goal"];
 
 /// The fields of one entry as read, before they are checked together.
 #[derive(Default)]
-struct Fields<'a> {
+struct Fields<'a, const W: usize> {
     name: Option<&'a str>,
     mode: Option<&'a str>,
     event: Option<&'a str>,
     number: [Option<u64>; 3],
-    sets: [Option<FactSet>; 3],
+    sets: [Option<FactSetOf<W>>; 3],
     body: bool,
 }
 
@@ -674,7 +700,7 @@ fn millis<'a>(v: u64) -> Result<Duration, Problem<'a>> {
     Ok(Duration::from_millis(v))
 }
 
-impl<'a> Visitor<'a> for Entry<'_, 'a> {
+impl<'a, const W: usize> Visitor<'a> for Entry<'_, 'a, W> {
     type Value = ();
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("an object")
@@ -722,26 +748,26 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
         }
         field(b, None);
         let set = |i: usize| f.sets.get(i).copied().flatten();
-        let required = |b: &mut dyn Build<'a>, v: Option<&'a str>, name: &'static str| {
-            v.ok_or_else(|| fail::<M::Error>(b, Problem::MissingField(name)))
+        let required = |b: &mut dyn Build<'a, W>, v: Option<&'a str>, name: &'static str| {
+            v.ok_or_else(|| fail::<M::Error, W>(b, Problem::MissingField(name)))
         };
-        let checked = |b: &mut dyn Build<'a>, r: Result<(), Problem<'a>>, at: &'static str| {
+        let checked = |b: &mut dyn Build<'a, W>, r: Result<(), Problem<'a>>, at: &'static str| {
             field(b, Some(at));
-            r.map_err(|p| fail::<M::Error>(b, p))
+            r.map_err(|p| fail::<M::Error, W>(b, p))
         };
         match section {
             Section::Sensors => {
                 let name = required(b, f.name, "name")?;
                 let per =
-                    set(1).ok_or_else(|| fail::<M::Error>(b, Problem::MissingField("per")))?;
+                    set(1).ok_or_else(|| fail::<M::Error, W>(b, Problem::MissingField("per")))?;
                 let mode = match required(b, f.mode, "mode")? {
                     "cyclic" => {
                         let p = f.number[0].ok_or_else(|| {
-                            fail::<M::Error>(b, Problem::MissingField("period_ms"))
+                            fail::<M::Error, W>(b, Problem::MissingField("period_ms"))
                         })?;
                         field(b, Some("period_ms"));
                         SensorMode::Cyclic {
-                            period: millis(p).map_err(|e| fail::<M::Error>(b, e))?,
+                            period: millis(p).map_err(|e| fail::<M::Error, W>(b, e))?,
                         }
                     }
                     "one-shot" => SensorMode::OneShot,
@@ -755,7 +781,7 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
                     SensorAction::new(name, per, mode).with_pre(set(0).unwrap_or_default());
                 if let Some(t) = f.number[1] {
                     field(b, Some("timeout_ms"));
-                    sensor = sensor.with_timeout(millis(t).map_err(|e| fail::<M::Error>(b, e))?);
+                    sensor = sensor.with_timeout(millis(t).map_err(|e| fail::<M::Error, W>(b, e))?);
                 }
                 let added = b.add_sensor(sensor);
                 checked(b, added, "name")
@@ -774,7 +800,7 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
                     field(b, Some("max_violation_ms"));
                     let ms = millis(ms.max(1))
                         .map(|_| Duration::from_millis(ms))
-                        .map_err(|_| fail::<M::Error>(b, Problem::Millis))?;
+                        .map_err(|_| fail::<M::Error, W>(b, Problem::Millis))?;
                     action = action.with_max_violation(ms);
                 }
                 let added = b.add_action(action);
@@ -787,7 +813,9 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
                     return Err(fail(b, Problem::MissingField("body")));
                 }
                 field(b, Some("trigger"));
-                let trigger = b.event(trigger_name).map_err(|p| fail::<M::Error>(b, p))?;
+                let trigger = b
+                    .event(trigger_name)
+                    .map_err(|p| fail::<M::Error, W>(b, p))?;
                 let (context, context_not) =
                     (set(0).unwrap_or_default(), set(1).unwrap_or_default());
                 if let Some(both) = context.intersection(context_not).iter().next() {
@@ -803,14 +831,14 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
                     _ => Some("body"),
                 };
                 field(b, at);
-                added.map_err(|p| fail::<M::Error>(b, p))
+                added.map_err(|p| fail::<M::Error, W>(b, p))
             }
             Section::Task => {
                 let event_name = required(b, f.event, "event")?;
                 let goal =
-                    set(1).ok_or_else(|| fail::<M::Error>(b, Problem::MissingField("goal")))?;
+                    set(1).ok_or_else(|| fail::<M::Error, W>(b, Problem::MissingField("goal")))?;
                 field(b, Some("event"));
-                let event = b.event(event_name).map_err(|p| fail::<M::Error>(b, p))?;
+                let event = b.event(event_name).map_err(|p| fail::<M::Error, W>(b, p))?;
                 b.set_task(Task {
                     event,
                     init: set(0).unwrap_or_default(),
@@ -823,16 +851,16 @@ impl<'a> Visitor<'a> for Entry<'_, 'a> {
 }
 
 /// One pass over the top-level object.
-struct Top<'s, 'a>(&'s mut dyn Build<'a>, Pass, &'s mut u16);
+struct Top<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, Pass, &'s mut u16);
 
-impl<'a> DeserializeSeed<'a> for Top<'_, 'a> {
+impl<'a, const W: usize> DeserializeSeed<'a> for Top<'_, 'a, W> {
     type Value = ();
     fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
         d.deserialize_map(self)
     }
 }
 
-impl<'a> Visitor<'a> for Top<'_, 'a> {
+impl<'a, const W: usize> Visitor<'a> for Top<'_, 'a, W> {
     type Value = ();
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("a mission object")
@@ -888,10 +916,10 @@ impl<'a> Visitor<'a> for Top<'_, 'a> {
 
 /// Facts that can ever hold, ignoring deletions (relaxed reachability): `init`, everything a
 /// sensor perceives, and the `add` of every action whose `pre` can hold. O(NA²).
-pub fn reachable<const NS: usize, const NA: usize>(
-    domain: &Domain<'_, NS, NA>,
-    init: FactSet,
-) -> FactSet {
+pub fn reachable<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
+    domain: &Domain<'_, NS, NA, W, NF>,
+    init: FactSetOf<W>,
+) -> FactSetOf<W> {
     let mut facts = domain
         .sensors()
         .iter()
@@ -948,10 +976,19 @@ fn too_deep(json: &[u8], limit: usize) -> bool {
 /// fact or event or action, a duplicate name, a capacity exceeded (naming the limit), an empty
 /// plan body, a goal no action can ever add, a behaviour the platform does not have, nesting
 /// deeper than [`MAX_DEPTH`].
-pub fn load<'a, R: Registry, const NS: usize, const NA: usize, const NP: usize, const L: usize>(
+pub fn load<
+    'a,
+    R: Registry,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>(
     json: &'a [u8],
     registry: &R,
-) -> Result<Loaded<'a, R::Sensor, R::Action, NS, NA, NP, L>, LoadError<'a>> {
+) -> Result<Loaded<'a, R::Sensor, R::Action, NS, NA, NP, L, W, NF>, LoadError<'a>> {
     let mut out = Loaded::empty();
     load_into(json, registry, &mut out.mission, &mut out.bindings)?;
     Ok(out)
@@ -967,21 +1004,31 @@ pub fn load_into<
     const NA: usize,
     const NP: usize,
     const L: usize,
+    const W: usize,
+    const NF: usize,
 >(
     json: &'a [u8],
     registry: &R,
-    mission: &mut Mission<'a, NS, NA, NP, L>,
+    mission: &mut Mission<'a, NS, NA, NP, L, W, NF>,
     bindings: &mut Bindings<R::Sensor, R::Action, NS, NA>,
 ) -> Result<(), LoadError<'a>> {
-    *mission = Mission::empty();
-    *bindings = Bindings::new();
+    // Emptied in place: assigning empty ones would build them on the stack first.
+    mission.name = "";
+    mission.domain.clear();
+    mission.library.clear();
+    mission.task = Task {
+        event: EventId::FIRST,
+        init: FactSetOf::EMPTY,
+        goal: FactSetOf::EMPTY,
+    };
+    bindings.clear();
     if too_deep(json, MAX_DEPTH) {
         return Err(LoadError {
             at: Location::default(),
             problem: Problem::TooDeep,
         });
     }
-    let mut b: Builder<'a, '_, R, NS, NA, NP, L> = Builder {
+    let mut b: Builder<'a, '_, R, NS, NA, NP, L, W, NF> = Builder {
         mission,
         bindings,
         registry,
@@ -1035,15 +1082,33 @@ pub fn load_into<
 
 /// A loaded mission and the platform behaviours bound to its sensors and actions.
 #[derive(Clone, Debug)]
-pub struct Loaded<'a, S, A, const NS: usize, const NA: usize, const NP: usize, const L: usize> {
+pub struct Loaded<
+    'a,
+    S,
+    A,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize = 1,
+    const NF: usize = 64,
+> {
     /// The mission.
-    pub mission: Mission<'a, NS, NA, NP, L>,
+    pub mission: Mission<'a, NS, NA, NP, L, W, NF>,
     /// The behaviour of every sensor and action id.
     pub bindings: Bindings<S, A, NS, NA>,
 }
 
-impl<S, A, const NS: usize, const NA: usize, const NP: usize, const L: usize>
-    Loaded<'_, S, A, NS, NA, NP, L>
+impl<
+    S,
+    A,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> Loaded<'_, S, A, NS, NA, NP, L, W, NF>
 {
     /// Nothing loaded yet; usable in a `static`.
     pub const fn empty() -> Self {
@@ -1054,7 +1119,15 @@ impl<S, A, const NS: usize, const NA: usize, const NP: usize, const L: usize>
     }
 }
 
-impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> Mission<'_, NS, NA, NP, L> {
+impl<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> Mission<'_, NS, NA, NP, L, W, NF>
+{
     /// A mission with nothing in it; usable in a `static`.
     pub const fn empty() -> Self {
         Self {
@@ -1063,8 +1136,8 @@ impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> Mission<
             library: PlanLibrary::new(),
             task: Task {
                 event: EventId::FIRST,
-                init: FactSet::EMPTY,
-                goal: FactSet::EMPTY,
+                init: FactSetOf::EMPTY,
+                goal: FactSetOf::EMPTY,
             },
         }
     }
@@ -1073,6 +1146,7 @@ impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> Mission<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::facts::FactSet;
     use std::string::{String, ToString};
 
     const FETCH_TEA: &[u8] = include_bytes!("../../missions/fetch-tea.json");

@@ -2,19 +2,19 @@
 
 use crate::action::SensorId;
 use crate::domain::EventId;
-use crate::facts::FactSet;
+use crate::facts::{FactSet, FactSetOf};
 use crate::store::Entry;
 
 /// A task `Π = <Δ, τ0, τG>`; the domain `Δ` is the mission's [`Domain`](crate::domain::Domain).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Task {
+pub struct Task<const W: usize = 1> {
     /// The event posted to the plan library until the goal holds (for example "fetch tea").
     pub event: EventId,
     /// `τ0`: the initial state.
-    pub init: FactSet,
+    pub init: FactSetOf<W>,
     /// `τG`: the goal; reached when `τG ⊆ τ`.
-    pub goal: FactSet,
+    pub goal: FactSetOf<W>,
 }
 
 /// A snapshot of the world model `M = <ω, φ, Π>` of a runtime with `NS` sensors.

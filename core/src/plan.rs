@@ -10,7 +10,7 @@ use heapless::Vec;
 
 use crate::action::ActionId;
 use crate::domain::EventId;
-use crate::facts::FactSet;
+use crate::facts::{FactSet, FactSetOf};
 
 /// Most plans a library can hold: the width of a [`PlanSet`].
 pub const MAX_PLANS: usize = 32;
@@ -87,16 +87,16 @@ impl PlanSet {
 /// A task-oriented plan `p = <t(p), c(p), bd(p)>` whose body holds at most `L` actions.
 #[derive(Clone, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Plan<'a, const L: usize> {
+pub struct Plan<'a, const L: usize, const W: usize = 1> {
     /// Name, as missions and traces call it.
     pub name: &'a str,
     /// `t(p)`: the event that makes the plan a candidate.
     pub trigger: EventId,
     /// `c(p)`: the facts that must hold for the plan to be applicable.
-    pub context: FactSet,
+    pub context: FactSetOf<W>,
     /// The facts that must *not* hold for the plan to be applicable (a plan for when the
     /// battery is not ok).
-    pub context_not: FactSet,
+    pub context_not: FactSetOf<W>,
     /// `bd(p) = <a0, ..., an>`: the actuator-based actions, in order.
     pub body: Vec<ActionId, L>,
 }
@@ -124,12 +124,12 @@ pub enum PlanError {
     EmptyName,
 }
 
-impl<'a, const L: usize> Plan<'a, L> {
+impl<'a, const L: usize, const W: usize> Plan<'a, L, W> {
     /// A plan from its trigger, context and body.
     pub fn new(
         name: &'a str,
         trigger: EventId,
-        context: FactSet,
+        context: FactSetOf<W>,
         body: &[ActionId],
     ) -> Result<Self, PlanError> {
         if body.is_empty() {
@@ -140,21 +140,21 @@ impl<'a, const L: usize> Plan<'a, L> {
             name,
             trigger,
             context,
-            context_not: FactSet::EMPTY,
+            context_not: FactSetOf::EMPTY,
             body,
         })
     }
 
     /// The same plan, applicable only while none of `facts` holds.
     #[must_use]
-    pub fn with_context_not(mut self, facts: FactSet) -> Self {
+    pub fn with_context_not(mut self, facts: FactSetOf<W>) -> Self {
         self.context_not = facts;
         self
     }
 
     /// Whether the plan is applicable: `t(p) = event`, `c(p) ⊆ beliefs` and no fact of
     /// [`context_not`](Self::context_not) holds. O(1).
-    pub fn applicable(&self, event: EventId, beliefs: FactSet) -> bool {
+    pub fn applicable(&self, event: EventId, beliefs: FactSetOf<W>) -> bool {
         self.trigger == event
             && self.context.is_subset(beliefs)
             && !self.context_not.intersects(beliefs)
@@ -163,18 +163,23 @@ impl<'a, const L: usize> Plan<'a, L> {
 
 /// The plan library `P`: at most `NP` plans of at most `L` actions each.
 #[derive(Clone, Debug, Default)]
-pub struct PlanLibrary<'a, const NP: usize, const L: usize> {
-    plans: Vec<Plan<'a, L>, NP>,
+pub struct PlanLibrary<'a, const NP: usize, const L: usize, const W: usize = 1> {
+    plans: Vec<Plan<'a, L, W>, NP>,
 }
 
-impl<'a, const NP: usize, const L: usize> PlanLibrary<'a, NP, L> {
+impl<'a, const NP: usize, const L: usize, const W: usize> PlanLibrary<'a, NP, L, W> {
     /// An empty library.
     pub const fn new() -> Self {
         Self { plans: Vec::new() }
     }
 
-    /// Adds a plan after the existing ones (lower priority) and returns its id.
-    pub fn add(&mut self, plan: Plan<'a, L>) -> Result<PlanId, PlanError> {
+    /// Empties the library in place.
+    pub fn clear(&mut self) {
+        self.plans.clear();
+    }
+
+    /// Adds a plan and returns its id.
+    pub fn add(&mut self, plan: Plan<'a, L, W>) -> Result<PlanId, PlanError> {
         let full = PlanError::LibraryFull {
             capacity: if NP < MAX_PLANS { NP } else { MAX_PLANS },
         };
@@ -190,12 +195,12 @@ impl<'a, const NP: usize, const L: usize> PlanLibrary<'a, NP, L> {
     }
 
     /// A plan of the library.
-    pub fn get(&self, id: PlanId) -> Option<&Plan<'a, L>> {
+    pub fn get(&self, id: PlanId) -> Option<&Plan<'a, L, W>> {
         self.plans.get(id.index())
     }
 
     /// All plans, in priority order.
-    pub fn plans(&self) -> &[Plan<'a, L>] {
+    pub fn plans(&self) -> &[Plan<'a, L, W>] {
         &self.plans
     }
 
@@ -209,7 +214,12 @@ impl<'a, const NP: usize, const L: usize> PlanLibrary<'a, NP, L> {
 
     /// BDI selection: the first plan, in priority order, that is applicable to `event` under
     /// `beliefs` and not in `excluded`. O(NP).
-    pub fn select(&self, event: EventId, beliefs: FactSet, excluded: PlanSet) -> Option<PlanId> {
+    pub fn select(
+        &self,
+        event: EventId,
+        beliefs: FactSetOf<W>,
+        excluded: PlanSet,
+    ) -> Option<PlanId> {
         self.plans
             .iter()
             .enumerate()
@@ -219,7 +229,7 @@ impl<'a, const NP: usize, const L: usize> PlanLibrary<'a, NP, L> {
     }
 
     /// Whether any plan, failed or not, is applicable to `event` under `beliefs`. O(NP).
-    pub fn any_applicable(&self, event: EventId, beliefs: FactSet) -> bool {
+    pub fn any_applicable(&self, event: EventId, beliefs: FactSetOf<W>) -> bool {
         self.plans.iter().any(|p| p.applicable(event, beliefs))
     }
 }

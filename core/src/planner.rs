@@ -17,7 +17,7 @@ use heapless::Vec;
 use heapless::binary_heap::{BinaryHeap, Min};
 
 use crate::action::{ActionId, ActuatorAction, MAX_ACTIONS};
-use crate::facts::{FactSet, MAX_FACTS};
+use crate::facts::FactSetOf;
 
 /// Estimates of the number of actions still needed (for unit action costs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,24 +89,25 @@ const INFINITE: u32 = u32::MAX;
 /// 16 bytes: node and action indices as wide as their capacities (`u32` nodes, [`ActionId`]'s
 /// 16 bits), never truncated.
 #[derive(Clone, Copy)]
-struct Node {
-    state: FactSet,
+struct Node<const W: usize> {
+    state: FactSetOf<W>,
     parent: u32,
     action: u16,
     g: u16,
 }
 
-/// A forward planner with room for `N` search nodes.
+/// A forward planner with room for `N` search nodes over fact sets of `W` words (one by
+/// default: 64 facts).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Planner<const N: usize> {
+pub struct Planner<const N: usize, const W: usize = 1> {
     /// How to search.
     pub strategy: Strategy,
     /// Most nodes to generate, set per call; capped at `N - 1`.
     pub budget: u32,
 }
 
-impl<const N: usize> Default for Planner<N> {
+impl<const N: usize, const W: usize> Default for Planner<N, W> {
     fn default() -> Self {
         Self {
             strategy: Strategy::BreadthFirst,
@@ -122,14 +123,16 @@ struct Visited<const N: usize> {
 }
 
 impl<const N: usize> Visited<N> {
-    fn start(state: FactSet) -> usize {
-        // Fibonacci hashing of the 64 fact bits.
-        let h = state.bits().wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32;
+    fn start<const W: usize>(state: FactSetOf<W>) -> usize {
+        // Fibonacci hashing of the fact bits, a word at a time.
+        let h = state.words().iter().fold(0u64, |h, w| {
+            (h.rotate_left(5) ^ w).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        }) >> 32;
         (h as usize).checked_rem(N).unwrap_or(0)
     }
 
     /// The node holding `state`, or the free slot where it would go.
-    fn find(&self, arena: &[Node], state: FactSet) -> (usize, Option<u32>) {
+    fn find<const W: usize>(&self, arena: &[Node<W>], state: FactSetOf<W>) -> (usize, Option<u32>) {
         let mut slot = Self::start(state);
         for _ in 0..N {
             match self.slots.get(slot).copied() {
@@ -155,7 +158,7 @@ impl<const N: usize> Visited<N> {
     /// Empties the slots of `arena`'s states, in O(arena + slots used) rather than O(N).
     /// Every used slot lies on the probe run from some stored state's start slot, and each
     /// walk clears to the end of its run, so no used slot is left behind.
-    fn clear(&mut self, arena: &[Node]) {
+    fn clear<const W: usize>(&mut self, arena: &[Node<W>]) {
         for node in arena {
             let mut slot = Self::start(node.state);
             for _ in 0..N {
@@ -171,10 +174,18 @@ impl<const N: usize> Visited<N> {
 
 /// Relaxed (delete-free) cost of reaching `goal` from `state`: the max or the sum over goal
 /// facts of their h_max / h_add cost. [`INFINITE`] when some goal fact is unreachable.
-fn relaxed(actions: &[ActuatorAction<'_>], state: FactSet, goal: FactSet, sum: bool) -> u32 {
-    let mut cost = [INFINITE; MAX_FACTS];
+fn relaxed<const W: usize>(
+    actions: &[ActuatorAction<'_, W>],
+    state: FactSetOf<W>,
+    goal: FactSetOf<W>,
+    sum: bool,
+) -> u32 {
+    // A cost per fact, 64 to a word of the fact sets.
+    let mut cost = [[INFINITE; 64]; W];
+    let at = |f: crate::facts::FactId| (f.index() >> 6, f.index() & 63);
     for f in state.iter() {
-        if let Some(c) = cost.get_mut(f.index()) {
+        let (w, i) = at(f);
+        if let Some(c) = cost.get_mut(w).and_then(|c| c.get_mut(i)) {
             *c = 0;
         }
     }
@@ -186,20 +197,27 @@ fn relaxed(actions: &[ActuatorAction<'_>], state: FactSet, goal: FactSet, sum: b
         }
     };
     // Bellman-Ford style: at most one round per fact until nothing improves.
-    for _ in 0..=MAX_FACTS {
+    for _ in 0..=FactSetOf::<W>::CAPACITY {
         let mut changed = false;
         for a in actions {
             let pre = a
                 .pre
                 .iter()
-                .map(|f| cost.get(f.index()).copied().unwrap_or(INFINITE))
+                .map(|f| {
+                    let (w, i) = at(f);
+                    cost.get(w)
+                        .and_then(|c| c.get(i))
+                        .copied()
+                        .unwrap_or(INFINITE)
+                })
                 .fold(0, combine);
             if pre == INFINITE {
                 continue;
             }
             let through = pre.saturating_add(1);
             for f in a.add.iter() {
-                if let Some(c) = cost.get_mut(f.index()) {
+                let (w, i) = at(f);
+                if let Some(c) = cost.get_mut(w).and_then(|c| c.get_mut(i)) {
                     if through < *c {
                         *c = through;
                         changed = true;
@@ -212,11 +230,22 @@ fn relaxed(actions: &[ActuatorAction<'_>], state: FactSet, goal: FactSet, sum: b
         }
     }
     goal.iter()
-        .map(|f| cost.get(f.index()).copied().unwrap_or(INFINITE))
+        .map(|f| {
+            let (w, i) = at(f);
+            cost.get(w)
+                .and_then(|c| c.get(i))
+                .copied()
+                .unwrap_or(INFINITE)
+        })
         .fold(0, combine)
 }
 
-fn estimate(h: Heuristic, actions: &[ActuatorAction<'_>], state: FactSet, goal: FactSet) -> u32 {
+fn estimate<const W: usize>(
+    h: Heuristic,
+    actions: &[ActuatorAction<'_, W>],
+    state: FactSetOf<W>,
+    goal: FactSetOf<W>,
+) -> u32 {
     match h {
         Heuristic::GoalCount => goal.difference(state).len() as u32,
         Heuristic::Max => relaxed(actions, state, goal, false),
@@ -224,7 +253,7 @@ fn estimate(h: Heuristic, actions: &[ActuatorAction<'_>], state: FactSet, goal: 
     }
 }
 
-impl<const N: usize> Planner<N> {
+impl<const N: usize, const W: usize> Planner<N, W> {
     /// A planner with `strategy` and the largest budget its capacity allows.
     pub const fn new(strategy: Strategy) -> Self {
         Self {
@@ -243,11 +272,11 @@ impl<const N: usize> Planner<N> {
     /// this call's stack; [`Search`] runs the same search in slices, in space the caller keeps.
     pub fn plan<const L: usize>(
         &self,
-        actions: &[ActuatorAction<'_>],
-        init: FactSet,
-        goal: FactSet,
+        actions: &[ActuatorAction<'_, W>],
+        init: FactSetOf<W>,
+        goal: FactSetOf<W>,
     ) -> Result<Found<L>, PlanningError> {
-        let mut search = Search::<N>::new();
+        let mut search = Search::<N, W>::new();
         search.start(self, actions, init, goal);
         loop {
             if let Some(result) = search.step(actions, u32::MAX) {
@@ -263,11 +292,11 @@ impl<const N: usize> Planner<N> {
 /// (a `static` on a microcontroller). [`start`](Self::start) sets a search up in place,
 /// [`step`](Self::step) runs it a slice at a time: between two slices the caller may yield, so
 /// that a search never holds a cooperative executor for longer than one slice.
-pub struct Search<const N: usize> {
+pub struct Search<const N: usize, const W: usize = 1> {
     strategy: Strategy,
     limit: u32,
-    goal: FactSet,
-    arena: Vec<Node, N>,
+    goal: FactSetOf<W>,
+    arena: Vec<Node<W>, N>,
     visited: Visited<N>,
     open: BinaryHeap<(u32, u32, u32), Min, N>,
     /// Breadth-first: the next node to expand.
@@ -277,19 +306,19 @@ pub struct Search<const N: usize> {
     early: Option<Result<usize, PlanningError>>,
 }
 
-impl<const N: usize> Default for Search<N> {
+impl<const N: usize, const W: usize> Default for Search<N, W> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<const N: usize> Search<N> {
+impl<const N: usize, const W: usize> Search<N, W> {
     /// An empty search space; usable in a `static`.
     pub const fn new() -> Self {
         Self {
             strategy: Strategy::BreadthFirst,
             limit: 0,
-            goal: FactSet::EMPTY,
+            goal: FactSetOf::EMPTY,
             arena: Vec::new(),
             visited: Visited { slots: [0; N] },
             open: BinaryHeap::new(),
@@ -304,15 +333,15 @@ impl<const N: usize> Search<N> {
     /// for a heuristic's first estimate.
     pub fn start<const P: usize>(
         &mut self,
-        planner: &Planner<P>,
-        actions: &[ActuatorAction<'_>],
-        init: FactSet,
-        goal: FactSet,
+        planner: &Planner<P, W>,
+        actions: &[ActuatorAction<'_, W>],
+        init: FactSetOf<W>,
+        goal: FactSetOf<W>,
     ) {
         self.strategy = planner.strategy;
         self.limit = planner
             .budget
-            .min(Planner::<N>::new(planner.strategy).limit());
+            .min(Planner::<N, W>::new(planner.strategy).limit());
         self.goal = goal;
         self.visited.clear(&self.arena);
         self.arena.clear();
@@ -380,7 +409,7 @@ impl<const N: usize> Search<N> {
     /// heuristic search, O(NA · |facts|) per generated node.
     pub fn step<const L: usize>(
         &mut self,
-        actions: &[ActuatorAction<'_>],
+        actions: &[ActuatorAction<'_, W>],
         slice: u32,
     ) -> Option<Result<Found<L>, PlanningError>> {
         if let Some(early) = self.early {
@@ -475,8 +504,8 @@ impl<const N: usize> Search<N> {
 }
 
 /// The plan that ends at node `goal`: the actions on the path from the root, in order.
-fn extract<const L: usize>(
-    arena: &[Node],
+fn extract<const L: usize, const W: usize>(
+    arena: &[Node<W>],
     goal: usize,
     expanded: u32,
 ) -> Result<Found<L>, PlanningError> {
@@ -503,6 +532,7 @@ fn extract<const L: usize>(
 mod tests {
     use super::*;
     use crate::domain::Domain;
+    use crate::facts::FactSet;
     use std::boxed::Box;
     use std::format;
     use std::string::String;

@@ -15,27 +15,38 @@ use core::fmt;
 use crate::action::SensorSet;
 use crate::domain::Domain;
 use crate::exec::Failure;
-use crate::facts::FactSet;
+use crate::facts::FactSetOf;
 use crate::mission::Mission;
 use crate::plan::PlanId;
 use crate::trace::TraceEvent;
 
 /// A fact set printed with its facts' names ([`Domain::names`]); `Debug` prints the same.
 #[derive(Clone, Copy)]
-pub struct FactNames<'d, 'a, const NS: usize, const NA: usize> {
-    domain: &'d Domain<'a, NS, NA>,
-    set: FactSet,
+pub struct FactNames<
+    'd,
+    'a,
+    const NS: usize,
+    const NA: usize,
+    const W: usize = 1,
+    const NF: usize = 64,
+> {
+    domain: &'d Domain<'a, NS, NA, W, NF>,
+    set: FactSetOf<W>,
 }
 
-impl<'a, const NS: usize, const NA: usize> Domain<'a, NS, NA> {
+impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
+    Domain<'a, NS, NA, W, NF>
+{
     /// `set` with the names of its facts: `{path_clear, at_door}`. A fact the domain does not
     /// declare prints as its index.
-    pub fn names(&self, set: FactSet) -> FactNames<'_, 'a, NS, NA> {
+    pub fn names(&self, set: FactSetOf<W>) -> FactNames<'_, 'a, NS, NA, W, NF> {
         FactNames { domain: self, set }
     }
 }
 
-impl<const NS: usize, const NA: usize> fmt::Display for FactNames<'_, '_, NS, NA> {
+impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> fmt::Display
+    for FactNames<'_, '_, NS, NA, W, NF>
+{
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("{")?;
         for (i, fact) in self.set.iter().enumerate() {
@@ -51,7 +62,9 @@ impl<const NS: usize, const NA: usize> fmt::Display for FactNames<'_, '_, NS, NA
     }
 }
 
-impl<const NS: usize, const NA: usize> fmt::Debug for FactNames<'_, '_, NS, NA> {
+impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> fmt::Debug
+    for FactNames<'_, '_, NS, NA, W, NF>
+{
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         fmt::Display::fmt(self, f)
     }

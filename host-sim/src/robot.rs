@@ -405,7 +405,7 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
         let find = |which: NaoSensor| robot.bindings.sensor_id(&which);
         let timeout = |id: Option<SensorId>| {
             id.and_then(|id| robot.mission.domain.sensor(id))
-                .map_or(SensorAction::DEFAULT_TIMEOUT, |s| s.timeout)
+                .map_or(SensorAction::<'_, 1>::DEFAULT_TIMEOUT, |s| s.timeout)
         };
         let (sonar, bumper) = (find(NaoSensor::Sonar), find(NaoSensor::Bumper));
         Self {
