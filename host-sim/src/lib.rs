@@ -14,6 +14,8 @@ pub mod cli;
 pub mod json;
 #[cfg(feature = "std")]
 pub mod load;
+#[cfg(feature = "std")]
+pub mod planning;
 pub mod robot;
 pub mod run;
 pub mod scenario;

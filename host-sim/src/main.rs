@@ -12,7 +12,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 use psmpa_sim::cli::files::{self, Output, Stop};
 use psmpa_sim::cli::outputs::{Streams, TraceStream, WorldStream};
-use psmpa_sim::cli::{check, outputs, report, sweep, table1};
+use psmpa_sim::cli::{check, outputs, plan, report, sweep, table1};
 use psmpa_sim::robot::Arch;
 use psmpa_sim::run::Summary;
 use psmpa_sim::scenario::Scenario;
@@ -43,6 +43,32 @@ impl From<ArchArg> for Arch {
         match a {
             ArchArg::Psmpa => Arch::PSmpa,
             ArchArg::Smpa => Arch::Smpa,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SearchArg {
+    /// Breadth-first: shortest plans.
+    Bfs,
+    /// A* with h_max: shortest plans, fewer nodes.
+    AstarHmax,
+    /// A* with h_add: not always shortest.
+    AstarHadd,
+    /// Greedy best-first with h_add: fast, not always shortest.
+    GreedyHadd,
+    /// A* with the number of goal facts missing: not always shortest.
+    AstarGoalCount,
+}
+
+impl From<SearchArg> for plan::Method {
+    fn from(s: SearchArg) -> Self {
+        match s {
+            SearchArg::Bfs => Self::Bfs,
+            SearchArg::AstarHmax => Self::AstarHmax,
+            SearchArg::AstarHadd => Self::AstarHadd,
+            SearchArg::GreedyHadd => Self::GreedyHadd,
+            SearchArg::AstarGoalCount => Self::AstarGoalCount,
         }
     }
 }
@@ -79,6 +105,22 @@ enum Command {
         /// Accept behaviour names this robot does not have (check the logic only).
         #[arg(long)]
         any_platform: bool,
+    },
+    /// Plans from a mission's task init to its goal with the mission's actions (sensors and
+    /// library plans play no part). Capacities: 256 facts, 4,096 actions, 1,048,576 search
+    /// nodes. Exit status 0 with a plan, 1 without one, 2 for bad input.
+    Plan {
+        /// Mission file (JSON); `sensors` and `plans` may be empty.
+        mission: PathBuf,
+        /// How to search.
+        #[arg(long, value_enum, default_value = "bfs")]
+        search: SearchArg,
+        /// Most nodes to generate (at most 1,048,575).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_048_575))]
+        budget: Option<u32>,
+        /// Print exactly one JSON object.
+        #[arg(long)]
+        json: bool,
     },
     /// Reproduces the paper's Table I: six scenarios under both architectures.
     Table1 {
@@ -188,6 +230,24 @@ fn run(cli: Cli) -> Result<(), Stop> {
             let shown: String = report.lines().map(|l| json::printable(l) + "\n").collect();
             files::print(shown.as_bytes())?;
         }
+        Command::Plan {
+            mission,
+            search,
+            budget,
+            json,
+        } => {
+            let bytes = files::read_input(&mission, "mission").map_err(Stop::Bad)?;
+            let outcome = plan::plan(&mission, &bytes, search.into(), budget).map_err(Stop::Bad)?;
+            let text = if json {
+                serde_json::to_string(&outcome).map_err(Stop::internal)? + "\n"
+            } else {
+                outcome.text()
+            };
+            files::print(text.as_bytes())?;
+            if outcome.plan.is_none() {
+                return Err(Stop::NoPlan);
+            }
+        }
         Command::Table1 { json, plots } => {
             if let Some(dir) = &plots {
                 if dir.exists() && !dir.is_dir() {
@@ -288,6 +348,7 @@ fn usage_error(e: &clap::Error) -> ExitCode {
         ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
             return match files::print(text.as_bytes()) {
                 Ok(()) | Err(Stop::ClosedPipe) => ExitCode::SUCCESS,
+                Err(Stop::NoPlan) => ExitCode::from(1),
                 Err(Stop::Bad(m) | Stop::Internal(m)) => {
                     say(&m);
                     ExitCode::from(2)
@@ -324,6 +385,7 @@ fn main() -> ExitCode {
     };
     match run(cli) {
         Ok(()) | Err(Stop::ClosedPipe) => ExitCode::SUCCESS,
+        Err(Stop::NoPlan) => ExitCode::from(1),
         Err(Stop::Bad(message)) => {
             say(&message);
             ExitCode::from(2)

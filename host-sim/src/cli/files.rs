@@ -22,6 +22,8 @@ pub enum Stop {
     /// Standard output was closed by its reader (`| head`): nothing is lost that was asked
     /// for, so the command ends quietly with status 0.
     ClosedPipe,
+    /// `plan` found no plan (and said so): exit 1.
+    NoPlan,
 }
 
 impl Stop {

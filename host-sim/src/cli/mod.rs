@@ -4,6 +4,7 @@
 pub mod check;
 pub mod files;
 pub mod outputs;
+pub mod plan;
 pub mod report;
 pub mod sweep;
 pub mod table1;

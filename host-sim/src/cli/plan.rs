@@ -1,0 +1,215 @@
+//! `psmpa-sim plan`: the embedded planner on a mission file, from the task's `init` to its
+//! `goal` with the mission's actions (sensors and library plans play no part), at capacities
+//! larger than a robot's: [`FACTS`] facts, [`ACTIONS`] actions, [`NODES`] search nodes.
+
+use std::path::Path;
+
+use psmpa_core::mission::{self, AnyBehaviour, Loaded, Problem};
+use psmpa_core::planner::{Found, Heuristic, Planner, PlanningError, Search, Strategy};
+use serde::Serialize;
+
+use crate::cli::check::error_line;
+
+/// Fact-set words of the command's missions.
+const WORDS: usize = 4;
+/// Facts a mission may declare: `64 · WORDS`.
+pub const FACTS: usize = 64 * WORDS;
+/// Actions a mission may declare.
+pub const ACTIONS: usize = 4096;
+/// Search nodes: the largest budget (`--budget`, at most `NODES - 1`).
+pub const NODES: usize = 1 << 20;
+/// The longest plan reported.
+const LENGTH: usize = 256;
+
+/// A mission at the command's capacities (sensors and plans as a robot's).
+type Wide<'a> = Loaded<'a, (), (), 32, ACTIONS, 32, 16, WORDS, FACTS>;
+
+/// How to search, as the command line names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Breadth-first.
+    Bfs,
+    /// A* with h_max.
+    AstarHmax,
+    /// A* with h_add.
+    AstarHadd,
+    /// Greedy best-first with h_add.
+    GreedyHadd,
+    /// A* with the goal count.
+    AstarGoalCount,
+}
+
+impl Method {
+    /// Its name on the command line and in the JSON.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Bfs => "bfs",
+            Self::AstarHmax => "astar-hmax",
+            Self::AstarHadd => "astar-hadd",
+            Self::GreedyHadd => "greedy-hadd",
+            Self::AstarGoalCount => "astar-goal-count",
+        }
+    }
+
+    const fn strategy(self) -> Strategy {
+        match self {
+            Self::Bfs => Strategy::BreadthFirst,
+            Self::AstarHmax => Strategy::AStar(Heuristic::Max),
+            Self::AstarHadd => Strategy::AStar(Heuristic::Add),
+            Self::GreedyHadd => Strategy::Greedy(Heuristic::Add),
+            Self::AstarGoalCount => Strategy::AStar(Heuristic::GoalCount),
+        }
+    }
+}
+
+/// The command's result: a plan, or why there is none.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Outcome {
+    /// The search used.
+    pub search: &'static str,
+    /// Plan length, `None` without a plan.
+    pub length: Option<usize>,
+    /// The actions by name, in order (with a plan).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plan: Option<Vec<String>>,
+    /// `unsolvable` or `budget` (without a plan).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<&'static str>,
+    /// Nodes expanded.
+    pub expanded: u32,
+    /// Nodes generated (with a plan).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub generated: Option<u32>,
+    /// Wall time of the search, ms (with a plan).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_ms: Option<f64>,
+}
+
+impl Outcome {
+    /// The outcome as text.
+    pub fn text(&self) -> String {
+        match (&self.plan, self.error) {
+            (Some(plan), _) => {
+                let mut out = format!(
+                    "plan of {} actions ({}, {} nodes expanded, {} generated, {:.1} ms)\n",
+                    plan.len(),
+                    self.search,
+                    self.expanded,
+                    self.generated.unwrap_or(0),
+                    self.time_ms.unwrap_or(0.0)
+                );
+                for (i, a) in plan.iter().enumerate() {
+                    out.push_str(&format!("{:>4}. {a}\n", i + 1));
+                }
+                out
+            }
+            (None, error) => format!(
+                "no plan ({}): {} after {} nodes expanded\n",
+                self.search,
+                match error {
+                    Some("budget") => "the node budget ran out",
+                    _ => "the goal cannot be reached",
+                },
+                self.expanded
+            ),
+        }
+    }
+}
+
+/// Plans on the mission in `bytes` (from `file`) with `search` and at most `budget` nodes.
+/// `Err` is bad input, as one line.
+pub fn plan(
+    file: &Path,
+    bytes: &[u8],
+    search: Method,
+    budget: Option<u32>,
+) -> Result<Outcome, String> {
+    // Tens of MB of capacity: built on a thread whose stack holds them (touched as used).
+    std::thread::scope(|scope| {
+        std::thread::Builder::new()
+            .stack_size(256 << 20)
+            .spawn_scoped(scope, || plan_here(file, bytes, search, budget))
+            .map_err(|e| format!("cannot start the planner: {e}"))?
+            .join()
+            .map_err(|_| "the planner stopped unexpectedly".to_owned())?
+    })
+}
+
+fn plan_here(
+    file: &Path,
+    bytes: &[u8],
+    search: Method,
+    budget: Option<u32>,
+) -> Result<Outcome, String> {
+    let decoded = crate::json::strict(bytes).map_err(|e| {
+        format!(
+            "{}: {}",
+            file.display(),
+            crate::json::printable(&e.to_string())
+        )
+    })?;
+    let mut loaded: Box<Wide<'_>> = Box::new(Loaded::empty());
+    let loaded = &mut *loaded;
+    let unsolvable = |expanded| Outcome {
+        search: search.name(),
+        length: None,
+        plan: None,
+        error: Some("unsolvable"),
+        expanded,
+        generated: None,
+        time_ms: None,
+    };
+    match mission::load_into(
+        &decoded,
+        &AnyBehaviour,
+        &mut loaded.mission,
+        &mut loaded.bindings,
+    ) {
+        Ok(()) => {}
+        // Not even the relaxed problem reaches the goal: no plan, a result rather than bad input.
+        Err(e) if matches!(e.problem, Problem::UnreachableGoal(_)) => return Ok(unsolvable(0)),
+        Err(e) => return Err(error_line(file, &e)),
+    }
+    let m = &loaded.mission;
+    let mut planner = Planner::<NODES, WORDS>::new(search.strategy());
+    if let Some(b) = budget {
+        planner.budget = b;
+    }
+    let mut space: Search<NODES, WORDS> = Search::new();
+    let actions = m.domain.actions();
+    let started = std::time::Instant::now();
+    space.start(&planner, actions, m.task.init, m.task.goal);
+    let result: Result<Found<LENGTH>, PlanningError> = loop {
+        if let Some(r) = space.step(actions, u32::MAX) {
+            break r;
+        }
+    };
+    let time_ms = started.elapsed().as_secs_f64() * 1000.0;
+    match result {
+        Ok(found) => Ok(Outcome {
+            search: search.name(),
+            length: Some(found.body.len()),
+            plan: Some(
+                found
+                    .body
+                    .iter()
+                    .map(|a| m.domain.action(*a).map_or("?", |a| a.name).to_owned())
+                    .collect(),
+            ),
+            error: None,
+            expanded: found.expanded,
+            generated: Some(found.generated),
+            time_ms: Some(time_ms),
+        }),
+        Err(PlanningError::Unsolvable { expanded }) => Ok(unsolvable(expanded)),
+        Err(PlanningError::Budget { expanded, .. }) => Ok(Outcome {
+            error: Some("budget"),
+            ..unsolvable(expanded)
+        }),
+        Err(PlanningError::TooLong { limit }) => Err(format!(
+            "{}: the plan is longer than {limit} actions, the most this command reports",
+            file.display()
+        )),
+        Err(e) => Err(format!("{}: {e:?}", file.display())),
+    }
+}

@@ -1,0 +1,275 @@
+//! Classic planning problems, generated: gripper with `n` balls and the blocks world with `n`
+//! blocks, as psmpa missions (for `psmpa-sim plan` and the tests) and as PDDL (for pyperplan,
+//! the independent planner `cargo xtask bench` compares with). Their optimal plan lengths are
+//! known in closed form.
+
+use serde_json::json;
+
+/// A grounded STRIPS action.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Action {
+    /// Name, as PDDL writes a grounded action: `pick ball1 rooma left`.
+    pub name: String,
+    /// Precondition.
+    pub pre: Vec<String>,
+    /// Add list.
+    pub add: Vec<String>,
+    /// Delete list.
+    pub del: Vec<String>,
+}
+
+/// A planning problem, grounded, with its PDDL and the length of its optimal plans.
+#[derive(Clone, Debug)]
+pub struct Problem {
+    /// Name: `gripper-6`, `blocks-10-swap`.
+    pub name: String,
+    /// Every fact.
+    pub facts: Vec<String>,
+    /// Every action.
+    pub actions: Vec<Action>,
+    /// Initial state.
+    pub init: Vec<String>,
+    /// Goal.
+    pub goal: Vec<String>,
+    /// Length of an optimal plan.
+    pub optimal: usize,
+    /// PDDL domain.
+    pub pddl_domain: &'static str,
+    /// PDDL problem.
+    pub pddl_problem: String,
+}
+
+fn action(name: String, pre: &[&String], add: &[&String], del: &[&String]) -> Action {
+    let own = |v: &[&String]| v.iter().map(|s| (*s).clone()).collect();
+    Action {
+        name,
+        pre: own(pre),
+        add: own(add),
+        del: own(del),
+    }
+}
+
+impl Problem {
+    /// The problem as a psmpa mission (no sensors, no library plans).
+    pub fn mission_json(&self) -> String {
+        let actions: Vec<_> = self
+            .actions
+            .iter()
+            .map(|a| json!({"name": a.name, "pre": a.pre, "add": a.add, "del": a.del}))
+            .collect();
+        json!({
+            "name": self.name,
+            "facts": self.facts,
+            "events": ["solve"],
+            "sensors": [],
+            "actions": actions,
+            "plans": [],
+            "task": {"event": "solve", "init": self.init, "goal": self.goal},
+        })
+        .to_string()
+    }
+}
+
+const GRIPPER_PDDL: &str = "(define (domain gripper-strips)
+  (:predicates (room ?r) (ball ?b) (gripper ?g) (at-robby ?r) (at ?b ?r) (free ?g) (carry ?o ?g))
+  (:action move :parameters (?from ?to)
+    :precondition (and (room ?from) (room ?to) (at-robby ?from))
+    :effect (and (at-robby ?to) (not (at-robby ?from))))
+  (:action pick :parameters (?obj ?room ?gripper)
+    :precondition (and (ball ?obj) (room ?room) (gripper ?gripper) (at ?obj ?room) (at-robby ?room) (free ?gripper))
+    :effect (and (carry ?obj ?gripper) (not (at ?obj ?room)) (not (free ?gripper))))
+  (:action drop :parameters (?obj ?room ?gripper)
+    :precondition (and (ball ?obj) (room ?room) (gripper ?gripper) (carry ?obj ?gripper) (at-robby ?room))
+    :effect (and (at ?obj ?room) (free ?gripper) (not (carry ?obj ?gripper)))))
+";
+
+/// Gripper: a robot with two hands carries `balls` balls from room a to room b. Optimal:
+/// `6 · ⌊n/2⌋ - 1` moves for even `n`, `6 · ⌊n/2⌋ + 3` for odd `n` (a round trip per pair).
+pub fn gripper(balls: usize) -> Problem {
+    let rooms = ["rooma", "roomb"];
+    let hands = ["left", "right"];
+    let robby = |r: &str| format!("at-robby {r}");
+    let at = |b: usize, r: &str| format!("at ball{b} {r}");
+    let free = |g: &str| format!("free {g}");
+    let carry = |b: usize, g: &str| format!("carry ball{b} {g}");
+    let mut facts: Vec<String> = rooms.iter().map(|r| robby(r)).collect();
+    facts.extend(hands.iter().map(|g| free(g)));
+    for b in 1..=balls {
+        facts.extend(rooms.iter().map(|r| at(b, r)));
+        facts.extend(hands.iter().map(|g| carry(b, g)));
+    }
+    let mut actions = Vec::new();
+    for from in rooms {
+        for to in rooms {
+            if from != to {
+                let (f, t) = (robby(from), robby(to));
+                actions.push(action(format!("move {from} {to}"), &[&f], &[&t], &[&f]));
+            }
+        }
+    }
+    for b in 1..=balls {
+        for r in rooms {
+            for g in hands {
+                let (a, rb, fr, c) = (at(b, r), robby(r), free(g), carry(b, g));
+                actions.push(action(
+                    format!("pick ball{b} {r} {g}"),
+                    &[&a, &rb, &fr],
+                    &[&c],
+                    &[&a, &fr],
+                ));
+                actions.push(action(
+                    format!("drop ball{b} {r} {g}"),
+                    &[&c, &rb],
+                    &[&a, &fr],
+                    &[&c],
+                ));
+            }
+        }
+    }
+    let mut init = vec![robby("rooma"), free("left"), free("right")];
+    init.extend((1..=balls).map(|b| at(b, "rooma")));
+    let goal: Vec<String> = (1..=balls).map(|b| at(b, "roomb")).collect();
+    let pairs = balls / 2;
+    let optimal = if balls % 2 == 0 {
+        (6 * pairs).saturating_sub(1)
+    } else {
+        6 * pairs + 3
+    };
+    let objects: Vec<String> = (1..=balls).map(|b| format!("ball{b}")).collect();
+    let pddl_problem = format!(
+        "(define (problem gripper-{balls}) (:domain gripper-strips)\n  (:objects rooma roomb left right {})\n  (:init (room rooma) (room roomb) (gripper left) (gripper right) (at-robby rooma) (free left) (free right) {})\n  (:goal (and {})))\n",
+        objects.join(" "),
+        objects
+            .iter()
+            .map(|b| format!("(ball {b}) (at {b} rooma)"))
+            .collect::<Vec<_>>()
+            .join(" "),
+        objects
+            .iter()
+            .map(|b| format!("(at {b} roomb)"))
+            .collect::<Vec<_>>()
+            .join(" "),
+    );
+    Problem {
+        name: format!("gripper-{balls}"),
+        facts,
+        actions,
+        init,
+        goal,
+        optimal,
+        pddl_domain: GRIPPER_PDDL,
+        pddl_problem,
+    }
+}
+
+const BLOCKS_PDDL: &str = "(define (domain blocks)
+  (:predicates (on ?x ?y) (ontable ?x) (clear ?x) (handempty) (holding ?x))
+  (:action pick-up :parameters (?x)
+    :precondition (and (clear ?x) (ontable ?x) (handempty))
+    :effect (and (not (ontable ?x)) (not (clear ?x)) (not (handempty)) (holding ?x)))
+  (:action put-down :parameters (?x)
+    :precondition (holding ?x)
+    :effect (and (not (holding ?x)) (clear ?x) (handempty) (ontable ?x)))
+  (:action stack :parameters (?x ?y)
+    :precondition (and (holding ?x) (clear ?y))
+    :effect (and (not (holding ?x)) (not (clear ?y)) (clear ?x) (handempty) (on ?x ?y)))
+  (:action unstack :parameters (?x ?y)
+    :precondition (and (on ?x ?y) (clear ?x) (handempty))
+    :effect (and (holding ?x) (clear ?y) (not (clear ?x)) (not (handempty)) (not (on ?x ?y)))))
+";
+
+/// The blocks world with `n` blocks in one tower `b1` (top) on `b2` ... on `bn` (on the
+/// table). `reverse`: the goal is the tower upside down (optimal `2n`); else the top two
+/// blocks swapped (`b2` on `b1` on `b3`, optimal 8 for `n >= 3`).
+pub fn blocks(n: usize, reverse: bool) -> Problem {
+    let b = |i: usize| format!("b{i}");
+    let on = |x: usize, y: usize| format!("on b{x} b{y}");
+    let table = |x: usize| format!("ontable b{x}");
+    let clear = |x: usize| format!("clear b{x}");
+    let holding = |x: usize| format!("holding b{x}");
+    let hand = "handempty".to_owned();
+    let mut facts = vec![hand.clone()];
+    for x in 1..=n {
+        facts.extend([table(x), clear(x), holding(x)]);
+        facts.extend((1..=n).filter(|y| *y != x).map(|y| on(x, y)));
+    }
+    let mut actions = Vec::new();
+    for x in 1..=n {
+        let (t, c, h) = (table(x), clear(x), holding(x));
+        actions.push(action(
+            format!("pick-up b{x}"),
+            &[&c, &t, &hand],
+            &[&h],
+            &[&t, &c, &hand],
+        ));
+        actions.push(action(
+            format!("put-down b{x}"),
+            &[&h],
+            &[&t, &c, &hand],
+            &[&h],
+        ));
+        for y in (1..=n).filter(|y| *y != x) {
+            let (o, cy) = (on(x, y), clear(y));
+            actions.push(action(
+                format!("stack b{x} b{y}"),
+                &[&h, &cy],
+                &[&o, &c, &hand],
+                &[&h, &cy],
+            ));
+            actions.push(action(
+                format!("unstack b{x} b{y}"),
+                &[&o, &c, &hand],
+                &[&h, &cy],
+                &[&o, &c, &hand],
+            ));
+        }
+    }
+    let mut init = vec![hand.clone(), clear(1), table(n)];
+    init.extend((1..n).map(|x| on(x, x + 1)));
+    let (goal, optimal, what) = if reverse {
+        let mut goal = vec![table(1)];
+        goal.extend((2..=n).map(|x| on(x, x - 1)));
+        (goal, 2 * n, "reverse")
+    } else {
+        let mut goal = vec![on(2, 1), on(1, 3)];
+        goal.extend((3..n).map(|x| on(x, x + 1)));
+        (goal, 8, "swap")
+    };
+    let pddl = |facts: &[String]| {
+        facts
+            .iter()
+            .map(|f| format!("({f})"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let objects: Vec<String> = (1..=n).map(b).collect();
+    let pddl_problem = format!(
+        "(define (problem blocks-{n}-{what}) (:domain blocks)\n  (:objects {})\n  (:init {})\n  (:goal (and {})))\n",
+        objects.join(" "),
+        pddl(&init),
+        pddl(&goal)
+    );
+    Problem {
+        name: format!("blocks-{n}-{what}"),
+        facts,
+        actions,
+        init,
+        goal,
+        optimal,
+        pddl_domain: BLOCKS_PDDL,
+        pddl_problem,
+    }
+}
+
+/// The problems `cargo xtask bench` and the tests plan on.
+pub fn suite() -> Vec<Problem> {
+    vec![
+        gripper(4),
+        gripper(6),
+        gripper(8),
+        blocks(4, true),
+        blocks(6, true),
+        blocks(10, false),
+        blocks(12, false),
+    ]
+}

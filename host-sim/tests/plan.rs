@@ -1,0 +1,159 @@
+//! `psmpa-sim plan` on generated classic problems (issue 17): optimal plans where the search
+//! is optimal, valid plans always, the JSON contract, and no plan or bad input told apart.
+
+mod common;
+
+use common::{assert_success, bin, file};
+
+use psmpa_sim::planning::{Problem, blocks, gripper};
+use serde_json::Value;
+
+fn plan(problem: &Problem, search: &str, extra: &[&str]) -> (Option<i32>, Value) {
+    let path = file(&format!("{}.json", problem.name), &problem.mission_json());
+    let out = bin()
+        .arg("plan")
+        .arg(&path)
+        .args(["--search", search, "--json"])
+        .args(extra)
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(text.lines().count(), 1, "one JSON object: {text}");
+    (out.status.code(), serde_json::from_str(&text).unwrap())
+}
+
+/// The plan's actions applied in order from `init`: each applicable, the goal at the end.
+fn assert_valid(problem: &Problem, names: &[Value]) {
+    let mut state: std::collections::BTreeSet<&str> =
+        problem.init.iter().map(String::as_str).collect();
+    for (i, name) in names.iter().enumerate() {
+        let name = name.as_str().unwrap();
+        let a = problem.actions.iter().find(|a| a.name == name).unwrap();
+        for p in &a.pre {
+            assert!(state.contains(p.as_str()), "step {i}: {name} needs {p}");
+        }
+        for d in &a.del {
+            state.remove(d.as_str());
+        }
+        state.extend(a.add.iter().map(String::as_str));
+    }
+    for g in &problem.goal {
+        assert!(state.contains(g.as_str()), "goal {g} not reached");
+    }
+}
+
+#[test]
+fn optimal_searches_find_the_known_optimal_lengths() {
+    for (problem, searches) in [
+        (gripper(4), &["bfs", "astar-hmax"][..]),
+        (gripper(5), &["astar-hmax"][..]),
+        (blocks(4, true), &["bfs", "astar-hmax"][..]),
+        (blocks(6, true), &["astar-hmax"][..]),
+    ] {
+        for search in searches {
+            let (status, v) = plan(&problem, search, &[]);
+            assert_eq!(status, Some(0), "{}: {v}", problem.name);
+            assert_eq!(v["search"], *search);
+            assert_eq!(v["length"], problem.optimal, "{} by {search}", problem.name);
+            let names = v["plan"].as_array().unwrap();
+            assert_eq!(names.len(), problem.optimal);
+            assert_valid(&problem, names);
+            assert!(v["expanded"].as_u64().unwrap() > 0);
+            assert!(v["generated"].as_u64().unwrap() >= v["expanded"].as_u64().unwrap());
+            assert!(v["time_ms"].as_f64().unwrap() >= 0.0);
+        }
+    }
+}
+
+#[test]
+fn more_than_64_facts_are_planned_optimally() {
+    // 121 and 169 facts, 200 and 288 actions: past one fact word and 256 actions.
+    for n in [10, 12] {
+        let problem = blocks(n, false);
+        assert!(problem.facts.len() > 64 && problem.facts.len() <= 256);
+        let (status, v) = plan(&problem, "astar-hmax", &[]);
+        assert_eq!(status, Some(0), "{v}");
+        assert_eq!(v["length"], problem.optimal, "{}", problem.name);
+        assert_valid(&problem, v["plan"].as_array().unwrap());
+    }
+    // Gripper with 30 balls (124 facts, 242 actions): greedy finds a valid plan fast.
+    let problem = gripper(30);
+    let (status, v) = plan(&problem, "greedy-hadd", &[]);
+    assert_eq!(status, Some(0), "{v}");
+    assert!(v["length"].as_u64().unwrap() >= problem.optimal as u64);
+    assert_valid(&problem, v["plan"].as_array().unwrap());
+}
+
+#[test]
+fn every_search_gives_a_valid_plan() {
+    let problem = gripper(6);
+    for search in [
+        "bfs",
+        "astar-hmax",
+        "astar-hadd",
+        "greedy-hadd",
+        "astar-goal-count",
+    ] {
+        let (status, v) = plan(&problem, search, &[]);
+        assert_eq!(status, Some(0), "{search}: {v}");
+        assert!(v["length"].as_u64().unwrap() >= problem.optimal as u64);
+        assert_valid(&problem, v["plan"].as_array().unwrap());
+    }
+}
+
+#[test]
+fn no_plan_is_status_1_with_the_reason() {
+    // The budget runs out.
+    let (status, v) = plan(&gripper(6), "bfs", &["--budget", "10"]);
+    assert_eq!(status, Some(1));
+    assert_eq!(v["length"], Value::Null);
+    assert_eq!(v["error"], "budget");
+    assert!(v.get("plan").is_none());
+    // Unsolvable: the ball needs a hand, and both are taken by balls that cannot be dropped.
+    let mut problem = gripper(1);
+    problem.actions.retain(|a| !a.name.starts_with("drop"));
+    problem.name = "gripper-no-drop".into();
+    let (status, v) = plan(&problem, "bfs", &[]);
+    assert_eq!(status, Some(1));
+    assert_eq!(v["error"], "unsolvable");
+    assert_eq!(v["length"], Value::Null);
+    // The Fetch Tea mission without its sensors: `path_clear` never holds.
+    let out = bin()
+        .args(["plan", "--json"])
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../missions/fetch-tea.json"
+        ))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+}
+
+#[test]
+fn bad_input_is_status_2_and_one_line() {
+    let path = file("not-a-mission.json", r#"{"name": "x"}"#);
+    let out = bin().arg("plan").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("not-a-mission.json"), "{stderr}");
+    // More facts than the command's 256.
+    let mut problem = gripper(70);
+    problem.name = "too-many-facts".into();
+    let path = file("too-many-facts.json", &problem.mission_json());
+    let out = bin().arg("plan").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(stderr.contains("256"), "names the limit: {stderr}");
+    // The same kind of problem within the limit plans (text output).
+    let path = file("gripper-2.json", &gripper(2).mission_json());
+    let out = bin().arg("plan").arg(&path).output().unwrap();
+    assert_success(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("plan of 5 actions"));
+    let out = bin()
+        .args(["plan", "--budget", "0"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
