@@ -15,6 +15,7 @@
 mod bench;
 mod callgrind;
 mod firmware;
+mod planning;
 mod size;
 mod stack;
 mod timing;
@@ -62,6 +63,10 @@ enum Task {
         /// deterministic, for optimising); writes nothing.
         #[arg(long, conflicts_with = "no_run")]
         instructions: bool,
+        /// Only the planning benchmark: psmpa's planner beside pyperplan (when installed) on
+        /// generated gripper and blocks problems; writes bench/PLANNING.md.
+        #[arg(long, conflicts_with_all = ["no_run", "instructions"])]
+        planning: bool,
     },
     /// Response-time analysis from step costs measured in QEMU: a latency bound per sensor,
     /// checked against every measured reaction; the table also goes to a JSON file.
@@ -89,6 +94,7 @@ fn main() -> ExitCode {
         Task::Bench {
             instructions: true, ..
         } => bench::instructions(),
+        Task::Bench { planning: true, .. } => planning::run(),
         Task::Bench { no_run, .. } => bench::run(no_run),
         Task::Timing {
             clock_hz,
