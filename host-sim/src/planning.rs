@@ -1,5 +1,5 @@
-//! Classic planning problems, generated: gripper with `n` balls and the blocks world with `n`
-//! blocks, as psmpa missions (for `psmpa-sim plan` and the tests) and as PDDL (for pyperplan,
+//! Classic planning problems, generated: gripper with `n` balls, the blocks world with `n`
+//! blocks and a small logistics problem, as psmpa missions (for `psmpa-sim plan` and the tests) and as PDDL (for pyperplan,
 //! the independent planner `cargo xtask bench` compares with). Their optimal plan lengths are
 //! known in closed form.
 
@@ -261,6 +261,159 @@ pub fn blocks(n: usize, reverse: bool) -> Problem {
     }
 }
 
+const LOGISTICS_PDDL: &str = "(define (domain logistics)
+  (:predicates (package ?p) (truck ?t) (airplane ?a) (airport ?l) (location ?l) (in-city ?l ?c)
+    (at ?o ?l) (in ?p ?v))
+  (:action load-truck :parameters (?p ?t ?l)
+    :precondition (and (package ?p) (truck ?t) (location ?l) (at ?t ?l) (at ?p ?l))
+    :effect (and (not (at ?p ?l)) (in ?p ?t)))
+  (:action unload-truck :parameters (?p ?t ?l)
+    :precondition (and (package ?p) (truck ?t) (location ?l) (at ?t ?l) (in ?p ?t))
+    :effect (and (not (in ?p ?t)) (at ?p ?l)))
+  (:action drive-truck :parameters (?t ?from ?to ?c)
+    :precondition (and (truck ?t) (location ?from) (location ?to) (at ?t ?from) (in-city ?from ?c) (in-city ?to ?c))
+    :effect (and (not (at ?t ?from)) (at ?t ?to)))
+  (:action load-airplane :parameters (?p ?a ?l)
+    :precondition (and (package ?p) (airplane ?a) (airport ?l) (at ?p ?l) (at ?a ?l))
+    :effect (and (not (at ?p ?l)) (in ?p ?a)))
+  (:action unload-airplane :parameters (?p ?a ?l)
+    :precondition (and (package ?p) (airplane ?a) (airport ?l) (in ?p ?a) (at ?a ?l))
+    :effect (and (not (in ?p ?a)) (at ?p ?l)))
+  (:action fly-airplane :parameters (?a ?from ?to)
+    :precondition (and (airplane ?a) (airport ?from) (airport ?to) (at ?a ?from))
+    :effect (and (not (at ?a ?from)) (at ?a ?to))))
+";
+
+/// A small logistics problem: two cities, each with an airport and a post office and a truck
+/// at the airport, one airplane at the first city's airport, and `packages` packages to carry
+/// from the first city's post office to the second's. Optimal: `4 + 6 · packages` (the first
+/// truck fetches them, the plane flies once, the second truck delivers).
+pub fn logistics(packages: usize) -> Problem {
+    let cities = ["c1", "c2"];
+    let places = ["c1-airport", "c1-office", "c2-airport", "c2-office"];
+    let city = |l: &str| if l.starts_with("c1") { "c1" } else { "c2" };
+    let trucks = ["t1", "t2"];
+    let truck_city = |t: &str| if t == "t1" { "c1" } else { "c2" };
+    let at = |o: &str, l: &str| format!("at {o} {l}");
+    let inside = |p: &str, v: &str| format!("in {p} {v}");
+    let ps: Vec<String> = (1..=packages).map(|i| format!("p{i}")).collect();
+    let mut facts = Vec::new();
+    for l in places {
+        for t in trucks.iter().filter(|t| truck_city(t) == city(l)) {
+            facts.push(at(t, l));
+        }
+        if l.ends_with("airport") {
+            facts.push(at("plane", l));
+        }
+        facts.extend(ps.iter().map(|p| at(p, l)));
+    }
+    for p in &ps {
+        facts.extend(trucks.iter().map(|t| inside(p, t)));
+        facts.push(inside(p, "plane"));
+    }
+    let mut actions = Vec::new();
+    for t in trucks {
+        let here = places.iter().filter(|l| city(l) == truck_city(t));
+        for from in here.clone() {
+            for to in here.clone().filter(|to| *to != from) {
+                let (f, g) = (at(t, from), at(t, to));
+                actions.push(action(
+                    format!("drive-truck {t} {from} {to} {}", city(from)),
+                    &[&f],
+                    &[&g],
+                    &[&f],
+                ));
+            }
+            for p in &ps {
+                let (tl, pl, pi) = (at(t, from), at(p, from), inside(p, t));
+                actions.push(action(
+                    format!("load-truck {p} {t} {from}"),
+                    &[&tl, &pl],
+                    &[&pi],
+                    &[&pl],
+                ));
+                actions.push(action(
+                    format!("unload-truck {p} {t} {from}"),
+                    &[&tl, &pi],
+                    &[&pl],
+                    &[&pi],
+                ));
+            }
+        }
+    }
+    let airports = ["c1-airport", "c2-airport"];
+    for from in airports {
+        for to in airports.iter().filter(|to| **to != from) {
+            let (f, g) = (at("plane", from), at("plane", to));
+            actions.push(action(
+                format!("fly-airplane plane {from} {to}"),
+                &[&f],
+                &[&g],
+                &[&f],
+            ));
+        }
+        for p in &ps {
+            let (al, pl, pi) = (at("plane", from), at(p, from), inside(p, "plane"));
+            actions.push(action(
+                format!("load-airplane {p} plane {from}"),
+                &[&al, &pl],
+                &[&pi],
+                &[&pl],
+            ));
+            actions.push(action(
+                format!("unload-airplane {p} plane {from}"),
+                &[&al, &pi],
+                &[&pl],
+                &[&pi],
+            ));
+        }
+    }
+    let mut init = vec![
+        at("t1", "c1-airport"),
+        at("t2", "c2-airport"),
+        at("plane", "c1-airport"),
+    ];
+    init.extend(ps.iter().map(|p| at(p, "c1-office")));
+    let goal: Vec<String> = ps.iter().map(|p| at(p, "c2-office")).collect();
+    let pddl = |facts: &[String]| {
+        facts
+            .iter()
+            .map(|f| format!("({f})"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let statics = format!(
+        "(truck t1) (truck t2) (airplane plane) (airport c1-airport) (airport c2-airport) {} {}",
+        places
+            .iter()
+            .map(|l| format!("(location {l}) (in-city {l} {})", city(l)))
+            .collect::<Vec<_>>()
+            .join(" "),
+        ps.iter()
+            .map(|p| format!("(package {p})"))
+            .collect::<Vec<_>>()
+            .join(" "),
+    );
+    let pddl_problem = format!(
+        "(define (problem logistics-{packages}) (:domain logistics)\n  (:objects t1 t2 plane {} {} {})\n  (:init {statics} {})\n  (:goal (and {})))\n",
+        cities.join(" "),
+        places.join(" "),
+        ps.join(" "),
+        pddl(&init),
+        pddl(&goal)
+    );
+    Problem {
+        name: format!("logistics-{packages}"),
+        facts,
+        actions,
+        init,
+        goal,
+        optimal: 4 + 6 * packages,
+        pddl_domain: LOGISTICS_PDDL,
+        pddl_problem,
+    }
+}
+
 /// The problems `cargo xtask bench` and the tests plan on.
 pub fn suite() -> Vec<Problem> {
     vec![
@@ -271,5 +424,7 @@ pub fn suite() -> Vec<Problem> {
         blocks(6, true),
         blocks(10, false),
         blocks(12, false),
+        logistics(2),
+        logistics(3),
     ]
 }

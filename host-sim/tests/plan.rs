@@ -5,7 +5,7 @@ mod common;
 
 use common::{assert_success, bin, file};
 
-use psmpa_sim::planning::{Problem, blocks, gripper};
+use psmpa_sim::planning::{Problem, blocks, gripper, logistics};
 use serde_json::Value;
 
 fn plan(problem: &Problem, search: &str, extra: &[&str]) -> (Option<i32>, Value) {
@@ -49,6 +49,8 @@ fn optimal_searches_find_the_known_optimal_lengths() {
         (gripper(5), &["astar-hmax"][..]),
         (blocks(4, true), &["bfs", "astar-hmax"][..]),
         (blocks(6, true), &["astar-hmax"][..]),
+        (logistics(1), &["bfs", "astar-hmax"][..]),
+        (logistics(2), &["astar-hmax"][..]),
     ] {
         for search in searches {
             let (status, v) = plan(&problem, search, &[]);
