@@ -219,6 +219,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
     }
 
     /// The id of the fact called `name`.
+    #[inline]
     pub fn fact_id(&self, name: &str) -> Option<FactId> {
         self.facts
             .iter()
@@ -252,6 +253,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
     }
 
     /// The id of the actuator-based action called `name`.
+    #[inline]
     pub fn action_id(&self, name: &str) -> Option<ActionId> {
         self.actions
             .iter()
@@ -331,6 +333,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
     /// Algorithm 2 line 11: the sensors `s` with `per(s) ⊆ pre` (and `per(s) ≠ ∅`).
     ///
     /// O(NS).
+    #[inline]
     pub fn sensors_serving(&self, pre: FactSetOf<W>) -> SensorSet {
         self.sensors
             .iter()
@@ -343,6 +346,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
     /// `∪ per(s)` over a set of sensors: the facts they decide while running.
     ///
     /// O(NS).
+    #[inline]
     pub fn perception_of(&self, sensors: SensorSet) -> FactSetOf<W> {
         sensors
             .iter()

@@ -331,6 +331,15 @@ impl<const W: usize> Iterator for FactIter<W> {
     type Item = FactId;
 
     fn next(&mut self) -> Option<FactId> {
+        // One word (the default width): the plain bit loop, no word index.
+        if let [bits] = self.words.as_mut_slice() {
+            if *bits == 0 {
+                return None;
+            }
+            let index = bits.trailing_zeros() as u16;
+            *bits &= bits.wrapping_sub(1);
+            return Some(FactId(index));
+        }
         loop {
             let bits = self.words.get_mut(self.word)?;
             if *bits != 0 {
@@ -396,5 +405,31 @@ mod tests {
         );
         assert!(b.without(f(63)).contains(f(3)));
         assert!(!b.without(f(63)).contains(f(63)));
+    }
+
+    #[test]
+    fn wide_sets_span_their_words() {
+        let id = |i: usize| FactId::within(i, 256).unwrap();
+        let a = FactSetOf::<4>::of(&[id(0), id(63), id(64), id(200)]);
+        assert_eq!(a.len(), 4);
+        assert!(a.contains(id(64)) && a.contains(id(200)) && !a.contains(id(65)));
+        assert_eq!(
+            a.iter().map(FactId::index).collect::<heapless::Vec<_, 8>>(),
+            [0, 63, 64, 200]
+        );
+        let add = FactSetOf::<4>::single(id(255));
+        let del = FactSetOf::<4>::of(&[id(63), id(200)]);
+        let b = a.apply(add, del);
+        assert_eq!(
+            b.iter().map(FactId::index).collect::<heapless::Vec<_, 8>>(),
+            [0, 64, 255]
+        );
+        assert!(FactSetOf::<4>::single(id(64)).is_subset(b));
+        assert!(!b.is_subset(a));
+        assert!(b.intersects(a) && !b.difference(a).intersects(a));
+        // A fact past a set's width is never another fact (no wrap into a lower word).
+        assert_eq!(FactSetOf::<1>::single(id(64)), FactSetOf::<1>::EMPTY);
+        assert!(!FactSet::ALL.contains(id(64)));
+        assert_eq!(FactSetOf::<4>::CAPACITY, 256);
     }
 }
