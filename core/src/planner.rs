@@ -7,8 +7,8 @@
 //!   plan, expanding fewer nodes; [`Strategy::Greedy`] with [`Heuristic::Add`] (h_add) finds a
 //!   plan fast in larger domains, not necessarily a shortest one.
 //!
-//! Memory is fixed: `N` search nodes (16 bytes each), a visited table of `N` slots and an open
-//! list of `N` entries, all on the stack of the call. Work is bounded: at most `budget <= N - 1`
+//! Memory is fixed: `N` search nodes (`8 · W + 8` bytes each: 16 for one-word fact sets), a
+//! visited table of `N` slots and an open list of `N` entries, all on the stack of the call. Work is bounded: at most `budget <= N - 1`
 //! nodes are generated; running out is [`PlanningError::Budget`], never a hang, and an
 //! exhausted search space is [`PlanningError::Unsolvable`]. Each expansion costs O(NA) set
 //! operations plus, for heuristic search, O(NA · |facts|) per generated node.
@@ -86,7 +86,7 @@ pub struct Found<const L: usize> {
 const NONE: u32 = u32::MAX;
 const INFINITE: u32 = u32::MAX;
 
-/// 16 bytes: node and action indices as wide as their capacities (`u32` nodes, [`ActionId`]'s
+/// `8 · W + 8` bytes: node and action indices as wide as their capacities (`u32` nodes, [`ActionId`]'s
 /// 16 bits), never truncated.
 #[derive(Clone, Copy)]
 struct Node<const W: usize> {
@@ -286,10 +286,9 @@ impl<const N: usize, const W: usize> Planner<N, W> {
     }
 }
 
-/// The space of one search, run in slices: `N` nodes of 16 bytes, a visited table of `N`
-/// 4-byte slots and an open list of `N` 12-byte entries, about `32 · N` bytes wherever the
-/// caller keeps it
-/// (a `static` on a microcontroller). [`start`](Self::start) sets a search up in place,
+/// The space of one search, run in slices: `N` nodes of `8 · W + 8` bytes, a visited table of
+/// `N` 4-byte slots and an open list of `N` 12-byte entries (`32 · N` bytes for one-word fact
+/// sets), wherever the caller keeps it (a `static` on a microcontroller). [`start`](Self::start) sets a search up in place,
 /// [`step`](Self::step) runs it a slice at a time: between two slices the caller may yield, so
 /// that a search never holds a cooperative executor for longer than one slice.
 pub struct Search<const N: usize, const W: usize = 1> {
