@@ -8,8 +8,8 @@
 //!   plan fast in larger domains, not necessarily a shortest one.
 //!
 //! Memory is fixed: `N` search nodes (`8 · W + 8` bytes each: 16 for one-word fact sets), a
-//! visited table of `N` slots and an open list of `N` entries, all on the stack of the call. Work is bounded: at most `budget <= N - 1`
-//! nodes are generated; running out is [`PlanningError::Budget`], never a hang, and an
+//! visited table of `N` slots and an open list of `N` entries, all on the stack of the call.
+//! Work is bounded: at most `budget` nodes, and at most 7/8 of `N`, are generated; running out is [`PlanningError::Budget`], never a hang, and an
 //! exhausted search space is [`PlanningError::Unsolvable`]. Each expansion costs O(NA) set
 //! operations plus, for heuristic search, O(NA · |facts|) per generated node.
 
@@ -103,7 +103,7 @@ struct Node<const W: usize> {
 pub struct Planner<const N: usize, const W: usize = 1> {
     /// How to search.
     pub strategy: Strategy,
-    /// Most nodes to generate, set per call; capped at `N - 1`.
+    /// Most nodes to generate, set per call; capped at 7/8 of `N` ([`Planner::capacity`]).
     pub budget: u32,
 }
 
@@ -116,8 +116,9 @@ impl<const N: usize, const W: usize> Default for Planner<N, W> {
     }
 }
 
-/// Visited states: open addressing over `N` slots holding node index + 1. At most `N - 1`
-/// nodes are ever stored, so a probe always ends at a free slot.
+/// Visited states: open addressing over `N` slots holding node index + 1. At most 7/8 of `N`
+/// nodes are ever stored, so a probe always ends at a free slot, and soon: linear probing
+/// slows down sharply as a table fills (a lookup in a full one scans it all).
 struct Visited<const N: usize> {
     slots: [u32; N],
 }
@@ -262,9 +263,19 @@ impl<const N: usize, const W: usize> Planner<N, W> {
         }
     }
 
+    /// The most nodes a search in `N` nodes of space generates: 7/8 of `N` (less one), so
+    /// that the visited table never fills up.
+    pub const fn capacity() -> u32 {
+        let c = N.saturating_sub(N / 8).saturating_sub(1);
+        if c < (NONE - 1) as usize {
+            c as u32
+        } else {
+            NONE - 1
+        }
+    }
+
     fn limit(&self) -> u32 {
-        let capacity = N.saturating_sub(1).min((NONE - 1) as usize) as u32;
-        self.budget.min(capacity)
+        self.budget.min(Self::capacity())
     }
 
     /// Searches a plan from `init` to a state where `goal` holds, with actions indexed by their
@@ -876,7 +887,7 @@ mod tests {
         // Capacity is a budget too: 16 nodes cannot hold the search.
         assert!(matches!(
             Planner::<16>::new(Strategy::AStar(Heuristic::Max)).plan::<32>(d.actions(), init, goal),
-            Err(PlanningError::Budget { limit: 15, .. })
+            Err(PlanningError::Budget { limit: 13, .. })
         ));
         // A plan longer than the body capacity.
         assert_eq!(

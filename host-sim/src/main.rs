@@ -107,7 +107,7 @@ enum Command {
         any_platform: bool,
     },
     /// Plans from a mission's task init to its goal with the mission's actions (sensors and
-    /// library plans play no part). Capacities: 256 facts, 4,096 actions, 1,048,576 search
+    /// library plans play no part). Capacities: 256 facts, 4,096 actions, 917,503 search
     /// nodes. Exit status 0 with a plan, 1 without one, 2 for bad input.
     Plan {
         /// Mission file (JSON); `sensors` and `plans` may be empty.
@@ -115,8 +115,8 @@ enum Command {
         /// How to search.
         #[arg(long, value_enum, default_value = "bfs")]
         search: SearchArg,
-        /// Most nodes to generate (at most 1,048,575).
-        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_048_575))]
+        /// Most nodes to generate, the start included (at most 917,503).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(plan::BUDGET)))]
         budget: Option<u32>,
         /// Print exactly one JSON object.
         #[arg(long)]
@@ -243,10 +243,15 @@ fn run(cli: Cli) -> Result<(), Stop> {
             } else {
                 outcome.text()
             };
-            files::print(text.as_bytes())?;
+            let printed = files::print(text.as_bytes());
+            // No plan is status 1 even when the reader has gone.
             if outcome.plan.is_none() {
-                return Err(Stop::NoPlan);
+                return Err(match printed {
+                    Err(Stop::Bad(m)) => Stop::Bad(m),
+                    _ => Stop::NoPlan,
+                });
             }
+            printed?;
         }
         Command::Table1 { json, plots } => {
             if let Some(dir) = &plots {

@@ -458,3 +458,37 @@ fn a_huge_value_is_shown_short() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[test]
+fn an_output_on_standard_output_appends_to_its_file() {
+    // `--trace /dev/stdout >> log`: written in place and appended, never renamed over `log`.
+    let dir = folder("stdout");
+    let log = dir.join("log.txt");
+    std::fs::write(&log, "IMPORTANT\n").unwrap();
+    let appended = std::fs::OpenOptions::new().append(true).open(&log).unwrap();
+    let out = bin()
+        .arg("run")
+        .arg(sonar8())
+        .args(["--arch", "psmpa", "--json", "--trace", "/dev/stdout"])
+        .stdout(appended)
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(text.starts_with("IMPORTANT\ntime_s,"), "{}", &text[..40]);
+    assert!(
+        text.trim_end().ends_with('}'),
+        "the summary follows the trace"
+    );
+    assert_eq!(names_in(&dir), ["log.txt"]);
+}
+
+#[test]
+fn two_names_of_one_file_by_hard_link_are_refused() {
+    let dir = folder("hardlink");
+    std::fs::write(dir.join("t.csv"), "keep").unwrap();
+    std::fs::hard_link(dir.join("t.csv"), dir.join("h.csv")).unwrap();
+    let out = run_in(&dir, &["--trace", "t.csv", "--timeline", "h.csv"]);
+    assert_refused(&out, &["--trace", "--timeline"]);
+    assert_eq!(std::fs::read_to_string(dir.join("h.csv")).unwrap(), "keep");
+}

@@ -159,3 +159,52 @@ fn bad_input_is_status_2_and_one_line() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// A binary counter of `bits` bits: its shortest plan counts to `2^bits - 1`.
+fn counter(bits: usize) -> Problem {
+    use psmpa_sim::planning::Action;
+    let b = |i: usize| format!("b{i}");
+    let nb = |i: usize| format!("nb{i}");
+    let facts: Vec<String> = (0..bits).flat_map(|i| [b(i), nb(i)]).collect();
+    // inc_i: bit i off and every lower bit on -> bit i on, every lower bit off.
+    let actions = (0..bits)
+        .map(|i| Action {
+            name: format!("inc{i}"),
+            pre: std::iter::once(nb(i)).chain((0..i).map(b)).collect(),
+            add: std::iter::once(b(i)).chain((0..i).map(nb)).collect(),
+            del: std::iter::once(nb(i)).chain((0..i).map(b)).collect(),
+        })
+        .collect();
+    Problem {
+        name: format!("counter-{bits}"),
+        facts,
+        actions,
+        init: (0..bits).map(nb).collect(),
+        goal: (0..bits).map(b).collect(),
+        optimal: (1 << bits) - 1,
+        pddl_domain: "",
+        pddl_problem: String::new(),
+    }
+}
+
+#[test]
+fn a_plan_longer_than_256_actions_is_reported() {
+    let problem = counter(9);
+    let (status, v) = plan(&problem, "bfs", &[]);
+    assert_eq!(status, Some(0), "{v}");
+    assert_eq!(v["length"], 511);
+    assert_valid(&problem, v["plan"].as_array().unwrap());
+}
+
+#[test]
+fn no_plan_stays_status_1_when_the_reader_has_gone() {
+    let path = file("gripper-no-plan.json", &gripper(6).mission_json());
+    let mut child = bin()
+        .args(["plan", "--budget", "10", "--json"])
+        .arg(&path)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    assert_eq!(child.wait().unwrap().code(), Some(1));
+}

@@ -139,14 +139,18 @@ impl Output {
     /// never be written (no such folder, a directory, no permission).
     pub fn create(path: &Path) -> Result<Self, String> {
         let fail = |e: io::Error| format!("{}: cannot write: {e}", path.display());
+        // `/dev/stdout`, `/dev/fd/3`, `/proc/self/fd/1` name an open stream, whatever file it
+        // was redirected to: written in place, appending (as `>>` asked, and so as not to
+        // overwrite what `>` already wrote), never replaced by a rename.
+        let stream = path.starts_with("/dev") || path.starts_with("/proc");
         // Write through a symbolic link to the file it names.
         let target = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
         let sink = match std::fs::metadata(&target) {
             Ok(meta) if meta.is_dir() => {
                 return Err(format!("{}: is a directory, not a file", path.display()));
             }
-            Ok(meta) if !meta.is_file() => Sink::Direct(BufWriter::new(
-                OpenOptions::new().write(true).open(&target).map_err(fail)?,
+            Ok(meta) if stream || !meta.is_file() => Sink::Direct(BufWriter::new(
+                OpenOptions::new().append(true).open(path).map_err(fail)?,
             )),
             _ => {
                 let dir = match target.parent() {
@@ -263,8 +267,22 @@ fn identity(path: &Path) -> PathBuf {
     }
 }
 
-/// Refuses, before anything runs, two outputs that name the same file, or an output that
-/// names the input: each `(what, path)` is an option (`--trace`) or the input's role.
+/// Whether two existing paths are one file (hard links included).
+fn same_inode(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt as _;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    let _ = (a, b);
+    false
+}
+
+/// Refuses, before anything runs, two outputs that name the same file (by path, link or hard
+/// link), or an output that names the input: each `(what, path)` is an option (`--trace`) or
+/// the input's role.
 pub fn distinct(named: &[(&str, &Path)]) -> Result<(), String> {
     for (i, (a, pa)) in named.iter().enumerate() {
         let id = identity(pa);
@@ -273,7 +291,7 @@ pub fn distinct(named: &[(&str, &Path)]) -> Result<(), String> {
             continue;
         }
         for (b, pb) in named.iter().skip(i + 1) {
-            if identity(pb) == id {
+            if identity(pb) == id || same_inode(pa, pb) {
                 return Err(format!(
                     "{}: named by both {a} and {b}: give each output its own file",
                     pb.display()

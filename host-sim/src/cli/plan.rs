@@ -1,6 +1,6 @@
 //! `psmpa-sim plan`: the embedded planner on a mission file, from the task's `init` to its
 //! `goal` with the mission's actions (sensors and library plans play no part), at capacities
-//! larger than a robot's: [`FACTS`] facts, [`ACTIONS`] actions, [`NODES`] search nodes.
+//! larger than a robot's: [`FACTS`] facts, [`ACTIONS`] actions, [`BUDGET`] search nodes.
 
 use std::path::Path;
 
@@ -16,10 +16,12 @@ const WORDS: usize = 4;
 pub const FACTS: usize = 64 * WORDS;
 /// Actions a mission may declare.
 pub const ACTIONS: usize = 4096;
-/// Search nodes: the largest budget (`--budget`, at most `NODES - 1`).
+/// Search nodes of space: a search generates at most 7/8 of them ([`BUDGET`]).
 pub const NODES: usize = 1 << 20;
-/// The longest plan reported.
-const LENGTH: usize = 256;
+/// The largest node budget (`--budget`): 917,503.
+pub const BUDGET: u32 = Planner::<NODES, WORDS>::capacity();
+/// The longest plan reported: as long as a plan can be (a node's depth is 16 bits).
+const LENGTH: usize = 1 << 16;
 
 /// A mission at the command's capacities (sensors and plans as a robot's).
 type Wide<'a> = Loaded<'a, (), (), 32, ACTIONS, 32, 16, WORDS, FACTS>;
@@ -184,7 +186,8 @@ fn plan_here(
             break r;
         }
     };
-    let time_ms = started.elapsed().as_secs_f64() * 1000.0;
+    // Microseconds are what a wall clock here resolves.
+    let time_ms = (started.elapsed().as_secs_f64() * 1e6).round() / 1000.0;
     match result {
         Ok(found) => Ok(Outcome {
             search: search.name(),
