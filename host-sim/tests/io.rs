@@ -492,3 +492,41 @@ fn two_names_of_one_file_by_hard_link_are_refused() {
     assert_refused(&out, &["--trace", "--timeline"]);
     assert_eq!(std::fs::read_to_string(dir.join("h.csv")).unwrap(), "keep");
 }
+
+#[test]
+fn an_interrupted_run_leaves_no_temporary_file() {
+    let dir = folder("interrupt");
+    std::fs::write(dir.join("t.csv"), "keep").unwrap();
+    std::fs::write(
+        dir.join("long.json"),
+        r#"{"name": "long", "door_m": 1000, "max_s": 86400, "robot": {"speed_mps": 0.001},
+            "sonar": {"period_ms": 1}, "bumper": {"period_ms": 1}, "interferences": []}"#,
+    )
+    .unwrap();
+    let child = bin()
+        .current_dir(&dir)
+        .args(["run", "long.json", "--arch", "psmpa", "--trace", "t.csv"])
+        .args(["--timeline", "t.json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the run is writing its temporary files, then interrupt it as Ctrl-C does.
+    let start = Instant::now();
+    while !names_in(&dir).iter().any(|n| n.ends_with(".part")) {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "no temporary file"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let out = finish(child);
+    assert_eq!(out.status.code(), Some(130));
+    assert_eq!(names_in(&dir), ["long.json", "t.csv"], "no .part left");
+    assert_eq!(std::fs::read_to_string(dir.join("t.csv")).unwrap(), "keep");
+}

@@ -5,8 +5,46 @@
 use std::fs::{File, Metadata, OpenOptions};
 use std::io::{self, BufWriter, Read as _, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use tempfile::NamedTempFile;
+
+/// Temporary files of the outputs not yet committed: removed when the process is interrupted.
+static PENDING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// On Ctrl-C or SIGTERM, removes the temporary files of outputs not yet committed and exits
+/// with status 130, so that an interrupted command leaves no `.part` file. Call once, first.
+/// (The handler runs on its own thread, not in the signal's context: it may lock and unlink.)
+pub fn clean_up_on_interrupt() {
+    let _ = ctrlc::set_handler(|| {
+        if let Ok(pending) = PENDING.lock() {
+            for path in pending.iter() {
+                let _ = std::fs::remove_file(path);
+            }
+        }
+        std::process::exit(130);
+    });
+}
+
+/// A temporary file listed in [`PENDING`] while it lives.
+struct Registered(PathBuf);
+
+impl Registered {
+    fn new(path: &Path) -> Self {
+        if let Ok(mut pending) = PENDING.lock() {
+            pending.push(path.to_path_buf());
+        }
+        Self(path.to_path_buf())
+    }
+}
+
+impl Drop for Registered {
+    fn drop(&mut self) {
+        if let Ok(mut pending) = PENDING.lock() {
+            pending.retain(|p| *p != self.0);
+        }
+    }
+}
 
 /// The largest input read: scenarios and missions are a few kilobytes, and a file that never
 /// ends (`/dev/zero`) must not fill memory.
@@ -132,6 +170,8 @@ pub struct Output {
     path: PathBuf,
     sink: Sink,
     error: Option<io::Error>,
+    /// Dropped last, after the temporary file is renamed or removed.
+    _pending: Option<Registered>,
 }
 
 impl Output {
@@ -179,10 +219,15 @@ impl Output {
                 Sink::Staged(BufWriter::new(file))
             }
         };
+        let pending = match &sink {
+            Sink::Staged(w) => Some(Registered::new(w.get_ref().path())),
+            Sink::Direct(_) => None,
+        };
         Ok(Self {
             path: target,
             sink,
             error: None,
+            _pending: pending,
         })
     }
 
