@@ -14,10 +14,13 @@ cd "$work"
 t() {
     local label="$1"
     shift
-    /usr/bin/time -o tm -f "%e s %M KB" bash -c "$*" >out 2>err
-    local status
-    status=$(grep -o 'status [0-9]*' tm | cut -d' ' -f2)
-    printf '%-5s status %s  %s  %s\n' "$label" "${status:-0}" "$(tail -1 tm)" "$(head -1 err)"
+    # A hang is cut at 10 s (status 124); a crash by a signal shows as such.
+    /usr/bin/time -o tm -f "%e s %M KB" timeout 10 bash -c "$*" >out 2>err
+    local status=$?
+    if grep -q 'terminated by signal' tm; then
+        status="killed ($(grep -o 'signal [0-9]*' tm))"
+    fi
+    printf '%-5s status %s  %s  %s\n' "$label" "$status" "$(tail -1 tm)" "$(head -1 err)"
 }
 t 1 "{ sleep .3; $B table1; } | true; exit \${PIPESTATUS[0]}"
 t 1 "$B table1 --json | head -c1 >/dev/null; exit \${PIPESTATUS[0]}"
