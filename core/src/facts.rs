@@ -206,49 +206,20 @@ impl<const W: usize> FactSetOf<W> {
     /// `self ∪ other`.
     #[must_use]
     pub const fn union(self, other: Self) -> Self {
-        let mut out = self.0;
-        if let ([x], [y]) = (&mut out as &mut [u64], other.0.as_slice()) {
-            *x = *x | *y;
-            return Self(out);
-        }
-        let (mut a, mut b): (&mut [u64], &[u64]) = (&mut out, &other.0);
-        while let ([x, ar @ ..], [y, br @ ..]) = (a, b) {
-            *x = *x | *y;
-            (a, b) = (ar, br);
-        }
-        Self(out)
+        self.apply(other, Self::EMPTY)
     }
 
     /// `self ∩ other`.
     #[must_use]
     pub const fn intersection(self, other: Self) -> Self {
-        let mut out = self.0;
-        if let ([x], [y]) = (&mut out as &mut [u64], other.0.as_slice()) {
-            *x = *x & *y;
-            return Self(out);
-        }
-        let (mut a, mut b): (&mut [u64], &[u64]) = (&mut out, &other.0);
-        while let ([x, ar @ ..], [y, br @ ..]) = (a, b) {
-            *x = *x & *y;
-            (a, b) = (ar, br);
-        }
-        Self(out)
+        // `self \ (self \ other)`: one word loop, `apply`'s, serves every set operation.
+        self.difference(self.difference(other))
     }
 
-    /// `self \\ other`.
+    /// `self \ other`.
     #[must_use]
     pub const fn difference(self, other: Self) -> Self {
-        let mut out = self.0;
-        if let ([x], [y]) = (&mut out as &mut [u64], other.0.as_slice()) {
-            *x = *x & !*y;
-            return Self(out);
-        }
-        let (mut a, mut b): (&mut [u64], &[u64]) = (&mut out, &other.0);
-        while let ([x, ar @ ..], [y, br @ ..]) = (a, b) {
-            *x = *x & !*y;
-            (a, b) = (ar, br);
-        }
-        Self(out)
+        self.apply(Self::EMPTY, other)
     }
 
     /// `self ⊆ other`: every fact of `self` holds in `other`.

@@ -17,7 +17,7 @@ use heapless::Vec;
 use heapless::binary_heap::{BinaryHeap, Min};
 
 use crate::action::{ActionId, ActuatorAction, MAX_ACTIONS};
-use crate::facts::FactSetOf;
+use crate::facts::{FactId, FactSetOf};
 
 /// Estimates of the number of actions still needed (for unit action costs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -173,6 +173,18 @@ impl<const N: usize> Visited<N> {
     }
 }
 
+/// The relaxed cost of fact `f`, kept 64 to a word of the fact sets.
+fn cost_of<const W: usize>(cost: &[[u32; 64]; W], f: FactId) -> u32 {
+    cost.get(f.index() >> 6)
+        .and_then(|c| c.get(f.index() & 63))
+        .copied()
+        .unwrap_or(INFINITE)
+}
+
+fn cost_mut<const W: usize>(cost: &mut [[u32; 64]; W], f: FactId) -> Option<&mut u32> {
+    cost.get_mut(f.index() >> 6)?.get_mut(f.index() & 63)
+}
+
 /// Relaxed (delete-free) cost of reaching `goal` from `state`: the max or the sum over goal
 /// facts of their h_max / h_add cost. [`INFINITE`] when some goal fact is unreachable.
 fn relaxed<const W: usize>(
@@ -183,10 +195,8 @@ fn relaxed<const W: usize>(
 ) -> u32 {
     // A cost per fact, 64 to a word of the fact sets.
     let mut cost = [[INFINITE; 64]; W];
-    let at = |f: crate::facts::FactId| (f.index() >> 6, f.index() & 63);
     for f in state.iter() {
-        let (w, i) = at(f);
-        if let Some(c) = cost.get_mut(w).and_then(|c| c.get_mut(i)) {
+        if let Some(c) = cost_mut(&mut cost, f) {
             *c = 0;
         }
     }
@@ -201,24 +211,13 @@ fn relaxed<const W: usize>(
     for _ in 0..=FactSetOf::<W>::CAPACITY {
         let mut changed = false;
         for a in actions {
-            let pre = a
-                .pre
-                .iter()
-                .map(|f| {
-                    let (w, i) = at(f);
-                    cost.get(w)
-                        .and_then(|c| c.get(i))
-                        .copied()
-                        .unwrap_or(INFINITE)
-                })
-                .fold(0, combine);
+            let pre = a.pre.iter().map(|f| cost_of(&cost, f)).fold(0, combine);
             if pre == INFINITE {
                 continue;
             }
             let through = pre.saturating_add(1);
             for f in a.add.iter() {
-                let (w, i) = at(f);
-                if let Some(c) = cost.get_mut(w).and_then(|c| c.get_mut(i)) {
+                if let Some(c) = cost_mut(&mut cost, f) {
                     if through < *c {
                         *c = through;
                         changed = true;
@@ -230,15 +229,7 @@ fn relaxed<const W: usize>(
             break;
         }
     }
-    goal.iter()
-        .map(|f| {
-            let (w, i) = at(f);
-            cost.get(w)
-                .and_then(|c| c.get(i))
-                .copied()
-                .unwrap_or(INFINITE)
-        })
-        .fold(0, combine)
+    goal.iter().map(|f| cost_of(&cost, f)).fold(0, combine)
 }
 
 fn estimate<const W: usize>(

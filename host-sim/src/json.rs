@@ -120,6 +120,11 @@ pub fn strict(bytes: &[u8]) -> Result<Cow<'_, [u8]>, JsonError> {
     Ok(decode_escapes(bytes))
 }
 
+/// [`strict`] for the file `file`, its error as the one line the command line prints.
+pub fn strict_file<'b>(file: &std::path::Path, bytes: &'b [u8]) -> Result<Cow<'b, [u8]>, String> {
+    strict(bytes).map_err(|e| format!("{}: {e}", file.display()))
+}
+
 /// One step of the path to a value.
 enum Step {
     Key(String),

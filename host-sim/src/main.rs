@@ -47,32 +47,6 @@ impl From<ArchArg> for Arch {
     }
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum SearchArg {
-    /// Breadth-first: shortest plans.
-    Bfs,
-    /// A* with h_max: shortest plans, fewer nodes.
-    AstarHmax,
-    /// A* with h_add: not always shortest.
-    AstarHadd,
-    /// Greedy best-first with h_add: fast, not always shortest.
-    GreedyHadd,
-    /// A* with the number of goal facts missing: not always shortest.
-    AstarGoalCount,
-}
-
-impl From<SearchArg> for plan::Method {
-    fn from(s: SearchArg) -> Self {
-        match s {
-            SearchArg::Bfs => Self::Bfs,
-            SearchArg::AstarHmax => Self::AstarHmax,
-            SearchArg::AstarHadd => Self::AstarHadd,
-            SearchArg::GreedyHadd => Self::GreedyHadd,
-            SearchArg::AstarGoalCount => Self::AstarGoalCount,
-        }
-    }
-}
-
 #[derive(Subcommand)]
 enum Command {
     /// Runs one scenario file under one architecture.
@@ -114,7 +88,7 @@ enum Command {
         mission: PathBuf,
         /// How to search.
         #[arg(long, value_enum, default_value = "bfs")]
-        search: SearchArg,
+        search: plan::Method,
         /// Most nodes to generate, the start included (at most 917,503).
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(plan::BUDGET)))]
         budget: Option<u32>,
@@ -237,7 +211,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
             json,
         } => {
             let bytes = files::read_input(&mission, "mission").map_err(Stop::Bad)?;
-            let outcome = plan::plan(&mission, &bytes, search.into(), budget).map_err(Stop::Bad)?;
+            let outcome = plan::plan(&mission, &bytes, search, budget).map_err(Stop::Bad)?;
             let text = if json {
                 serde_json::to_string(&outcome).map_err(Stop::internal)? + "\n"
             } else {

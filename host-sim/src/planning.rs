@@ -284,6 +284,28 @@ const LOGISTICS_PDDL: &str = "(define (domain logistics)
     :effect (and (not (at ?a ?from)) (at ?a ?to))))
 ";
 
+/// Logistics' `load-KIND` and `unload-KIND` of package `p` into and out of `vehicle` at
+/// `place`.
+fn carry(actions: &mut Vec<Action>, kind: &str, p: &str, vehicle: &str, place: &str) {
+    let (here, parcel, inside) = (
+        format!("at {vehicle} {place}"),
+        format!("at {p} {place}"),
+        format!("in {p} {vehicle}"),
+    );
+    actions.push(action(
+        format!("load-{kind} {p} {vehicle} {place}"),
+        &[&here, &parcel],
+        &[&inside],
+        &[&parcel],
+    ));
+    actions.push(action(
+        format!("unload-{kind} {p} {vehicle} {place}"),
+        &[&here, &inside],
+        &[&parcel],
+        &[&inside],
+    ));
+}
+
 /// A small logistics problem: two cities, each with an airport and a post office and a truck
 /// at the airport, one airplane at the first city's airport, and `packages` packages to carry
 /// from the first city's post office to the second's. Optimal: `4 + 6 · packages` (the first
@@ -325,19 +347,7 @@ pub fn logistics(packages: usize) -> Problem {
                 ));
             }
             for p in &ps {
-                let (tl, pl, pi) = (at(t, from), at(p, from), inside(p, t));
-                actions.push(action(
-                    format!("load-truck {p} {t} {from}"),
-                    &[&tl, &pl],
-                    &[&pi],
-                    &[&pl],
-                ));
-                actions.push(action(
-                    format!("unload-truck {p} {t} {from}"),
-                    &[&tl, &pi],
-                    &[&pl],
-                    &[&pi],
-                ));
+                carry(&mut actions, "truck", p, t, from);
             }
         }
     }
@@ -353,19 +363,7 @@ pub fn logistics(packages: usize) -> Problem {
             ));
         }
         for p in &ps {
-            let (al, pl, pi) = (at("plane", from), at(p, from), inside(p, "plane"));
-            actions.push(action(
-                format!("load-airplane {p} plane {from}"),
-                &[&al, &pl],
-                &[&pi],
-                &[&pl],
-            ));
-            actions.push(action(
-                format!("unload-airplane {p} plane {from}"),
-                &[&al, &pi],
-                &[&pl],
-                &[&pi],
-            ));
+            carry(&mut actions, "airplane", p, "plane", from);
         }
     }
     let mut init = vec![

@@ -21,6 +21,24 @@ fn sonar8() -> PathBuf {
     repo("scenarios/sonar-8.json")
 }
 
+/// `psmpa-sim run SCENARIO --arch psmpa`, to add to.
+fn psmpa(scenario: impl AsRef<std::ffi::OsStr>) -> Command {
+    let mut cmd = bin();
+    cmd.arg("run").arg(scenario).args(["--arch", "psmpa"]);
+    cmd
+}
+
+/// `dir/long.json`: 1 ms sonar and bumper samples for `max_s`, the door out of reach.
+fn long_scenario(dir: &Path, max_s: u32) -> PathBuf {
+    let path = dir.join("long.json");
+    let text = format!(
+        r#"{{"name": "long", "door_m": 1000, "max_s": {max_s}, "robot": {{"speed_mps": 0.001}},
+            "sonar": {{"period_ms": 1}}, "bumper": {{"period_ms": 1}}, "interferences": []}}"#
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
 /// A fresh folder for one test.
 fn folder(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("psmpa-io-{}-{name}", std::process::id()));
@@ -152,12 +170,7 @@ fn a_file_larger_than_the_limit_is_refused_unread() {
     let mut big = " ".repeat(1 << 20);
     big.push_str(r#"{"name": "x", "interferences": []}"#);
     let path = file("big.json", &big);
-    let out = bin()
-        .arg("run")
-        .arg(&path)
-        .args(["--arch", "psmpa"])
-        .output()
-        .unwrap();
+    let out = psmpa(&path).output().unwrap();
     assert_refused(&out, &["big.json", "larger than 1 MiB"]);
     let out = bin().arg("check").arg(&path).output().unwrap();
     assert_refused(&out, &["big.json", "larger than 1 MiB", "mission"]);
@@ -183,11 +196,8 @@ fn a_fifo_is_refused_without_waiting_for_a_writer() {
 
 /// Runs `sonar-8` under P-SMPA with `extra` arguments, in `dir`.
 fn run_in(dir: &Path, extra: &[&str]) -> Output {
-    bin()
+    psmpa(sonar8())
         .current_dir(dir)
-        .arg("run")
-        .arg(sonar8())
-        .args(["--arch", "psmpa"])
         .args(extra)
         .output()
         .unwrap()
@@ -220,13 +230,7 @@ fn two_outputs_naming_one_file_are_refused_before_the_run() {
     let copy = dir.join("s.json");
     std::fs::copy(sonar8(), &copy).unwrap();
     let before = std::fs::read(&copy).unwrap();
-    let out = bin()
-        .arg("run")
-        .arg(&copy)
-        .args(["--arch", "psmpa", "--trace"])
-        .arg(&copy)
-        .output()
-        .unwrap();
+    let out = psmpa(&copy).args(["--trace"]).arg(&copy).output().unwrap();
     assert_refused(&out, &["the scenario", "--trace"]);
     assert_eq!(std::fs::read(&copy).unwrap(), before);
     let mission = dir.join("m.json");
@@ -299,17 +303,9 @@ fn outputs_appear_complete_and_a_device_takes_them_in_place() {
 fn a_long_run_streams_its_trace() {
     // 120 s of 1 ms samples of two sensors: about 240,000 rows, each written as it happens.
     let dir = folder("long");
-    let scenario = dir.join("long.json");
-    std::fs::write(
-        &scenario,
-        r#"{"name": "long", "door_m": 1000, "max_s": 120, "robot": {"speed_mps": 0.001},
-            "sonar": {"period_ms": 1}, "bumper": {"period_ms": 1}, "interferences": []}"#,
-    )
-    .unwrap();
-    let out = bin()
-        .arg("run")
-        .arg(&scenario)
-        .args(["--arch", "psmpa", "--trace"])
+    let scenario = long_scenario(&dir, 120);
+    let out = psmpa(&scenario)
+        .arg("--trace")
         .arg(dir.join("t.csv"))
         .arg("--timeline")
         .arg(dir.join("t.json"))
@@ -333,19 +329,10 @@ fn a_long_run_streams_its_trace() {
             .any(|e| e["name"] == "sonar on" && e["dur"] == 120_000_000)
     );
     // The plot keeps every sample, so it is refused up front for a run that may be long.
-    let longer = dir.join("longer.json");
-    std::fs::write(
-        &longer,
-        std::fs::read_to_string(&scenario)
-            .unwrap()
-            .replace("\"max_s\": 120", "\"max_s\": 86400"),
-    )
-    .unwrap();
+    let longer = long_scenario(&folder("longer"), 86400);
     let start = Instant::now();
-    let out = bin()
-        .arg("run")
-        .arg(&longer)
-        .args(["--arch", "psmpa", "--plot"])
+    let out = psmpa(&longer)
+        .arg("--plot")
         .arg(dir.join("p.svg"))
         .output()
         .unwrap();
@@ -361,12 +348,7 @@ fn an_interference_due_after_the_run_says_so() {
             .unwrap()
             .replace("\"max_s\": 600", "\"max_s\": 0.001"),
     );
-    let out = bin()
-        .arg("run")
-        .arg(&short)
-        .args(["--arch", "psmpa"])
-        .output()
-        .unwrap();
+    let out = psmpa(&short).output().unwrap();
     assert_success(&out);
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(
@@ -380,12 +362,7 @@ fn an_interference_due_after_the_run_says_so() {
         "late.json",
         r#"{"name": "late", "door_m": 0.5, "interferences": [{"kind": "box", "at_s": 6}]}"#,
     );
-    let out = bin()
-        .arg("run")
-        .arg(&late)
-        .args(["--arch", "psmpa"])
-        .output()
-        .unwrap();
+    let out = psmpa(&late).output().unwrap();
     assert_success(&out);
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(
@@ -423,12 +400,7 @@ fn control_characters_never_reach_the_terminal() {
         "odd.json",
         r#"{"name": "a\u001b[31mred", "interferences": []}"#,
     );
-    let out = bin()
-        .arg("run")
-        .arg(&odd)
-        .args(["--arch", "psmpa"])
-        .output()
-        .unwrap();
+    let out = psmpa(&odd).output().unwrap();
     assert_success(&out);
     assert!(!out.stdout.contains(&0x1b), "ESC printed raw");
     assert!(String::from_utf8_lossy(&out.stdout).contains("a\\u001b[31mred"));
@@ -445,12 +417,7 @@ fn a_huge_value_is_shown_short() {
         "huge.json",
         r#"{"name": "x", "door_m": 1e308, "interferences": []}"#,
     );
-    let out = bin()
-        .arg("run")
-        .arg(&path)
-        .args(["--arch", "psmpa"])
-        .output()
-        .unwrap();
+    let out = psmpa(&path).output().unwrap();
     assert_refused(&out, &["door_m", "got 1e308"]);
     assert!(
         out.stderr.len() < 200,
@@ -466,10 +433,8 @@ fn an_output_on_standard_output_appends_to_its_file() {
     let log = dir.join("log.txt");
     std::fs::write(&log, "IMPORTANT\n").unwrap();
     let appended = std::fs::OpenOptions::new().append(true).open(&log).unwrap();
-    let out = bin()
-        .arg("run")
-        .arg(sonar8())
-        .args(["--arch", "psmpa", "--json", "--trace", "/dev/stdout"])
+    let out = psmpa(sonar8())
+        .args(["--json", "--trace", "/dev/stdout"])
         .stdout(appended)
         .output()
         .unwrap();
@@ -497,16 +462,10 @@ fn two_names_of_one_file_by_hard_link_are_refused() {
 fn an_interrupted_run_leaves_no_temporary_file() {
     let dir = folder("interrupt");
     std::fs::write(dir.join("t.csv"), "keep").unwrap();
-    std::fs::write(
-        dir.join("long.json"),
-        r#"{"name": "long", "door_m": 1000, "max_s": 86400, "robot": {"speed_mps": 0.001},
-            "sonar": {"period_ms": 1}, "bumper": {"period_ms": 1}, "interferences": []}"#,
-    )
-    .unwrap();
-    let child = bin()
+    long_scenario(&dir, 86400);
+    let child = psmpa("long.json")
         .current_dir(&dir)
-        .args(["run", "long.json", "--arch", "psmpa", "--trace", "t.csv"])
-        .args(["--timeline", "t.json"])
+        .args(["--trace", "t.csv", "--timeline", "t.json"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()

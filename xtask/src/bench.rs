@@ -142,6 +142,23 @@ fn sweep_seconds() -> Result<f64, String> {
     Ok(times[1])
 }
 
+/// Puts `md` between the README's `<!-- NAME:start -->` and `<!-- NAME:end -->` markers.
+pub fn replace_in_readme(root: &Path, name: &str, md: &str) -> Result<(), String> {
+    let path = root.join("README.md");
+    let readme = std::fs::read_to_string(&path).map_err(|e| e.to_string())?;
+    let (start, end) = (
+        format!("<!-- {name}:start -->\n"),
+        format!("<!-- {name}:end -->"),
+    );
+    let (Some(a), Some(b)) = (readme.find(&start), readme.find(&end)) else {
+        return Err(format!(
+            "README.md lacks the {name}:start / {name}:end markers"
+        ));
+    };
+    let updated = format!("{}{start}{md}{}", &readme[..a], &readme[b..]);
+    std::fs::write(&path, updated).map_err(|e| e.to_string())
+}
+
 fn fmt_ns(ns: f64) -> String {
     if ns >= 1000.0 {
         format!("{:.2} µs", ns / 1000.0)
@@ -430,14 +447,7 @@ fn report(root: &Path, extra: &Extra) -> Result<(), String> {
         format!("# Benchmark results\n\n{md}"),
     )
     .map_err(|e| e.to_string())?;
-    let readme_path = root.join("README.md");
-    let readme = std::fs::read_to_string(&readme_path).map_err(|e| e.to_string())?;
-    let (start, end) = ("<!-- bench:start -->\n", "<!-- bench:end -->");
-    let (Some(a), Some(b)) = (readme.find(start), readme.find(end)) else {
-        return Err("README.md lacks the bench:start / bench:end markers".to_owned());
-    };
-    let updated = format!("{}{start}{md}{}", &readme[..a], &readme[b..]);
-    std::fs::write(&readme_path, updated).map_err(|e| e.to_string())?;
+    replace_in_readme(root, "bench", &md)?;
     println!("\n{md}\nwritten to bench/RESULTS.md and README.md");
     Ok(())
 }

@@ -167,14 +167,7 @@ pub fn run() -> Result<(), String> {
         format!("# Planning benchmark\n\n{md}"),
     )
     .map_err(|e| e.to_string())?;
-    let readme_path = root.join("README.md");
-    let readme = std::fs::read_to_string(&readme_path).map_err(|e| e.to_string())?;
-    let (start, end) = ("<!-- planning:start -->\n", "<!-- planning:end -->");
-    let (Some(a), Some(b)) = (readme.find(start), readme.find(end)) else {
-        return Err("README.md lacks the planning:start / planning:end markers".to_owned());
-    };
-    let updated = format!("{}{start}{md}{}", &readme[..a], &readme[b..]);
-    std::fs::write(&readme_path, updated).map_err(|e| e.to_string())?;
+    crate::bench::replace_in_readme(&root, "planning", &md)?;
     println!("{md}\nwritten to bench/PLANNING.md and README.md");
     Ok(())
 }

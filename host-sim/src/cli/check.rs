@@ -278,7 +278,7 @@ pub fn check_bytes(
             reachable_then_describe(file, &loaded.mission)
         }
     }
-    let doc = json::strict(bytes).map_err(|e| format!("{}: {e}", file.display()))?;
+    let doc = json::strict_file(file, bytes)?;
     if any_platform {
         with(file, &doc, &AnyBehaviour, true)
     } else {

@@ -269,7 +269,7 @@ impl Output {
 
 impl Write for Output {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        // After a failure the rest is dropped here and the failure reported at `flush`: a
+        // After a failure the rest is dropped here and the failure reported at `finish`: a
         // streaming writer must not stop the run it records.
         if self.error.is_some() {
             return Ok(buf.len());

@@ -27,17 +27,17 @@ const LENGTH: usize = 1 << 16;
 type Wide<'a> = Loaded<'a, (), (), 32, ACTIONS, 32, 16, WORDS, FACTS>;
 
 /// How to search, as the command line names it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
-    /// Breadth-first.
+    /// Breadth-first: shortest plans.
     Bfs,
-    /// A* with h_max.
+    /// A* with h_max: shortest plans, fewer nodes.
     AstarHmax,
-    /// A* with h_add.
+    /// A* with h_add: not always shortest.
     AstarHadd,
-    /// Greedy best-first with h_add.
+    /// Greedy best-first with h_add: fast, not always shortest.
     GreedyHadd,
-    /// A* with the goal count.
+    /// A* with the number of goal facts missing: not always shortest.
     AstarGoalCount,
 }
 
@@ -143,13 +143,7 @@ fn plan_here(
     search: Method,
     budget: Option<u32>,
 ) -> Result<Outcome, String> {
-    let decoded = crate::json::strict(bytes).map_err(|e| {
-        format!(
-            "{}: {}",
-            file.display(),
-            crate::json::printable(&e.to_string())
-        )
-    })?;
+    let decoded = crate::json::strict_file(file, bytes)?;
     let mut loaded: Box<Wide<'_>> = Box::new(Loaded::empty());
     let loaded = &mut *loaded;
     let unsolvable = |expanded| Outcome {
