@@ -14,38 +14,38 @@ use heapless::Vec;
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
 use crate::exec::{Engine, Failure, Mode};
-use crate::facts::FactSet;
+use crate::facts::FactSetOf;
 use crate::fmt::{info, warning};
 use crate::fsm::{Fsm, FsmError};
 use crate::plan::{FailureMemory, Plan, PlanId, PlanSet};
 use crate::planner::{Found, Planner, PlanningError, Search};
-use crate::platform::Platform;
+use crate::platform::{Actuator, Platform, Sensor};
 use crate::trace::{TraceEvent, TraceSink};
 use embassy_futures::yield_now;
 
-/// How a mission that reached its goal went.
+/// How a mission that reached its goal went (fact sets of `W` words).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Report {
+pub struct Report<const W: usize = 1> {
     /// Plans selected and started.
     pub plans_started: u16,
     /// Plans that failed.
     pub plans_failed: u16,
     /// The beliefs at the end.
-    pub beliefs: FactSet,
+    pub beliefs: FactSetOf<W>,
 }
 
-/// Why the control loop stopped before the goal held.
+/// Why the control loop stopped before the goal held (fact sets of `W` words).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
-pub enum ControlError {
+pub enum ControlError<const W: usize = 1> {
     /// No plan of the library is applicable to the task's event under the beliefs.
     NoApplicablePlan {
         /// The event.
         event: EventId,
         /// The beliefs.
-        beliefs: FactSet,
+        beliefs: FactSetOf<W>,
     },
     /// Every plan applicable to the event starts with an action whose precondition a percept
     /// has already shown false: none was started.
@@ -55,7 +55,7 @@ pub enum ControlError {
         /// The plans passed over.
         skipped: PlanSet,
         /// The facts percepts showed false.
-        known_false: FactSet,
+        known_false: FactSetOf<W>,
     },
     /// Every applicable plan already failed under the current beliefs.
     Exhausted {
@@ -64,14 +64,14 @@ pub enum ControlError {
         /// The plans that failed.
         failed: PlanSet,
         /// The beliefs.
-        beliefs: FactSet,
+        beliefs: FactSetOf<W>,
     },
     /// More plans failed than [`Config::max_failures`](crate::exec::Config::max_failures).
     TooManyFailures {
         /// Plans that failed.
         failures: u16,
         /// The last failure.
-        last: Failure,
+        last: Failure<W>,
     },
     /// More plans ran than [`Config::max_plans`](crate::exec::Config::max_plans) without reaching
     /// the goal.
@@ -94,24 +94,26 @@ pub enum ControlError {
     /// The initial model could not be established (a sensor fault, a full store).
     InitialModel {
         /// What went wrong.
-        failure: Failure,
+        failure: Failure<W>,
     },
 }
 
 impl<
     'r,
-    P: Platform,
-    T: TraceSink,
+    P: Platform + Sensor<W> + Actuator<W>,
+    T: TraceSink<W>,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Engine<'r, P, T, NS, NA, NP, L, K>
+    const W: usize,
+    const NF: usize,
+> Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
 {
     /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor in service
     /// whose `pre(s)` holds is switched on, sampled once and switched off again, all at once.
-    pub async fn establish_initial_model(&self) -> Result<FactSet, ControlError> {
+    pub async fn establish_initial_model(&self) -> Result<FactSetOf<W>, ControlError<W>> {
         let init = self.mission.task.init;
         self.set_beliefs(init);
         let faulty = self.faulty_sensors();
@@ -140,7 +142,7 @@ impl<
     /// executes plans until the task's goal holds. Ends with an error, never a hang, when no
     /// plan applies, every applicable plan failed, or the failure or plan limit of the
     /// [`Config`](crate::exec::Config) is reached.
-    pub async fn run(&self) -> Result<Report, ControlError> {
+    pub async fn run(&self) -> Result<Report<W>, ControlError<W>> {
         self.control::<1>(None).await
     }
 
@@ -152,9 +154,9 @@ impl<
     /// time.
     pub async fn run_planning<const N: usize>(
         &self,
-        planner: &Planner<N>,
-        space: &mut Search<N>,
-    ) -> Result<Report, ControlError> {
+        planner: &Planner<N, W>,
+        space: &mut Search<N, W>,
+    ) -> Result<Report<W>, ControlError<W>> {
         self.control(Some((planner, space))).await
     }
 
@@ -162,7 +164,7 @@ impl<
     /// that a sensor running beside the action perceives are checked by that sensor when the
     /// action runs, so they are assumed to hold unless a sample already showed them false. An
     /// action beside a sensor that failed cannot be monitored: it never applies.
-    fn planning_actions(&self) -> Vec<ActuatorAction<'r>, NA> {
+    fn planning_actions(&self) -> Vec<ActuatorAction<'r, W>, NA> {
         let domain = &self.mission.domain;
         let known_false = self.known_false();
         let faulty = self.faulty_sensors();
@@ -173,7 +175,7 @@ impl<
                 let serving = domain.sensors_serving(a.pre);
                 let checked = domain.perception_of(serving);
                 let pre = if serving.bits() & faulty.bits() != 0 {
-                    FactSet::ALL
+                    FactSetOf::ALL
                 } else {
                     a.pre.difference(checked.difference(known_false))
                 };
@@ -187,9 +189,9 @@ impl<
     /// has shown false is passed over: started, it would only wait for that fact. O(NP).
     fn select(
         &self,
-        memory: &FailureMemory,
-        beliefs: FactSet,
-    ) -> Result<(PlanId, Vec<ActionId, L>), ControlError> {
+        memory: &FailureMemory<W>,
+        beliefs: FactSetOf<W>,
+    ) -> Result<(PlanId, Vec<ActionId, L>), ControlError<W>> {
         let task = self.mission.task;
         let library = &self.mission.library;
         let excluded = memory.excluded(task.event, beliefs);
@@ -234,10 +236,10 @@ impl<
     /// the search per poll.
     async fn generate<const N: usize>(
         &self,
-        planner: &Planner<N>,
-        search: &mut Search<N>,
-        beliefs: FactSet,
-    ) -> Result<Vec<ActionId, L>, ControlError> {
+        planner: &Planner<N, W>,
+        search: &mut Search<N, W>,
+        beliefs: FactSetOf<W>,
+    ) -> Result<Vec<ActionId, L>, ControlError<W>> {
         let goal = self.mission.task.goal;
         let actions = self.planning_actions();
         search.start(planner, &actions, beliefs, goal);
@@ -259,12 +261,12 @@ impl<
 
     async fn control<const N: usize>(
         &self,
-        mut planner: Option<(&Planner<N>, &mut Search<N>)>,
-    ) -> Result<Report, ControlError> {
+        mut planner: Option<(&Planner<N, W>, &mut Search<N, W>)>,
+    ) -> Result<Report<W>, ControlError<W>> {
         let task = self.mission.task;
         self.establish_initial_model().await?;
         let mut memory = FailureMemory::new();
-        let mut generated_failed: Option<FactSet> = None;
+        let mut generated_failed: Option<FactSetOf<W>> = None;
         let mut report = Report::default();
         loop {
             let beliefs = self.beliefs();
@@ -297,8 +299,8 @@ impl<
                     .get(plan)
                     .map_or("generated", |p| p.name),
                 trigger: task.event,
-                context: FactSet::EMPTY,
-                context_not: FactSet::EMPTY,
+                context: FactSetOf::EMPTY,
+                context_not: FactSetOf::EMPTY,
                 body,
             };
             let fsm: Fsm<L> = Fsm::compile(plan, &named, &self.mission.domain)

@@ -38,12 +38,12 @@ use embassy_sync::waitqueue::WakerRegistration;
 use embassy_time::{Duration, Instant, Timer};
 
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorSet};
-use crate::facts::FactSet;
+use crate::facts::FactSetOf;
 use crate::fmt::debug;
 use crate::fsm::{BehaviourState, Edge, Fsm, Target};
 use crate::mission::Mission;
 use crate::model::WorldModel;
-use crate::platform::{Outcome, Platform, SensorFault};
+use crate::platform::{Actuator, Outcome, Platform, Sensor, SensorFault};
 use crate::store::{DataStore, Entry, Key, MutualStore, StoreFull, Value};
 use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};
 
@@ -98,11 +98,11 @@ impl Default for Config {
     }
 }
 
-/// Why a behaviour state took its failure edge.
+/// Why a behaviour state took its failure edge (fact sets of `W` words).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
-pub enum Failure {
+pub enum Failure<const W: usize = 1> {
     /// The behaviour returned [`Outcome::Failure`].
     ActionFailed {
         /// The action.
@@ -118,7 +118,7 @@ pub enum Failure {
         /// The action.
         action: ActionId,
         /// The facts that did not hold.
-        missing: FactSet,
+        missing: FactSetOf<W>,
     },
     /// A percept made `pre(a)` false and it stayed false longer than the action's
     /// [`max_violation`](ActuatorAction::max_violation) (or [`Config::max_violation`]).
@@ -126,7 +126,7 @@ pub enum Failure {
         /// The action.
         action: ActionId,
         /// The facts that did not hold.
-        missing: FactSet,
+        missing: FactSetOf<W>,
     },
     /// A sensor the state needs cannot run: it failed earlier and is out of service
     /// ([`Engine::faulty_sensors`]), `pre(s)` does not hold, or the domain has no such sensor.
@@ -159,9 +159,9 @@ pub enum Failure {
 /// A running action's precondition is false.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Violation {
+pub struct Violation<const W: usize = 1> {
     /// The facts of `pre(a)` that do not hold.
-    pub missing: FactSet,
+    pub missing: FactSetOf<W>,
     /// When the first sample that showed it was taken.
     pub since: Instant,
     /// When the latest sample that showed it was taken.
@@ -170,9 +170,9 @@ pub struct Violation {
 
 /// What the runtime shares with a running behaviour, object safe so [`ActionIo`] needs no
 /// type parameters.
-trait Monitor {
-    fn beliefs(&self) -> FactSet;
-    fn violation(&self) -> Option<Violation>;
+trait Monitor<const W: usize> {
+    fn beliefs(&self) -> FactSetOf<W>;
+    fn violation(&self) -> Option<Violation<W>>;
     fn version(&self) -> u32;
     fn poll_changed(&self, cx: &mut Context<'_>, since: u32) -> Poll<u32>;
     fn request(&self, sensor: SensorId);
@@ -180,14 +180,14 @@ trait Monitor {
 }
 
 /// What a running actuator behaviour sees: its mutual data store, the beliefs, the state of
-/// its precondition, and a way to wait for the next change.
-pub struct ActionIo<'io> {
+/// its precondition, and a way to wait for the next change (fact sets of `W` words).
+pub struct ActionIo<'io, const W: usize = 1> {
     action: ActionId,
     store: MutualStore<'io>,
-    monitor: &'io dyn Monitor,
+    monitor: &'io dyn Monitor<W>,
 }
 
-impl ActionIo<'_> {
+impl<const W: usize> ActionIo<'_, W> {
     /// The action being run.
     pub fn action(&self) -> ActionId {
         self.action
@@ -219,12 +219,12 @@ impl ActionIo<'_> {
     }
 
     /// The current beliefs `φ`.
-    pub fn beliefs(&self) -> FactSet {
+    pub fn beliefs(&self) -> FactSetOf<W> {
         self.monitor.beliefs()
     }
 
     /// `Some` while the action's precondition is false according to the latest samples.
-    pub fn violation(&self) -> Option<Violation> {
+    pub fn violation(&self) -> Option<Violation<W>> {
         self.monitor.violation()
     }
 
@@ -275,13 +275,13 @@ impl ActionIo<'_> {
 
 /// What the deciding side asks of the sensing side: the sensors to run and how.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Command {
+pub(crate) struct Command<const W: usize> {
     /// Moves on with every command; a sampler serves one epoch at a time.
     pub(crate) epoch: u32,
     pub(crate) sensors: SensorSet,
     pub(crate) mode: Mode,
     /// The running action and its precondition, checked after every sample.
-    pub(crate) watch: Option<(ActionId, FactSet)>,
+    pub(crate) watch: Option<(ActionId, FactSetOf<W>)>,
     /// Cyclic sensors are due at this instant first.
     pub(crate) start: Instant,
 }
@@ -300,11 +300,11 @@ pub(crate) enum Mode {
 
 /// State the two sides share. Only `Cell`s, so reads and writes cannot fail; the waker lists
 /// are the `RefCell`s, never borrowed across a call out.
-pub(crate) struct Shared<const NS: usize> {
-    pub(crate) beliefs: Cell<FactSet>,
+pub(crate) struct Shared<const NS: usize, const W: usize> {
+    pub(crate) beliefs: Cell<FactSetOf<W>>,
     pub(crate) percepts: [Cell<Option<Entry>>; NS],
     /// What each sensor's latest sample says of its `per(s)`.
-    pub(crate) holds: [Cell<FactSet>; NS],
+    pub(crate) holds: [Cell<FactSetOf<W>>; NS],
     /// The sensors switched on.
     pub(crate) running: Cell<SensorSet>,
     /// The running sensors that have sampled since they were switched on.
@@ -314,13 +314,13 @@ pub(crate) struct Shared<const NS: usize> {
     /// When each sensor's latest read started.
     pub(crate) last_read: [Cell<Option<Instant>>; NS],
     /// Facts some sample has decided (true or false) since the start.
-    pub(crate) sensed: Cell<FactSet>,
+    pub(crate) sensed: Cell<FactSetOf<W>>,
     /// Sensors that failed: out of service until [`Engine::clear_faults`].
     pub(crate) faulty: Cell<SensorSet>,
-    pub(crate) violation: Cell<Option<Violation>>,
+    pub(crate) violation: Cell<Option<Violation<W>>>,
     pub(crate) requests: Cell<SensorSet>,
     pub(crate) version: Cell<u32>,
-    pub(crate) command: Cell<Command>,
+    pub(crate) command: Cell<Command<W>>,
     /// The command's epoch, apart: samplers read it at every await.
     pub(crate) epoch: Cell<u32>,
     /// Sensors of the current command that are on and have taken the samples due at its start.
@@ -328,7 +328,7 @@ pub(crate) struct Shared<const NS: usize> {
     /// Sensors whose sampler is between switching on and having switched off.
     pub(crate) active: Cell<SensorSet>,
     /// The first failure under the command of that epoch.
-    pub(crate) failure: Cell<Option<(u32, Failure)>>,
+    pub(crate) failure: Cell<Option<(u32, Failure<W>)>>,
     /// The deciding side's task (behaviours, the precondition watch and the control loop).
     /// One task per side: a registration of another waker wakes the one it replaces.
     pub(crate) deciding: RefCell<WakerRegistration>,
@@ -336,7 +336,7 @@ pub(crate) struct Shared<const NS: usize> {
     pub(crate) sensing: RefCell<WakerRegistration>,
 }
 
-impl<const NS: usize> Shared<NS> {
+impl<const NS: usize, const W: usize> Shared<NS, W> {
     /// Something the deciding side may wait for changed: bump the version and wake it.
     pub(crate) fn notify(&self) {
         self.version.set(self.version.get().wrapping_add(1));
@@ -356,11 +356,11 @@ impl<const NS: usize> Shared<NS> {
 /// A wait on the shared state `shared`: `done` decides, and when it says not yet the waker is
 /// registered with the side's wakers (`wakers`), in the same lock, so that a side that preempts
 /// in between cannot wake nobody.
-pub(crate) fn poll_shared<M: RawMutex, const NS: usize, R>(
-    shared: &Mutex<M, Shared<NS>>,
+pub(crate) fn poll_shared<M: RawMutex, const NS: usize, const W: usize, R>(
+    shared: &Mutex<M, Shared<NS, W>>,
     cx: &Context<'_>,
-    wakers: impl FnOnce(&Shared<NS>) -> &RefCell<WakerRegistration>,
-    done: impl FnOnce(&Shared<NS>) -> Option<R>,
+    wakers: impl FnOnce(&Shared<NS, W>) -> &RefCell<WakerRegistration>,
+    done: impl FnOnce(&Shared<NS, W>) -> Option<R>,
 ) -> Poll<R> {
     shared.lock(|s| match done(s) {
         Some(r) => Poll::Ready(r),
@@ -373,7 +373,7 @@ pub(crate) fn poll_shared<M: RawMutex, const NS: usize, R>(
     })
 }
 
-fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
+fn outcome_result<const W: usize>(action: ActionId, outcome: Outcome) -> Result<(), Failure<W>> {
     match outcome {
         Outcome::Success => Ok(()),
         Outcome::Failure => Err(Failure::ActionFailed { action }),
@@ -384,7 +384,7 @@ fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
 /// What a [`Runtime`](crate::Runtime) does: the mission, the platform, the data stores of
 /// every behaviour, the beliefs and the trace. Name it through [`Runtime`](crate::Runtime)
 /// and [`Caps`](crate::Caps); its capacities are `NS` sensors, `NA` actions, `NP` plans of at
-/// most `L` actions, `K` keys per data store.
+/// most `L` actions, `K` keys per data store, `NF` facts in fact sets of `W` words.
 ///
 /// It runs as two futures: [`sensing`](Self::sensing), which never ends, and the control
 /// loop, [`run`](Self::run) or [`run_planning`](Self::run_planning). Run both: on one
@@ -393,38 +393,42 @@ fn outcome_result(action: ActionId, outcome: Outcome) -> Result<(), Failure> {
 pub struct Engine<
     'r,
     P: Platform,
-    T: TraceSink,
+    T,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
+    const W: usize = 1,
+    const NF: usize = 64,
 > {
-    pub(crate) mission: &'r Mission<'r, NS, NA, NP, L>,
+    pub(crate) mission: &'r Mission<'r, NS, NA, NP, L, W, NF>,
     pub(crate) platform: &'r P,
     pub(crate) config: Config,
     pub(crate) sensor_stores: [DataStore<P::Mutex, K>; NS],
     action_stores: [DataStore<P::Mutex, K>; NA],
-    pub(crate) shared: Mutex<P::Mutex, Shared<NS>>,
+    pub(crate) shared: Mutex<P::Mutex, Shared<NS, W>>,
     tracer: Mutex<P::Mutex, RefCell<Tracer<T>>>,
     trace_lost: Mutex<P::Mutex, Cell<u32>>,
 }
 
 impl<
     'r,
-    P: Platform,
-    T: TraceSink,
+    P: Platform + Sensor<W> + Actuator<W>,
+    T: TraceSink<W>,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Engine<'r, P, T, NS, NA, NP, L, K>
+    const W: usize,
+    const NF: usize,
+> Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
 {
     /// A runtime for `mission` on `platform`, tracing into `sink`. The beliefs start at the
     /// task's initial state `τ0`.
     pub fn new(
-        mission: &'r Mission<'r, NS, NA, NP, L>,
+        mission: &'r Mission<'r, NS, NA, NP, L, W, NF>,
         platform: &'r P,
         sink: T,
         config: Config,
@@ -438,12 +442,12 @@ impl<
             shared: Mutex::new(Shared {
                 beliefs: Cell::new(mission.task.init),
                 percepts: [const { Cell::new(None) }; NS],
-                holds: [const { Cell::new(FactSet::EMPTY) }; NS],
+                holds: [const { Cell::new(FactSetOf::EMPTY) }; NS],
                 running: Cell::new(SensorSet::EMPTY),
                 fresh: Cell::new(SensorSet::EMPTY),
                 lost: [const { Cell::new(0) }; NS],
                 last_read: [const { Cell::new(None) }; NS],
-                sensed: Cell::new(FactSet::EMPTY),
+                sensed: Cell::new(FactSetOf::EMPTY),
                 faulty: Cell::new(SensorSet::EMPTY),
                 violation: Cell::new(None),
                 requests: Cell::new(SensorSet::EMPTY),
@@ -468,7 +472,7 @@ impl<
     }
 
     /// The mission.
-    pub fn mission(&self) -> &'r Mission<'r, NS, NA, NP, L> {
+    pub fn mission(&self) -> &'r Mission<'r, NS, NA, NP, L, W, NF> {
         self.mission
     }
 
@@ -478,23 +482,23 @@ impl<
     }
 
     /// The current beliefs `φ`.
-    pub fn beliefs(&self) -> FactSet {
+    pub fn beliefs(&self) -> FactSetOf<W> {
         self.shared.lock(|s| s.beliefs.get())
     }
 
     /// Percept facts a sample has shown to be false (facts never sensed are unknown, not false).
-    pub fn known_false(&self) -> FactSet {
+    pub fn known_false(&self) -> FactSetOf<W> {
         self.shared
             .lock(|s| s.sensed.get().difference(s.beliefs.get()))
     }
 
-    pub(crate) fn set_beliefs(&self, beliefs: FactSet) {
+    pub(crate) fn set_beliefs(&self, beliefs: FactSetOf<W>) {
         self.shared.lock(|s| s.beliefs.set(beliefs));
         self.notify();
     }
 
     /// A snapshot of the world model `M = <ω, φ, Π>`.
-    pub fn model(&self) -> WorldModel<NS> {
+    pub fn model(&self) -> WorldModel<NS, W> {
         self.shared.lock(|s| WorldModel {
             percepts: core::array::from_fn(|i| s.percepts.get(i).and_then(Cell::get)),
             beliefs: s.beliefs.get(),
@@ -535,7 +539,7 @@ impl<
         self.tracer.into_inner().into_inner().into_sink()
     }
 
-    pub(crate) fn trace(&self, event: TraceEvent) {
+    pub(crate) fn trace(&self, event: TraceEvent<W>) {
         let at = Instant::now();
         let recorded = self.tracer.lock(|t| match t.try_borrow_mut() {
             Ok(mut t) => {
@@ -567,7 +571,7 @@ impl<
     fn poll_deciding<R>(
         &self,
         cx: &mut Context<'_>,
-        done: impl FnOnce(&Shared<NS>) -> Option<R>,
+        done: impl FnOnce(&Shared<NS, W>) -> Option<R>,
     ) -> Poll<R> {
         poll_shared(&self.shared, cx, |s| &s.deciding, done)
     }
@@ -576,7 +580,7 @@ impl<
     pub(crate) fn poll_sensing<R>(
         &self,
         cx: &mut Context<'_>,
-        done: impl FnOnce(&Shared<NS>) -> Option<R>,
+        done: impl FnOnce(&Shared<NS, W>) -> Option<R>,
     ) -> Poll<R> {
         poll_shared(&self.shared, cx, |s| &s.sensing, done)
     }
@@ -602,7 +606,7 @@ impl<
         &self,
         sensors: SensorSet,
         mode: Mode,
-        watch: Option<(ActionId, FactSet)>,
+        watch: Option<(ActionId, FactSetOf<W>)>,
     ) -> u32 {
         let start = Instant::now();
         let epoch = self.shared.lock(|s| {
@@ -639,7 +643,7 @@ impl<
     /// Waits until `sensors` are on and have attempted the samples due at the command's start
     /// (a sample lost there counts: waiting for the next one could take a period), or one of
     /// them failed.
-    pub(crate) async fn ready(&self, epoch: u32, sensors: SensorSet) -> Result<(), Failure> {
+    pub(crate) async fn ready(&self, epoch: u32, sensors: SensorSet) -> Result<(), Failure<W>> {
         // Switching on and the first sample are each bounded by the sensor's timeout.
         let limit = Instant::now().saturating_add(self.answer_within(sensors, 2));
         let answered = poll_fn(|cx| {
@@ -657,7 +661,7 @@ impl<
     }
 
     /// Tells the sensing side to switch every sensor off, and waits until it has.
-    pub(crate) async fn stop(&self) -> Result<(), Failure> {
+    pub(crate) async fn stop(&self) -> Result<(), Failure<W>> {
         let active = self.shared.lock(|s| s.active.get());
         self.command(SensorSet::EMPTY, Mode::Parallel, None);
         if active.is_empty() {
@@ -676,7 +680,7 @@ impl<
     /// sensing side reports, or the violation of `pre(a)` once it has lasted the action's
     /// `max_violation` (or [`Config::max_violation`]). Never returns while all is well. One lock a poll; woken by
     /// every delivery, and by a timer at the deadline of a violation.
-    async fn watch(&self, epoch: u32, action: ActionId) -> Failure {
+    async fn watch(&self, epoch: u32, action: ActionId) -> Failure<W> {
         let max = self
             .mission
             .domain
@@ -725,10 +729,10 @@ impl<
     async fn run_parallel(
         &self,
         action: ActionId,
-        spec: &ActuatorAction<'r>,
+        spec: &ActuatorAction<'r, W>,
         sensors: SensorSet,
-        io: &ActionIo<'_>,
-    ) -> Result<Outcome, Failure> {
+        io: &ActionIo<'_, W>,
+    ) -> Result<Outcome, Failure<W>> {
         let epoch = self.command(sensors, Mode::Parallel, Some((action, spec.pre)));
         let result = async {
             // Fresh percepts before the behaviour starts, checked against its precondition.
@@ -754,11 +758,11 @@ impl<
     async fn sense_phase(
         &self,
         action: ActionId,
-        spec: &ActuatorAction<'r>,
+        spec: &ActuatorAction<'r, W>,
         sensors: SensorSet,
         until: Instant,
         first: bool,
-    ) -> Result<(), Failure> {
+    ) -> Result<(), Failure<W>> {
         let epoch = self.command(sensors, Mode::Phase { first }, Some((action, spec.pre)));
         let result = async {
             self.ready(epoch, sensors).await?;
@@ -777,12 +781,12 @@ impl<
     async fn run_alternating(
         &self,
         action: ActionId,
-        spec: &ActuatorAction<'r>,
+        spec: &ActuatorAction<'r, W>,
         sensors: SensorSet,
-        io: &ActionIo<'_>,
+        io: &ActionIo<'_, W>,
         sense: Duration,
         act: Duration,
-    ) -> Result<Outcome, Failure> {
+    ) -> Result<Outcome, Failure<W>> {
         // A phase of no time would alternate forever at one instant.
         let (sense, act) = (
             sense.max(Duration::from_ticks(1)),
@@ -816,7 +820,7 @@ impl<
     }
 
     /// Runs one behaviour state to its end and applies the action's effects on success.
-    async fn run_state(&self, index: u8, state: &BehaviourState) -> Result<(), Failure> {
+    async fn run_state(&self, index: u8, state: &BehaviourState) -> Result<(), Failure<W>> {
         let action = state.action;
         let sensors = state.sensors;
         self.trace(TraceEvent::StateEntered {
@@ -848,7 +852,11 @@ impl<
         result
     }
 
-    async fn run_action(&self, action: ActionId, sensors: SensorSet) -> Result<Outcome, Failure> {
+    async fn run_action(
+        &self,
+        action: ActionId,
+        sensors: SensorSet,
+    ) -> Result<Outcome, Failure<W>> {
         let domain = &self.mission.domain;
         let spec = domain
             .action(action)
@@ -903,7 +911,7 @@ impl<
     /// `executePlans` for one plan: runs its FSM from the initial state along the transition
     /// rules `T` until [`Target::Done`] or [`Target::Failed`]. Between two states the work is
     /// bounded: the transition is O(1), switching sensors off and on O(NS), the effects O(1).
-    pub async fn execute(&self, fsm: &Fsm<L>) -> Result<(), Failure> {
+    pub async fn execute(&self, fsm: &Fsm<L>) -> Result<(), Failure<W>> {
         let mut index = 0u8;
         loop {
             let state = fsm
@@ -927,20 +935,22 @@ impl<
 
 impl<
     'r,
-    P: Platform,
-    T: TraceSink,
+    P: Platform + Sensor<W> + Actuator<W>,
+    T: TraceSink<W>,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Monitor for Engine<'r, P, T, NS, NA, NP, L, K>
+    const W: usize,
+    const NF: usize,
+> Monitor<W> for Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
 {
-    fn beliefs(&self) -> FactSet {
+    fn beliefs(&self) -> FactSetOf<W> {
         Engine::beliefs(self)
     }
 
-    fn violation(&self) -> Option<Violation> {
+    fn violation(&self) -> Option<Violation<W>> {
         self.shared.lock(|s| s.violation.get())
     }
 

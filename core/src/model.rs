@@ -2,7 +2,7 @@
 
 use crate::action::SensorId;
 use crate::domain::EventId;
-use crate::facts::{FactSet, FactSetOf};
+use crate::facts::FactSetOf;
 use crate::store::Entry;
 
 /// A task `Π = <Δ, τ0, τG>`; the domain `Δ` is the mission's [`Domain`](crate::domain::Domain).
@@ -17,18 +17,19 @@ pub struct Task<const W: usize = 1> {
     pub goal: FactSetOf<W>,
 }
 
-/// A snapshot of the world model `M = <ω, φ, Π>` of a runtime with `NS` sensors.
+/// A snapshot of the world model `M = <ω, φ, Π>` of a runtime with `NS` sensors and fact sets
+/// of `W` words.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct WorldModel<const NS: usize> {
+pub struct WorldModel<const NS: usize, const W: usize = 1> {
     /// `ω`: the latest sample of every sensor, with its timestamp.
     pub percepts: [Option<Entry>; NS],
     /// `φ`: the beliefs, the current state `τ`.
-    pub beliefs: FactSet,
+    pub beliefs: FactSetOf<W>,
     /// `Π`: the task.
-    pub task: Task,
+    pub task: Task<W>,
 }
 
-impl<const NS: usize> WorldModel<NS> {
+impl<const NS: usize, const W: usize> WorldModel<NS, W> {
     /// Whether the goal holds: `τG ⊆ φ`.
     pub fn goal_holds(&self) -> bool {
         self.task.goal.is_subset(self.beliefs)

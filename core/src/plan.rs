@@ -10,7 +10,7 @@ use heapless::Vec;
 
 use crate::action::ActionId;
 use crate::domain::EventId;
-use crate::facts::{FactSet, FactSetOf};
+use crate::facts::FactSetOf;
 
 /// Most plans a library can hold: the width of a [`PlanSet`].
 pub const MAX_PLANS: usize = 32;
@@ -237,24 +237,24 @@ impl<'a, const NP: usize, const L: usize, const W: usize> PlanLibrary<'a, NP, L,
 /// Remembers which plans failed for an event, so that a failed plan is not retried for the
 /// same event until the model (the beliefs) changes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct FailureMemory {
+pub struct FailureMemory<const W: usize = 1> {
     event: Option<EventId>,
-    beliefs: FactSet,
+    beliefs: FactSetOf<W>,
     failed: PlanSet,
 }
 
-impl FailureMemory {
+impl<const W: usize> FailureMemory<W> {
     /// Nothing has failed.
     pub const fn new() -> Self {
         Self {
             event: None,
-            beliefs: FactSet::EMPTY,
+            beliefs: FactSetOf::EMPTY,
             failed: PlanSet::EMPTY,
         }
     }
 
     /// Records that `plan` failed for `event` when the beliefs were `beliefs`. O(1).
-    pub fn record(&mut self, plan: PlanId, event: EventId, beliefs: FactSet) {
+    pub fn record(&mut self, plan: PlanId, event: EventId, beliefs: FactSetOf<W>) {
         if self.event != Some(event) || self.beliefs != beliefs {
             *self = Self {
                 event: Some(event),
@@ -267,7 +267,7 @@ impl FailureMemory {
 
     /// The plans to skip for `event` under `beliefs`: the recorded failures if neither the
     /// event nor the beliefs changed since, else none. O(1).
-    pub fn excluded(&self, event: EventId, beliefs: FactSet) -> PlanSet {
+    pub fn excluded(&self, event: EventId, beliefs: FactSetOf<W>) -> PlanSet {
         if self.event == Some(event) && self.beliefs == beliefs {
             self.failed
         } else {
@@ -279,7 +279,7 @@ impl FailureMemory {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::facts::FactId;
+    use crate::facts::{FactId, FactSet};
 
     fn ev(i: usize) -> EventId {
         EventId::new(i).unwrap()

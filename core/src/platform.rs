@@ -8,7 +8,7 @@
 
 use crate::action::{ActionId, SensorId};
 use crate::exec::ActionIo;
-use crate::facts::FactSet;
+use crate::facts::FactSetOf;
 use crate::store::{Key, SAMPLE_KEY, Value};
 
 /// Most `(key, value)` pairs one [`Reading`] carries besides its main value.
@@ -16,15 +16,15 @@ pub const MAX_PAIRS: usize = 4;
 
 /// One sample of a sensor: the measured value, the perception facts it makes true, and any
 /// further `(k', v')` pairs the sensor puts into its own store (Algorithm 3 line 6: a sonar's
-/// echo time, an IMU's three axes).
+/// echo time, an IMU's three axes). In a runtime whose fact sets have `W` words (1 by default).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Reading {
+pub struct Reading<const W: usize = 1> {
     /// The measurement, stored under [`SAMPLE_KEY`] in the sensor's data store.
     pub value: Value,
     /// The facts of `per(s)` that hold according to this sample; the facts of `per(s)` not in
     /// `holds` are false. Facts outside `per(s)` are ignored.
-    pub holds: FactSet,
+    pub holds: FactSetOf<W>,
     pairs: [Option<(Key, Value)>; MAX_PAIRS],
 }
 
@@ -38,9 +38,9 @@ pub struct PairRejected {
     pub value: Value,
 }
 
-impl Reading {
+impl<const W: usize> Reading<W> {
     /// A reading of `value` under which the facts `holds` of `per(s)` are true.
-    pub const fn new(value: Value, holds: FactSet) -> Self {
+    pub const fn new(value: Value, holds: FactSetOf<W>) -> Self {
         Self {
             value,
             holds,
@@ -70,7 +70,14 @@ impl Reading {
     /// A reading of `value` that decides every fact of `per(s)` one way: all hold when `holds`,
     /// none otherwise (a switch, a threshold on a distance).
     pub const fn of(value: Value, holds: bool) -> Self {
-        Self::new(value, if holds { FactSet::ALL } else { FactSet::EMPTY })
+        Self::new(
+            value,
+            if holds {
+                FactSetOf::ALL
+            } else {
+                FactSetOf::EMPTY
+            },
+        )
     }
 
     /// A yes/no sensor's reading: [`Value::Bool`] and, when `true`, every fact of `per(s)`.
@@ -133,8 +140,10 @@ pub enum Outcome {
 ///   next call can start from.
 /// * A sample describes the world at the instant it started: the runtime stamps its values
 ///   with that instant, and delivers them when the call returns.
+///
+/// `W` is the width of the runtime's fact sets in words (1, up to 64 facts, by default).
 #[allow(async_fn_in_trait)] // Runs on single-threaded executors: no `Send` bound wanted.
-pub trait Sensor {
+pub trait Sensor<const W: usize = 1> {
     /// Powers the sensor up. Called when a state that needs it starts (least commitment).
     async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault>;
     /// Powers the sensor down. Called when the action it serves ends.
@@ -143,19 +152,20 @@ pub trait Sensor {
     /// sample was lost (an echo that never came back); the runtime keeps the previous belief
     /// and fails the state after [`Config::max_lost`](crate::exec::Config::max_lost) losses in
     /// a row.
-    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault>;
+    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading<W>>, SensorFault>;
 }
 
-/// The actuator behaviours of a platform (the acting side of the deliberative controller).
+/// The actuator behaviours of a platform (the acting side of the deliberative controller), in
+/// a runtime whose fact sets have `W` words (1 by default).
 #[allow(async_fn_in_trait)] // Runs on single-threaded executors: no `Send` bound wanted.
-pub trait Actuator {
+pub trait Actuator<const W: usize = 1> {
     /// Runs actuator-based action `action` until it succeeds, fails or gives up.
     ///
     /// `io` gives the mutual data store (the latest samples of the sensors running beside the
     /// action), the precondition status, and a way to await the next change. When a percept
     /// makes the precondition false the behaviour is told at once ([`ActionIo::violation`]) and
     /// may stop, avoid, or return [`Outcome::Interrupted`].
-    async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome;
+    async fn run(&self, action: ActionId, io: &ActionIo<'_, W>) -> Outcome;
 
     /// SMPA only: `true` at the start of a sense phase (the robot must stand still while the
     /// behaviour is not polled), `false` when acting resumes.
@@ -170,10 +180,11 @@ pub trait Actuator {
     }
 }
 
-/// A robot, or a simulated one: its sensors, its actuator behaviours, and how the runtime's two
-/// sides share state on it. The one type a [`Runtime`](crate::Runtime) is generic over besides
-/// its capacities.
-pub trait Platform: Sensor + Actuator {
+/// A robot, or a simulated one: how the runtime's two sides share state on it. Implement
+/// [`Sensor`] and [`Actuator`] on the same type: the one type a [`Runtime`](crate::Runtime) is
+/// generic over besides its capacities. (Those two are not required here because they take the
+/// fact-set width, which is one of the capacities.)
+pub trait Platform {
     /// The mutex through which the sensing and deciding sides share state:
     /// `NoopRawMutex` where both run on one executor (or a host simulation),
     /// `CriticalSectionRawMutex` where sensing runs on a higher-priority executor.

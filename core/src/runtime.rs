@@ -26,12 +26,20 @@
 use crate::exec::Engine;
 use crate::mission::{Bindings, Loaded, Mission};
 use crate::platform::Platform;
-use crate::trace::TraceSink;
 
 /// Every capacity of a runtime in one type: `NS` sensors, `NA` actions, `NP` plans of at most
-/// `L` actions each, `K` keys per data store. Only a name: it holds nothing.
+/// `L` actions each, `K` keys per data store, and `NF` facts in fact sets of `W` 64-bit words
+/// (64 facts in one word by default; `NF` is at most `64 · W`). Only a name: it holds nothing.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Caps<const NS: usize, const NA: usize, const NP: usize, const L: usize, const K: usize>;
+pub struct Caps<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+    const W: usize = 1,
+    const NF: usize = 64,
+>;
 
 /// What a capacity type ([`Caps`]) sizes: the mission, its bindings and the runtime's engine.
 pub trait Capacity {
@@ -41,17 +49,24 @@ pub trait Capacity {
     type Loaded<'a, S, A>;
     /// The bindings of sensors `S` and actions `A`.
     type Bindings<S, A>;
-    /// The runtime's engine on platform `P`, tracing into `T`.
-    type Engine<'r, P: Platform + 'r, T: TraceSink>;
+    /// The runtime's engine on platform `P`, tracing into `T` (a [`TraceSink`](crate::TraceSink)).
+    type Engine<'r, P: Platform + 'r, T>;
 }
 
-impl<const NS: usize, const NA: usize, const NP: usize, const L: usize, const K: usize> Capacity
-    for Caps<NS, NA, NP, L, K>
+impl<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+    const W: usize,
+    const NF: usize,
+> Capacity for Caps<NS, NA, NP, L, K, W, NF>
 {
-    type Mission<'a> = Mission<'a, NS, NA, NP, L>;
-    type Loaded<'a, S, A> = Loaded<'a, S, A, NS, NA, NP, L>;
+    type Mission<'a> = Mission<'a, NS, NA, NP, L, W, NF>;
+    type Loaded<'a, S, A> = Loaded<'a, S, A, NS, NA, NP, L, W, NF>;
     type Bindings<S, A> = Bindings<S, A, NS, NA>;
-    type Engine<'r, P: Platform + 'r, T: TraceSink> = Engine<'r, P, T, NS, NA, NP, L, K>;
+    type Engine<'r, P: Platform + 'r, T> = Engine<'r, P, T, NS, NA, NP, L, K, W, NF>;
 }
 
 /// The mission of capacities `C`.

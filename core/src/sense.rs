@@ -43,8 +43,8 @@ use pin_project_lite::pin_project;
 use crate::action::{ActionId, SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::Domain;
 use crate::exec::{Engine, Failure, Mode, Shared, Violation, poll_shared};
-use crate::facts::FactSet;
-use crate::platform::{Platform, Reading, SensorFault};
+use crate::facts::FactSetOf;
+use crate::platform::{Actuator, Platform, Reading, Sensor, SensorFault};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
 use crate::trace::{TraceEvent, TraceSink};
 
@@ -84,14 +84,16 @@ impl<F: Future> Future for Sensing<F> {
 
 impl<
     'r,
-    P: Platform,
-    T: TraceSink,
+    P: Platform + Sensor<W> + Actuator<W>,
+    T: TraceSink<W>,
     const NS: usize,
     const NA: usize,
     const NP: usize,
     const L: usize,
     const K: usize,
-> Engine<'r, P, T, NS, NA, NP, L, K>
+    const W: usize,
+    const NF: usize,
+> Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
 {
     /// The sensing side: one sampler per sensor, all concurrent. Never ends; drop it to stop
     /// sensing. Place it on an executor of higher priority than the deciding side, or run it
@@ -199,7 +201,7 @@ impl<
                         let holds = s
                             .holds
                             .get(sensor.index())
-                            .map_or(FactSet::EMPTY, Cell::get);
+                            .map_or(FactSetOf::EMPTY, Cell::get);
                         fuse(s, domain, sensor, spec.per, holds);
                         let change = check(s, domain);
                         s.notify();
@@ -263,7 +265,7 @@ impl<
         epoch: u32,
         deadline: Option<Instant>,
         inner: F,
-    ) -> Bounded<'_, Mutex<P::Mutex, Shared<NS>>, F> {
+    ) -> Bounded<'_, Mutex<P::Mutex, Shared<NS, W>>, F> {
         Bounded {
             shared: &self.shared,
             epoch,
@@ -311,8 +313,8 @@ impl<
     fn take(
         &self,
         sensor: SensorId,
-        spec: &SensorAction<'_>,
-        read: Result<Result<Option<Reading>, SensorFault>, TimeoutError>,
+        spec: &SensorAction<'_, W>,
+        read: Result<Result<Option<Reading<W>>, SensorFault>, TimeoutError>,
         started: Instant,
         epoch: u32,
     ) -> Result<(), ()> {
@@ -349,10 +351,10 @@ impl<
     fn deliver(
         &self,
         sensor: SensorId,
-        spec: &SensorAction<'_>,
-        reading: &Reading,
+        spec: &SensorAction<'_, W>,
+        reading: &Reading<W>,
         at: Instant,
-    ) -> Result<(), Failure> {
+    ) -> Result<(), Failure<W>> {
         let store = self
             .sensor_stores
             .get(sensor.index())
@@ -402,7 +404,7 @@ impl<
         self.trace_change(change);
     }
 
-    fn trace_change(&self, change: Option<Change>) {
+    fn trace_change(&self, change: Option<Change<W>>) {
         match change {
             Some((action, _, None)) => self.trace(TraceEvent::PreconditionRestored { action }),
             Some((action, b, Some(a))) if b.is_none_or(|b| b.missing != a.missing) => {
@@ -426,7 +428,7 @@ impl<
 
     /// Hands `failure` to the deciding side, unless an earlier one of the same command is
     /// pending or the command is over.
-    fn report(&self, failure: Failure, epoch: u32) {
+    fn report(&self, failure: Failure<W>, epoch: u32) {
         self.shared.lock(|s| {
             if s.command.get().epoch == epoch && s.failure.get().is_none() {
                 s.failure.set(Some((epoch, failure)));
@@ -448,7 +450,9 @@ pin_project! {
     }
 }
 
-impl<const NS: usize, M: RawMutex, F: Future> Future for Bounded<'_, Mutex<M, Shared<NS>>, F> {
+impl<const NS: usize, const W: usize, M: RawMutex, F: Future> Future
+    for Bounded<'_, Mutex<M, Shared<NS, W>>, F>
+{
     type Output = Bound<F::Output>;
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
@@ -487,19 +491,19 @@ enum Bound<T> {
 /// caller's lock, and marks the sensor fresh. Fusion by conjunction: a fact of `per(s)` holds
 /// only if no running sensor that perceives it and has sampled says otherwise (the sonar sees a
 /// box while the bumper feels nothing: the path is not clear). O(NS).
-fn fuse<const NS: usize, const NA: usize>(
-    s: &Shared<NS>,
-    domain: &Domain<'_, NS, NA>,
+fn fuse<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
+    s: &Shared<NS, W>,
+    domain: &Domain<'_, NS, NA, W, NF>,
     sensor: SensorId,
-    per: FactSet,
-    holds: FactSet,
+    per: FactSetOf<W>,
+    holds: FactSetOf<W>,
 ) {
     let fresh = s.fresh.get().with(sensor);
     s.fresh.set(fresh);
     let sampled = SensorSet::from_bits(s.running.get().bits() & fresh.bits()).without(sensor);
     let decided = sampled.iter().fold(holds, |acc, t| {
-        let per_t = domain.sensor(t).map_or(FactSet::EMPTY, |t| t.per);
-        let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, Cell::get);
+        let per_t = domain.sensor(t).map_or(FactSetOf::EMPTY, |t| t.per);
+        let holds_t = s.holds.get(t.index()).map_or(FactSetOf::EMPTY, Cell::get);
         acc.difference(per_t.difference(holds_t))
     });
     s.beliefs
@@ -508,14 +512,14 @@ fn fuse<const NS: usize, const NA: usize>(
 }
 
 /// A change of the watched action's violation: (action, before, after).
-type Change = (ActionId, Option<Violation>, Option<Violation>);
+type Change<const W: usize> = (ActionId, Option<Violation<W>>, Option<Violation<W>>);
 
 /// Compares the watched action's `pre(a)` with the beliefs and updates the violation, in the
 /// caller's lock. `None` when nothing is watched or nothing changed. O(NS).
-fn check<const NS: usize, const NA: usize>(
-    s: &Shared<NS>,
-    domain: &Domain<'_, NS, NA>,
-) -> Option<Change> {
+fn check<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
+    s: &Shared<NS, W>,
+    domain: &Domain<'_, NS, NA, W, NF>,
+) -> Option<Change<W>> {
     let (action, pre) = s.command.get().watch?;
     let missing = pre.difference(s.beliefs.get());
     let before = s.violation.get();
@@ -543,17 +547,17 @@ fn check<const NS: usize, const NA: usize>(
 /// When the latest sample was taken that says one of `missing` does not hold: the newest
 /// evidence of a violation. Samples of other sensors that only repeat the fused verdict are not
 /// evidence. O(NS).
-fn evidence<const NS: usize, const NA: usize>(
-    s: &Shared<NS>,
-    domain: &Domain<'_, NS, NA>,
-    missing: FactSet,
+fn evidence<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
+    s: &Shared<NS, W>,
+    domain: &Domain<'_, NS, NA, W, NF>,
+    missing: FactSetOf<W>,
 ) -> Option<Instant> {
     let sampled = SensorSet::from_bits(s.running.get().bits() & s.fresh.get().bits());
     sampled
         .iter()
         .filter(|t| {
-            let per_t = domain.sensor(*t).map_or(FactSet::EMPTY, |t| t.per);
-            let holds_t = s.holds.get(t.index()).map_or(FactSet::EMPTY, |h| h.get());
+            let per_t = domain.sensor(*t).map_or(FactSetOf::EMPTY, |t| t.per);
+            let holds_t = s.holds.get(t.index()).map_or(FactSetOf::EMPTY, |h| h.get());
             per_t.difference(holds_t).intersects(missing)
         })
         .filter_map(|t| s.percepts.get(t.index()).and_then(|p| p.get()))

@@ -72,17 +72,37 @@ impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> fmt::Deb
 
 /// A failure or trace event printed with a mission's names ([`Mission::describe`],
 /// [`Mission::describe_failure`]).
-pub struct Described<'m, 'a, T, const NS: usize, const NA: usize, const NP: usize, const L: usize> {
-    mission: &'m Mission<'a, NS, NA, NP, L>,
+pub struct Described<
+    'm,
+    'a,
+    T,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize = 1,
+    const NF: usize = 64,
+> {
+    mission: &'m Mission<'a, NS, NA, NP, L, W, NF>,
     what: T,
 }
 
-impl<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>
-    Mission<'a, NS, NA, NP, L>
+impl<
+    'a,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> Mission<'a, NS, NA, NP, L, W, NF>
 {
     /// A trace event in words, with this mission's names: "state entered: go to door with
     /// [sonar bumper]", "precondition of go to door violated: {path_clear}".
-    pub fn describe(&self, event: TraceEvent) -> Described<'_, 'a, TraceEvent, NS, NA, NP, L> {
+    pub fn describe(
+        &self,
+        event: TraceEvent<W>,
+    ) -> Described<'_, 'a, TraceEvent<W>, NS, NA, NP, L, W, NF> {
         Described {
             mission: self,
             what: event,
@@ -90,7 +110,10 @@ impl<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>
     }
 
     /// A failure in words, with this mission's names.
-    pub fn describe_failure(&self, failure: Failure) -> Described<'_, 'a, Failure, NS, NA, NP, L> {
+    pub fn describe_failure(
+        &self,
+        failure: Failure<W>,
+    ) -> Described<'_, 'a, Failure<W>, NS, NA, NP, L, W, NF> {
         Described {
             mission: self,
             what: failure,
@@ -99,12 +122,26 @@ impl<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>
 }
 
 /// The names the adapters print.
-struct Names<'m, 'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>(
-    &'m Mission<'a, NS, NA, NP, L>,
-);
+struct Names<
+    'm,
+    'a,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>(&'m Mission<'a, NS, NA, NP, L, W, NF>);
 
-impl<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>
-    Names<'_, 'a, NS, NA, NP, L>
+impl<
+    'a,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> Names<'_, 'a, NS, NA, NP, L, W, NF>
 {
     fn action(&self, a: crate::ActionId) -> &'a str {
         self.0.domain.action(a).map_or("?", |a| a.name)
@@ -127,8 +164,14 @@ impl<'a, const NS: usize, const NA: usize, const NP: usize, const L: usize>
     }
 }
 
-impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> fmt::Display
-    for Described<'_, '_, Failure, NS, NA, NP, L>
+impl<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> fmt::Display for Described<'_, '_, Failure<W>, NS, NA, NP, L, W, NF>
 {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let n = Names(self.mission);
@@ -163,8 +206,14 @@ impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> fmt::Dis
     }
 }
 
-impl<const NS: usize, const NA: usize, const NP: usize, const L: usize> fmt::Display
-    for Described<'_, '_, TraceEvent, NS, NA, NP, L>
+impl<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> fmt::Display for Described<'_, '_, TraceEvent<W>, NS, NA, NP, L, W, NF>
 {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         use TraceEvent as E;
@@ -276,6 +325,6 @@ mod tests {
         // A reading from a bool decides all of per(s) one way.
         assert_eq!(Reading::of(Value::Mm(5), true).holds, FactSet::ALL);
         assert_eq!(Reading::flag(false).holds, FactSet::EMPTY);
-        assert_eq!(Reading::flag(true).value, Value::Bool(true));
+        assert_eq!(Reading::<1>::flag(true).value, Value::Bool(true));
     }
 }

@@ -9,7 +9,7 @@ use embassy_time::Instant;
 use crate::action::{ActionId, SensorId, SensorSet};
 use crate::domain::EventId;
 use crate::exec::Failure;
-use crate::facts::FactSet;
+use crate::facts::FactSetOf;
 use crate::plan::PlanId;
 use crate::platform::{Outcome, SensorFault};
 use crate::store::Value;
@@ -24,15 +24,15 @@ pub enum Phase {
     Act,
 }
 
-/// One event of the execution.
+/// One event of the execution, in a runtime whose fact sets have `W` words.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
-pub enum TraceEvent {
+pub enum TraceEvent<const W: usize = 1> {
     /// Algorithm 1 line 2: the initial beliefs after the first samples.
     ModelEstablished {
         /// The beliefs `φ`.
-        beliefs: FactSet,
+        beliefs: FactSetOf<W>,
     },
     /// No library plan applied: the planner generated one.
     PlanGenerated {
@@ -58,7 +58,7 @@ pub enum TraceEvent {
         /// The plan.
         plan: PlanId,
         /// Why.
-        reason: Failure,
+        reason: Failure<W>,
     },
     /// A behaviour state (or parallel state) started.
     StateEntered {
@@ -102,7 +102,7 @@ pub enum TraceEvent {
         /// The value stored.
         value: Value,
         /// The perception facts that hold according to it.
-        holds: FactSet,
+        holds: FactSetOf<W>,
     },
     /// A sample was lost (the sensor answered without a value).
     SampleLost {
@@ -121,7 +121,7 @@ pub enum TraceEvent {
         /// The running action.
         action: ActionId,
         /// The facts of `pre(a)` that no longer hold.
-        missing: FactSet,
+        missing: FactSetOf<W>,
     },
     /// The running action's precondition holds again.
     PreconditionRestored {
@@ -133,12 +133,12 @@ pub enum TraceEvent {
         /// The action.
         action: ActionId,
         /// The beliefs afterwards.
-        beliefs: FactSet,
+        beliefs: FactSetOf<W>,
     },
     /// The task's goal holds.
     GoalReached {
         /// The beliefs.
-        beliefs: FactSet,
+        beliefs: FactSetOf<W>,
     },
     /// An application-defined event (a behaviour's decision, a world event).
     User {
@@ -149,19 +149,20 @@ pub enum TraceEvent {
     },
 }
 
-/// Receives trace events. Implementations must not block; they run in the control path.
-pub trait TraceSink {
+/// Receives the trace events of a runtime whose fact sets have `W` words. Implementations
+/// must not block; they run in the control path.
+pub trait TraceSink<const W: usize = 1> {
     /// Called once per event, in order.
-    fn record(&mut self, at: Instant, event: &TraceEvent);
+    fn record(&mut self, at: Instant, event: &TraceEvent<W>);
 }
 
 /// Discards every event (the hash is still computed).
-impl TraceSink for () {
-    fn record(&mut self, _at: Instant, _event: &TraceEvent) {}
+impl<const W: usize> TraceSink<W> for () {
+    fn record(&mut self, _at: Instant, _event: &TraceEvent<W>) {}
 }
 
-impl<T: TraceSink + ?Sized> TraceSink for &mut T {
-    fn record(&mut self, at: Instant, event: &TraceEvent) {
+impl<const W: usize, T: TraceSink<W> + ?Sized> TraceSink<W> for &mut T {
+    fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
         (**self).record(at, event);
     }
 }
@@ -194,6 +195,20 @@ fn bits(i: i32) -> u64 {
 /// action id's high byte goes in [`hi`].
 fn id(i: usize) -> u8 {
     (i & 0xff) as u8
+}
+
+/// A payload of one word, as the first word of a fact set (the rest 0).
+fn low<const W: usize>(w: u64) -> FactSetOf<W> {
+    let mut words = [0; W];
+    if let Some(first) = words.first_mut() {
+        *first = w;
+    }
+    FactSetOf::from_words(words)
+}
+
+/// No payload.
+const fn none<const W: usize>() -> FactSetOf<W> {
+    FactSetOf::EMPTY
 }
 
 /// The high byte of an action id, at byte 5 of a header (0 for the first 256 actions, so
@@ -263,24 +278,22 @@ impl TraceHash {
     }
 
     /// A failure as (kind, subject, detail byte, payload, high byte of an action subject).
-    fn failure(f: Failure) -> (u8, u8, u8, u64, u64) {
+    fn failure<const W: usize>(f: Failure<W>) -> (u8, u8, u8, FactSetOf<W>, u64) {
         let (kind, subject, detail, payload) = match f {
-            Failure::ActionFailed { action } => (0, id(action.index()), 0, 0),
-            Failure::ActionInterrupted { action } => (1, id(action.index()), 0, 0),
-            Failure::PreconditionUnmet { action, missing } => {
-                (2, id(action.index()), 0, missing.bits())
-            }
+            Failure::ActionFailed { action } => (0, id(action.index()), 0, none()),
+            Failure::ActionInterrupted { action } => (1, id(action.index()), 0, none()),
+            Failure::PreconditionUnmet { action, missing } => (2, id(action.index()), 0, missing),
             Failure::PreconditionViolated { action, missing } => {
-                (3, id(action.index()), 0, missing.bits())
+                (3, id(action.index()), 0, missing)
             }
-            Failure::SensorUnavailable { sensor } => (4, id(sensor.index()), 0, 0),
+            Failure::SensorUnavailable { sensor } => (4, id(sensor.index()), 0, none()),
             Failure::SensorFault { sensor, fault } => {
                 let (kind, code) = Self::fault(fault);
-                (5, id(sensor.index()), kind, u64::from(code))
+                (5, id(sensor.index()), kind, low(u64::from(code)))
             }
-            Failure::StoreFull { key } => (6, key.0, 0, 0),
-            Failure::InvalidFsm { state } => (7, state, 0, 0),
-            Failure::SensingStalled => (8, 0, 0, 0),
+            Failure::StoreFull { key } => (6, key.0, 0, none()),
+            Failure::InvalidFsm { state } => (7, state, 0, none()),
+            Failure::SensingStalled => (8, 0, 0, none()),
         };
         let high = match f {
             Failure::ActionFailed { action }
@@ -292,13 +305,17 @@ impl TraceHash {
         (kind, subject, detail, payload, high)
     }
 
-    /// Adds one event at time `at` to the hash. O(1): three words.
-    pub fn add(&mut self, at: Instant, event: &TraceEvent) {
+    /// Adds one event at time `at` to the hash. O(W): three words, and a fact set's further
+    /// words after them (none in a one-word runtime, whose hashes are therefore the same as
+    /// before fact sets had a width).
+    pub fn add<const W: usize>(&mut self, at: Instant, event: &TraceEvent<W>) {
         use TraceEvent as E;
         let (header, payload) = match *event {
-            E::ModelEstablished { beliefs } => (head(0, 0, 0, 0), beliefs.bits()),
-            E::PlanSelected { plan, event } => (head(1, id(plan.index()), id(event.index()), 0), 0),
-            E::PlanSucceeded { plan } => (head(2, id(plan.index()), 0, 0), 0),
+            E::ModelEstablished { beliefs } => (head(0, 0, 0, 0), beliefs),
+            E::PlanSelected { plan, event } => {
+                (head(1, id(plan.index()), id(event.index()), 0), none())
+            }
+            E::PlanSucceeded { plan } => (head(2, id(plan.index()), 0, 0), none()),
             E::PlanFailed { plan, reason } => {
                 let (kind, subject, detail, payload, high) = Self::failure(reason);
                 let h = head(3, id(plan.index()), kind, subject) | u64::from(detail) << 32 | high;
@@ -310,7 +327,7 @@ impl TraceHash {
                 sensors,
             } => (
                 head(4, state, id(action.index()), 0) | hi(action),
-                u64::from(sensors.bits()),
+                low(u64::from(sensors.bits())),
             ),
             E::StateLeft {
                 state,
@@ -323,48 +340,52 @@ impl TraceHash {
                     Some(Outcome::Failure) => 2,
                     Some(Outcome::Interrupted) => 3,
                 };
-                (head(5, state, id(action.index()), o) | hi(action), 0)
+                (head(5, state, id(action.index()), o) | hi(action), none())
             }
             E::PhaseStarted { action, phase } => {
                 let p = match phase {
                     Phase::Sense => 0,
                     Phase::Act => 1,
                 };
-                (head(6, id(action.index()), p, 0) | hi(action), 0)
+                (head(6, id(action.index()), p, 0) | hi(action), none())
             }
-            E::SensorOn { sensor } => (head(7, id(sensor.index()), 0, 0), 0),
-            E::SensorOff { sensor } => (head(8, id(sensor.index()), 0, 0), 0),
+            E::SensorOn { sensor } => (head(7, id(sensor.index()), 0, 0), none()),
+            E::SensorOff { sensor } => (head(8, id(sensor.index()), 0, 0), none()),
             E::Sample {
                 sensor,
                 value,
                 holds,
             } => {
                 let (kind, v) = Self::value_of(value);
-                (head(9, id(sensor.index()), kind, 0) | v << 32, holds.bits())
+                (head(9, id(sensor.index()), kind, 0) | v << 32, holds)
             }
             E::SensorFailed { sensor, fault } => {
                 let (kind, code) = Self::fault(fault);
-                (head(10, id(sensor.index()), kind, code), 0)
+                (head(10, id(sensor.index()), kind, code), none())
             }
-            E::PreconditionViolated { action, missing } => (
-                head(11, id(action.index()), 0, 0) | hi(action),
-                missing.bits(),
-            ),
+            E::PreconditionViolated { action, missing } => {
+                (head(11, id(action.index()), 0, 0) | hi(action), missing)
+            }
             E::PreconditionRestored { action } => {
-                (head(12, id(action.index()), 0, 0) | hi(action), 0)
+                (head(12, id(action.index()), 0, 0) | hi(action), none())
             }
-            E::EffectsApplied { action, beliefs } => (
-                head(13, id(action.index()), 0, 0) | hi(action),
-                beliefs.bits(),
-            ),
-            E::GoalReached { beliefs } => (head(14, 0, 0, 0), beliefs.bits()),
-            E::User { code, value } => (head(16, 0, 0, 0) | u64::from(code) << 16, bits(value)),
-            E::SampleLost { sensor } => (head(17, id(sensor.index()), 0, 0), 0),
-            E::PlanGenerated { length, expanded } => (head(18, length, 0, 0), u64::from(expanded)),
+            E::EffectsApplied { action, beliefs } => {
+                (head(13, id(action.index()), 0, 0) | hi(action), beliefs)
+            }
+            E::GoalReached { beliefs } => (head(14, 0, 0, 0), beliefs),
+            E::User { code, value } => {
+                (head(16, 0, 0, 0) | u64::from(code) << 16, low(bits(value)))
+            }
+            E::SampleLost { sensor } => (head(17, id(sensor.index()), 0, 0), none()),
+            E::PlanGenerated { length, expanded } => {
+                (head(18, length, 0, 0), low(u64::from(expanded)))
+            }
         };
         self.word(at.as_ticks());
         self.word(header);
-        self.word(payload);
+        for w in payload.words() {
+            self.word(w);
+        }
     }
 }
 
@@ -376,7 +397,7 @@ pub struct Tracer<T> {
     events: u32,
 }
 
-impl<T: TraceSink> Tracer<T> {
+impl<T> Tracer<T> {
     /// A tracer in front of `sink`.
     pub const fn new(sink: T) -> Self {
         Self {
@@ -387,7 +408,10 @@ impl<T: TraceSink> Tracer<T> {
     }
 
     /// Hashes the event and hands it to the sink. O(1).
-    pub fn record(&mut self, at: Instant, event: &TraceEvent) {
+    pub fn record<const W: usize>(&mut self, at: Instant, event: &TraceEvent<W>)
+    where
+        T: TraceSink<W>,
+    {
         self.hash.add(at, event);
         self.events = self.events.wrapping_add(1);
         self.sink.record(at, event);

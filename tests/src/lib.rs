@@ -11,12 +11,12 @@ pub mod tiny;
 use embassy_time::Instant;
 use psmpa_core::{TraceEvent, TraceSink};
 
-/// A sink that keeps every event.
+/// A sink that keeps every event (of a runtime with fact sets of `W` words).
 #[derive(Debug, Default)]
-pub struct Recorder(pub Vec<(Instant, TraceEvent)>);
+pub struct Recorder<const W: usize = 1>(pub Vec<(Instant, TraceEvent<W>)>);
 
-impl TraceSink for Recorder {
-    fn record(&mut self, at: Instant, event: &TraceEvent) {
+impl<const W: usize> TraceSink<W> for Recorder<W> {
+    fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
         self.0.push((at, *event));
     }
 }

@@ -1,0 +1,218 @@
+//! A runtime whose facts do not fit one word: 128 facts in fact sets of two words, with the
+//! facts the robot senses and acts on past the first 64.
+//!
+//! A robot drives while a ranger (cyclic, 50 ms) decides `clear`; a box stands in the way
+//! from 300 ms to 700 ms. The drive needs `clear` (fact 100) and adds `arrived` (fact 120).
+
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_time::{Duration, Instant};
+use psmpa_core::{
+    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Domain, FactId, FactSetOf, Mission,
+    Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor, SensorAction, SensorFault,
+    SensorId, SensorMode, Task, TraceEvent, TraceHash, Value,
+};
+use psmpa_sim::backend::simulate_split;
+use psmpa_tests::Recorder;
+
+/// Two words of facts.
+const W: usize = 2;
+const NF: usize = 128;
+type Wide = FactSetOf<W>;
+type WideMission = Mission<'static, 1, 1, 1, 1, W, NF>;
+type WideRuntime<'r> = Runtime<'r, Robot, Caps<1, 1, 1, 1, 4, W, NF>, Recorder<W>>;
+
+/// The box stands in the way from .. to, ms.
+const BOX: (u64, u64) = (300, 700);
+/// The drive takes this long once the way is clear.
+const DRIVE_MS: u64 = 1_000;
+
+struct Facts {
+    clear: FactId,
+    arrived: FactId,
+}
+
+/// A name that lives as long as the test (the domain borrows its names).
+fn name(i: usize) -> &'static str {
+    Box::leak(format!("f{i}").into_boxed_str())
+}
+
+fn mission() -> (WideMission, Facts) {
+    let mut d: Domain<'static, 1, 1, W, NF> = Domain::new();
+    // Facts 0..100 and 101..120 stand for the rest of the robot's task model.
+    for i in 0..100 {
+        d.add_fact(name(i)).unwrap();
+    }
+    let clear = d.add_fact("clear").unwrap();
+    for i in 101..120 {
+        d.add_fact(name(i)).unwrap();
+    }
+    let arrived = d.add_fact("arrived").unwrap();
+    assert_eq!((clear.index(), arrived.index()), (100, 120));
+    let go = d.add_event("go").unwrap();
+    d.add_sensor(SensorAction::new(
+        "ranger",
+        Wide::single(clear),
+        SensorMode::Cyclic {
+            period: Duration::from_millis(50),
+        },
+    ))
+    .unwrap();
+    let drive = d
+        .add_action(ActuatorAction::new(
+            "drive",
+            Wide::single(clear),
+            Wide::single(arrived),
+            Wide::EMPTY,
+        ))
+        .unwrap();
+    let mut library: PlanLibrary<'static, 1, 1, W> = PlanLibrary::new();
+    library
+        .add(Plan::new("drive", go, Wide::EMPTY, &[drive]).unwrap())
+        .unwrap();
+    let task = Task {
+        event: go,
+        init: Wide::EMPTY,
+        goal: Wide::single(arrived),
+    };
+    let mission = Mission {
+        name: "wide",
+        domain: d,
+        library,
+        task,
+    };
+    (mission, Facts { clear, arrived })
+}
+
+struct Robot;
+
+impl Sensor<W> for Robot {
+    async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+        Ok(())
+    }
+
+    async fn switch_off(&self, _: SensorId) {}
+
+    async fn sample(&self, _: SensorId) -> Result<Option<Reading<W>>, SensorFault> {
+        let now = Instant::now().as_millis();
+        let blocked = (BOX.0..BOX.1).contains(&now);
+        Ok(Some(Reading::of(Value::Bool(blocked), !blocked)))
+    }
+}
+
+impl Actuator<W> for Robot {
+    /// Drives for `DRIVE_MS` of clear way: waits while the precondition is violated.
+    async fn run(&self, _: ActionId, io: &ActionIo<'_, W>) -> Outcome {
+        let mut driven = 0;
+        let mut version = io.version();
+        while driven < DRIVE_MS {
+            if io.violation().is_some() {
+                version = io.changed(version).await;
+                continue;
+            }
+            let step = Instant::now();
+            if let Some(v) = io.changed_within(version, Duration::from_millis(10)).await {
+                version = v;
+            }
+            driven += Instant::now().as_millis() - step.as_millis();
+        }
+        Outcome::Success
+    }
+}
+
+impl Platform for Robot {
+    type Mutex = NoopRawMutex;
+}
+
+fn run() -> (WideMission, Vec<(Instant, TraceEvent<W>)>, TraceHash) {
+    let (mission, _) = mission();
+    let trace = {
+        let rt = WideRuntime::new(&mission, &Robot, Recorder::default(), Config::default());
+        let done = simulate_split(rt.sensing(), rt.run(), Duration::from_secs(10)).unwrap();
+        let report = done.output.unwrap();
+        assert!(
+            report
+                .beliefs
+                .contains(mission.task.goal.iter().next().unwrap())
+        );
+        let hash = rt.trace_hash();
+        (rt.into_sink().0, hash)
+    };
+    (mission, trace.0, trace.1)
+}
+
+#[test]
+fn facts_past_the_first_word_are_sensed_monitored_and_achieved() {
+    let facts = mission().1;
+    let (mission, trace, hash) = run();
+    let clear = Wide::single(facts.clear);
+    // The box makes the drive's precondition false: the fact past the first word is the one
+    // missing, from the first sample that sees the box until the first that does not.
+    let violated: Vec<_> = trace
+        .iter()
+        .filter_map(|(t, e)| match e {
+            TraceEvent::PreconditionViolated { missing, .. } => Some((t.as_millis(), *missing)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(violated, vec![(BOX.0, clear)]);
+    let restored: Vec<u64> = trace
+        .iter()
+        .filter(|(_, e)| matches!(e, TraceEvent::PreconditionRestored { .. }))
+        .map(|(t, _)| t.as_millis())
+        .collect();
+    assert_eq!(restored, vec![BOX.1]);
+    // The effects reach the second word; the goal holds at the end.
+    let last = trace.last().unwrap();
+    assert!(
+        matches!(last.1, TraceEvent::GoalReached { beliefs } if beliefs.contains(facts.arrived))
+    );
+    // Events print with the mission's names, whatever the word a fact is in.
+    let text = format!(
+        "{}",
+        mission.describe(TraceEvent::PreconditionViolated {
+            action: ActionId::new(0).unwrap(),
+            missing: clear,
+        })
+    );
+    assert!(text.contains("{clear}"), "{text}");
+    // The same run, the same trace.
+    assert_eq!(run().2, hash);
+}
+
+#[test]
+fn the_trace_hash_covers_every_word_of_a_fact_set() {
+    let at = Instant::from_ticks(5);
+    let hash = |fact: usize| {
+        let mut h = TraceHash::new();
+        h.add(
+            at,
+            &TraceEvent::<W>::GoalReached {
+                beliefs: Wide::single(FactId::within(fact, NF).unwrap()),
+            },
+        );
+        h.value()
+    };
+    // Facts 70 and 71 differ only in the second word.
+    assert_ne!(hash(70), hash(71));
+    assert_ne!(hash(6), hash(70));
+    // A one-word runtime hashes its events as before fact sets had a width: three words.
+    let mut one = TraceHash::new();
+    one.add(
+        at,
+        &TraceEvent::<1>::GoalReached {
+            beliefs: FactSetOf::single(FactId::new(6).unwrap()),
+        },
+    );
+    let mut words = TraceHash::new();
+    words.add(
+        at,
+        &TraceEvent::<W>::GoalReached {
+            beliefs: Wide::single(FactId::new(6).unwrap()),
+        },
+    );
+    assert_ne!(
+        one.value(),
+        words.value(),
+        "a second word is hashed even when 0"
+    );
+}
