@@ -50,6 +50,12 @@ done
 step "the simulated world builds without std (the firmware runs it)"
 cargo build -p psmpa-sim --no-default-features --target thumbv7em-none-eabihf --release
 
+step "the dock example builds for a microcontroller"
+cargo build -p psmpa-dock --target thumbv7em-none-eabihf --release
+
+step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
+cargo test --manifest-path examples/outside/Cargo.toml --target-dir target/outside
+
 step "firmware: clippy for the target"
 cargo clippy -p psmpa-firmware --target thumbv7em-none-eabihf --profile firmware -- -D warnings
 

@@ -1,13 +1,13 @@
 //! # psmpa-sim: the host side of psmpa
 //!
-//! * [`backend`] (feature `std`): runs `psmpa-core` futures to completion in virtual time, on a
-//!   poll loop of two priorities (sensing above deciding), deterministically and on any number
-//!   of threads. The core spawns nothing, so no executor is needed.
+//! * [`backend`] (feature `std`): `psmpa-testkit`'s virtual-time backend, re-exported: runs
+//!   `psmpa-core` futures to completion in virtual time, on a poll loop of two priorities
+//!   (sensing above deciding), deterministically and on any number of threads.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 
 #[cfg(feature = "std")]
-pub mod backend;
+pub use psmpa_testkit::sim as backend;
 #[cfg(feature = "std")]
 pub mod cli;
 #[cfg(feature = "std")]

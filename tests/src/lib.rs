@@ -8,15 +8,5 @@
 
 pub mod tiny;
 
-use embassy_time::Instant;
-use psmpa_core::{TraceEvent, TraceSink};
-
-/// A sink that keeps every event (of a runtime with fact sets of `W` words).
-#[derive(Debug, Default)]
-pub struct Recorder<const W: usize = 1>(pub Vec<(Instant, TraceEvent<W>)>);
-
-impl<const W: usize> TraceSink<W> for Recorder<W> {
-    fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
-        self.0.push((at, *event));
-    }
-}
+/// The test kit's trace recorder: a sink that keeps every event.
+pub use psmpa_testkit::Recorder;

@@ -4,7 +4,7 @@ use embassy_time::{Duration, Instant};
 use psmpa_core::{
     ControlError, DataStore, Failure, Policy, SensorSet, StoreAccess, TraceEvent, Value,
 };
-use psmpa_sim::backend::simulate_split;
+use psmpa_testkit::simulate_split;
 use psmpa_tests::tiny::{self, Ids, Note, SMPA, TinyWorld};
 
 const LIMIT: Duration = Duration::from_secs(600);

@@ -13,7 +13,7 @@ use psmpa_core::{
     FactSet, Failure, Key, Mission, Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor,
     SensorAction, SensorFault, SensorId, SensorMode, Task, TraceEvent, Value,
 };
-use psmpa_sim::backend::{simulate, simulate_split};
+use psmpa_testkit::{simulate, simulate_split};
 use psmpa_tests::Recorder;
 
 const CLIFF_PERIOD: Duration = Duration::from_millis(20);

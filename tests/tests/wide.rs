@@ -11,7 +11,7 @@ use psmpa_core::{
     Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor, SensorAction, SensorFault,
     SensorId, SensorMode, Task, TraceEvent, TraceHash, Value,
 };
-use psmpa_sim::backend::simulate_split;
+use psmpa_testkit::simulate_split;
 use psmpa_tests::Recorder;
 
 /// Two words of facts.

@@ -71,7 +71,7 @@ const ONLY_FROM: &[(&str, &str, &str)] = &[
         "the formatting functions in fmt::Arguments are called by core::fmt::write only",
     ),
     (
-        "psmpa_sim::run::poll_erased",
+        "psmpa_testkit::beside::poll_erased",
         "TaskStorage<psmpa_firmware::executor::__trampoline_task",
         "a run's sensing side is installed for the sensing executor's trampoline task only",
     ),

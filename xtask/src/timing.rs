@@ -64,7 +64,7 @@ struct HostCost {
 const HOST_STEPS: &[(&str, &str)] = &[
     (
         "sensing side: one poll (samples)",
-        "psmpa_sim::run::poll_erased",
+        "psmpa_testkit::beside::poll_erased",
     ),
     ("precondition check", "psmpa_core::sense::check"),
     (

@@ -31,7 +31,7 @@ use std::task::{Context, Poll, RawWaker, RawWakerVTable, Waker};
 
 use embassy_time::{Duration, Instant};
 
-use crate::run::{Beside, Erased, HighSlot};
+use crate::beside::{Beside, Erased, HighSlot};
 
 /// Why a simulation did not complete.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,0 +1,174 @@
+//! The dock robot in virtual time, with the test kit.
+
+use embassy_time::Duration;
+use psmpa_core::{ActionId, Config, ControlError, PlanId, Report, SensorSet, TraceEvent};
+use psmpa_dock::{DOCK_MM, Dock, DockRuntime, NEAR_MM, TOF_LATENCY, Yard, mission};
+use psmpa_testkit::{Recorder, simulate_split};
+
+const LIMIT: Duration = Duration::from_secs(120);
+const TOF_PERIOD_MS: u64 = 100;
+
+/// Runs the mission in `yard`: how it ended, the trace, and the runtime's names.
+fn run(yard: &Yard) -> (Result<Report, ControlError>, Recorder) {
+    let loaded = mission().unwrap();
+    let dock = Dock {
+        yard,
+        bindings: loaded.bindings.clone(),
+    };
+    let rt = DockRuntime::new(
+        &loaded.mission,
+        &dock,
+        Recorder::default(),
+        Config::default(),
+    );
+    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
+    (done.output, rt.into_sink())
+}
+
+fn action(name: &str) -> ActionId {
+    let loaded = mission().unwrap();
+    loaded.mission.domain.action_id(name).unwrap()
+}
+
+fn sensors(names: &[&str]) -> SensorSet {
+    let loaded = mission().unwrap();
+    names
+        .iter()
+        .map(|n| loaded.mission.domain.sensor_id(n).unwrap())
+        .collect()
+}
+
+fn plans(trace: &Recorder) -> Vec<PlanId> {
+    trace
+        .find(|e| matches!(e, TraceEvent::PlanSelected { .. }))
+        .into_iter()
+        .filter_map(|(_, e)| match e {
+            TraceEvent::PlanSelected { plan, .. } => Some(plan),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn docks_driving_with_a_good_battery_and_creeping_with_a_low_one() {
+    for (battery, plan, mm_s) in [(90, 0, 300), (20, 1, 100)] {
+        let yard = Yard::new().with_battery(battery);
+        let (result, trace) = run(&yard);
+        assert!(result.is_ok(), "{result:?}");
+        assert_eq!(plans(&trace), [PlanId::new(plan).unwrap()]);
+        // The approach takes its distance at its speed; aligning 0.5 s, connecting 0.3 s.
+        let goal = trace.first(|e| matches!(e, TraceEvent::GoalReached { .. }));
+        let approach_ms = ((DOCK_MM - NEAR_MM) as u64 * 1_000).div_ceil(mm_s);
+        let at = goal.unwrap().as_millis();
+        assert!(
+            (approach_ms + 800..approach_ms + 800 + 200).contains(&at),
+            "battery {battery}: docked at {at} ms"
+        );
+        assert_eq!(yard.position_mm(), DOCK_MM - NEAR_MM);
+    }
+}
+
+#[test]
+fn a_box_stops_the_drive_within_one_ranger_period_and_the_robot_docks_after_it() {
+    let (from, to) = (2_000, 4_000);
+    let yard = Yard::new().with_box(from, to);
+    let (result, trace) = run(&yard);
+    assert!(result.is_ok(), "{result:?}");
+    let violated = trace
+        .first(|e| matches!(e, TraceEvent::PreconditionViolated { action: a, .. } if *a == action("drive")))
+        .unwrap()
+        .as_millis();
+    let restored = trace
+        .first(|e| matches!(e, TraceEvent::PreconditionRestored { .. }))
+        .unwrap()
+        .as_millis();
+    // The first read that starts after the box appears sees it; it takes the ranger's latency.
+    let within = TOF_PERIOD_MS + TOF_LATENCY.as_millis();
+    assert!((from..=from + within).contains(&violated), "{violated}");
+    assert!((to..=to + within).contains(&restored), "{restored}");
+    // Stopped while the box stood there: the whole approach is late by about as long.
+    let goal = trace
+        .first(|e| matches!(e, TraceEvent::GoalReached { .. }))
+        .unwrap()
+        .as_millis();
+    assert!(goal >= 9_334 + 800 + (restored - violated), "{goal}");
+}
+
+#[test]
+fn a_cliff_stops_the_robot_at_the_edge_and_ends_the_mission_with_an_error() {
+    let yard = Yard::new().with_cliff(1_500);
+    let (result, trace) = run(&yard);
+    // The drive failed after its 3 s of tolerance; the only other plan needs a low battery.
+    assert!(
+        matches!(result, Err(ControlError::Exhausted { .. })),
+        "{result:?}"
+    );
+    // Braked within one cliff period (20 ms at 300 mm/s: 6 mm) of the edge.
+    let pos = yard.position_mm();
+    assert!((1_500..=1_506).contains(&pos), "stopped at {pos} mm");
+    // The drive starts once the ranger's first read is in; it reaches the edge 5 s later, and
+    // the next cliff sample (20 ms) sees it.
+    let entered = trace
+        .first(|e| matches!(e, TraceEvent::StateEntered { .. }))
+        .unwrap();
+    let seen = trace
+        .first(|e| matches!(e, TraceEvent::PreconditionViolated { .. }))
+        .unwrap();
+    let edge = entered + TOF_LATENCY + Duration::from_millis(5_000);
+    assert!(
+        seen >= edge && seen <= edge + Duration::from_millis(20),
+        "{seen:?}"
+    );
+}
+
+#[test]
+fn each_state_runs_exactly_the_sensors_its_precondition_needs() {
+    let (result, trace) = run(&Yard::new());
+    assert!(result.is_ok());
+    let states: Vec<(ActionId, SensorSet)> = trace
+        .0
+        .iter()
+        .filter_map(|(_, e)| match *e {
+            TraceEvent::StateEntered {
+                action, sensors, ..
+            } => Some((action, sensors)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        states,
+        [
+            (action("drive"), sensors(&["tof", "cliff"])),
+            (action("align"), sensors(&["camera"])),
+            (action("connect"), SensorSet::EMPTY),
+        ]
+    );
+    // After the initial model, a sensor is on only inside a state that needs it.
+    let mut on = SensorSet::EMPTY;
+    let mut needed = SensorSet::EMPTY;
+    let model = trace
+        .0
+        .iter()
+        .position(|(_, e)| matches!(e, TraceEvent::ModelEstablished { .. }))
+        .unwrap();
+    for (at, e) in &trace.0[model..] {
+        match *e {
+            TraceEvent::StateEntered { sensors, .. } => needed = sensors,
+            TraceEvent::StateLeft { .. } => needed = SensorSet::EMPTY,
+            TraceEvent::SensorOn { sensor } => on = on.with(sensor),
+            TraceEvent::SensorOff { sensor } => on = on.without(sensor),
+            TraceEvent::Sample { sensor, .. } => {
+                assert!(
+                    needed.contains(sensor),
+                    "{sensor:?} sampled at {at:?} outside its state"
+                )
+            }
+            _ => {}
+        }
+        assert_eq!(
+            on.bits() & !needed.bits(),
+            0,
+            "a sensor on at {at:?} that no state needs"
+        );
+    }
+}

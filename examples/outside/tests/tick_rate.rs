@@ -1,0 +1,34 @@
+//! The dock robot's mission at this crate's tick rate, in virtual time.
+
+use embassy_time::Duration;
+use psmpa_core::{Config, TraceEvent};
+use psmpa_dock::{Dock, DockRuntime, Yard, mission};
+use psmpa_testkit::{Recorder, simulate_split};
+
+#[test]
+fn the_kit_runs_a_mission_at_the_crates_own_tick_rate() {
+    assert_eq!(embassy_time_driver::TICK_HZ, 32_768);
+    let loaded = mission().unwrap();
+    let yard = Yard::new().with_box(2_000, 3_000);
+    let dock = Dock {
+        yard: &yard,
+        bindings: loaded.bindings.clone(),
+    };
+    let rt = DockRuntime::new(
+        &loaded.mission,
+        &dock,
+        Recorder::default(),
+        Config::default(),
+    );
+    let done = simulate_split(rt.sensing(), rt.run(), Duration::from_secs(60)).unwrap();
+    assert!(done.output.is_ok(), "{:?}", done.output);
+    let trace = rt.into_sink();
+    let seen = trace
+        .first(|e| matches!(e, TraceEvent::PreconditionViolated { .. }))
+        .unwrap();
+    // The box is seen within a ranger period and read (130 ms), in ticks of 1/32,768 s.
+    assert!(
+        seen.as_ticks() >= 2 * 32_768 && seen.as_millis() <= 2_130,
+        "{seen:?}"
+    );
+}

@@ -1,0 +1,115 @@
+//! Run a psmpa robot in virtual time, in a test.
+//!
+//! * [`sim::simulate_split`] runs a runtime's sensing side at a higher priority beside its
+//!   deciding side on an `embassy-time` driver whose clock only moves when everything waits:
+//!   a minute of robot time takes milliseconds, and every run of the same code is the same
+//!   run. A future that waits with no timer pending is a [`SimError::Deadlock`], one that is
+//!   still running at the limit a [`SimError::TimeLimit`].
+//! * [`Recorder`] keeps the runtime's trace events; [`Script`] says what a scripted sensor
+//!   reads at each instant.
+//! * [`beside`] (`no_std`, also without the `std` feature) is the placement itself: a
+//!   microcontroller's interrupt executor polls the sensing side through the same
+//!   [`beside::HighSlot`] the host loop does.
+//!
+//! The crate defines the `embassy-time` driver (there can be one per program) and chooses no
+//! tick rate: the rate is whatever the program's `embassy-time-driver` features say (1 MHz by
+//! default), so a firmware crate with its own rate can use the kit as a dev-dependency.
+//!
+//! ```
+//! use embassy_time::{Duration, Instant, Timer};
+//! use psmpa_testkit::{Script, sim::simulate};
+//!
+//! // A door that opens at 2 s.
+//! const OPENS: [(Duration, bool); 1] = [(Duration::from_secs(2), true)];
+//! let door = Script::new(false, &OPENS);
+//! let done = simulate(
+//!     async {
+//!         while !door.now() {
+//!             Timer::after(Duration::from_millis(100)).await;
+//!         }
+//!         Instant::now()
+//!     },
+//!     Duration::from_secs(60),
+//! )
+//! .unwrap();
+//! assert_eq!(done.output.as_millis(), 2_000);
+//! ```
+#![cfg_attr(not(feature = "std"), no_std)]
+#![deny(missing_docs)]
+
+pub mod beside;
+#[cfg(feature = "std")]
+pub mod sim;
+
+#[cfg(feature = "std")]
+pub use sim::{Completed, SimError, simulate, simulate_split};
+
+#[cfg(feature = "std")]
+mod record {
+    use embassy_time::{Duration, Instant};
+    use psmpa_core::{TraceEvent, TraceSink};
+
+    /// A trace sink that keeps every event with its instant (of a runtime whose fact sets have
+    /// `W` words).
+    #[derive(Clone, Debug, Default, PartialEq, Eq)]
+    pub struct Recorder<const W: usize = 1>(pub Vec<(Instant, TraceEvent<W>)>);
+
+    impl<const W: usize> TraceSink<W> for Recorder<W> {
+        fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
+            self.0.push((at, *event));
+        }
+    }
+
+    impl<const W: usize> Recorder<W> {
+        /// The events `matching` picks, with their instants.
+        pub fn find(
+            &self,
+            matching: impl Fn(&TraceEvent<W>) -> bool,
+        ) -> Vec<(Instant, TraceEvent<W>)> {
+            self.0
+                .iter()
+                .filter(|(_, e)| matching(e))
+                .copied()
+                .collect()
+        }
+
+        /// The instant of the first event `matching` picks.
+        pub fn first(&self, matching: impl Fn(&TraceEvent<W>) -> bool) -> Option<Instant> {
+            self.0.iter().find(|(_, e)| matching(e)).map(|(t, _)| *t)
+        }
+    }
+
+    /// A value that changes at given times after the start of the simulation: what a scripted
+    /// sensor reads, or what a simulated world holds, at each instant.
+    #[derive(Clone, Copy, Debug)]
+    pub struct Script<'a, T> {
+        initial: T,
+        steps: &'a [(Duration, T)],
+    }
+
+    impl<'a, T: Copy> Script<'a, T> {
+        /// `initial` until the first step; each step `(after, value)` holds from `after` on.
+        /// Steps are in time order.
+        pub const fn new(initial: T, steps: &'a [(Duration, T)]) -> Self {
+            Self { initial, steps }
+        }
+
+        /// The value at `at`.
+        pub fn at(&self, at: Instant) -> T {
+            let since = at.duration_since(Instant::from_ticks(0));
+            self.steps
+                .iter()
+                .take_while(|(after, _)| *after <= since)
+                .last()
+                .map_or(self.initial, |(_, v)| *v)
+        }
+
+        /// The value now.
+        pub fn now(&self) -> T {
+            self.at(Instant::now())
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+pub use record::{Recorder, Script};
