@@ -142,7 +142,12 @@ fn bad_missions_are_rejected_with_one_clear_line() {
     for (i, (from, to, expected)) in cases.iter().enumerate() {
         assert!(good.contains(from), "case {i}: `{from}` not in the mission");
         let path = file(&format!("bad-{i}.json"), &good.replacen(from, to, 1));
-        let out = bin().arg("check").arg(&path).output().unwrap();
+        // With the NAO's behaviours required, so that an unknown one is an error too.
+        let out = bin()
+            .args(["check", "--platform", "nao"])
+            .arg(&path)
+            .output()
+            .unwrap();
         let stderr = String::from_utf8(out.stderr).unwrap();
         assert_eq!(out.status.code(), Some(2), "case {i}: {stderr}");
         assert_eq!(stderr.lines().count(), 1, "case {i}: {stderr}");
@@ -192,13 +197,20 @@ fn an_unreachable_goal_and_an_unbound_behaviour_name_their_cause() {
         1,
     );
     let out = bin()
+        .arg("check")
+        .arg(file("many-any.json", &many))
+        .output()
+        .unwrap();
+    assert_success(&out);
+    // The old flag still means the default.
+    let out = bin()
         .args(["check", "--any-platform"])
         .arg(file("many-any.json", &many))
         .output()
         .unwrap();
     assert_success(&out);
     let out = bin()
-        .arg("check")
+        .args(["check", "--platform", "nao"])
         .arg(file("many.json", &many))
         .output()
         .unwrap();
@@ -233,4 +245,24 @@ fn per_action_tolerance_and_negative_context_are_shown() {
         text.contains("failure → failed, max_violation 0 ms"),
         "{text}"
     );
+}
+
+/// Another robot's mission checks by default; `--platform nao` asks for the NAO's behaviours.
+#[test]
+fn any_robots_mission_checks_by_default() {
+    let dock = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/dock/mission.json");
+    let out = bin().arg("check").arg(dock).output().unwrap();
+    assert_success(&out);
+    assert!(
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .contains("drive ∥ {tof, cliff}")
+    );
+    let out = bin()
+        .args(["check", "--platform", "nao", dock])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(stderr.contains("no behaviour called `tof`"), "{stderr}");
 }
