@@ -976,6 +976,25 @@ fn too_deep(json: &[u8], limit: usize) -> bool {
 /// fact or event or action, a duplicate name, a capacity exceeded (naming the limit), an empty
 /// plan body, a goal no action can ever add, a behaviour the platform does not have, nesting
 /// deeper than [`MAX_DEPTH`].
+///
+/// ```
+/// use psmpa_core::mission::{AnyBehaviour, Loaded, load};
+///
+/// let json = br#"{ "name": "hello", "facts": ["clear", "there"], "events": ["go"],
+///   "sensors": [{ "name": "bumper", "per": ["clear"], "mode": "cyclic", "period_ms": 20 }],
+///   "actions": [{ "name": "drive", "pre": ["clear"], "add": ["there"] }],
+///   "plans": [{ "name": "go there", "trigger": "go", "context": [], "body": ["drive"] }],
+///   "task": { "event": "go", "init": [], "goal": ["there"] } }"#;
+/// // 1 sensor, 1 action, 1 plan of at most 1 action; fact sets of one word (64 facts).
+/// let loaded: Loaded<'_, (), (), 1, 1, 1, 1> = load(json, &AnyBehaviour).unwrap();
+/// let domain = &loaded.mission.domain;
+/// assert_eq!(domain.names(loaded.mission.task.goal).to_string(), "{there}");
+///
+/// // Errors say where: an action that does not exist.
+/// let bad = core::str::from_utf8(json).unwrap().replace(r#"["drive"]"#, r#"["fly"]"#);
+/// let error = load::<_, 1, 1, 1, 1, 1, 64>(bad.as_bytes(), &AnyBehaviour).unwrap_err();
+/// assert!(error.to_string().contains("plans[0].body"), "{error}");
+/// ```
 pub fn load<
     'a,
     R: Registry,
