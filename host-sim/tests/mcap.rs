@@ -68,6 +68,12 @@ fn read(bytes: &[u8]) -> (BTreeMap<String, (String, Value)>, Vec<Msg>) {
     let summary = mcap::Summary::read(bytes)
         .unwrap()
         .expect("a summary section");
+    // Chunked and indexed, so that Foxglove can seek in a long log.
+    assert!(!summary.chunk_indexes.is_empty(), "chunk indexes");
+    for chunk in &summary.chunk_indexes {
+        assert_eq!(chunk.compression, "", "uncompressed");
+        assert!(!chunk.message_index_offsets.is_empty(), "message indexes");
+    }
     let mut channels = BTreeMap::new();
     for c in summary.channels.values() {
         assert_eq!(c.message_encoding, "json", "{}", c.topic);
