@@ -75,6 +75,10 @@ enum Command {
         /// Write a Chrome trace-event timeline of the behaviours (open in Perfetto).
         #[arg(long, value_name = "FILE.json")]
         timeline: Option<PathBuf>,
+        /// Write an MCAP log for Foxglove: /sensor/<name> readings, /robot/pose, /events
+        /// (JSON messages, log time = simulated time).
+        #[arg(long, value_name = "FILE.mcap")]
+        mcap: Option<PathBuf>,
     },
     /// Validates a mission file and prints each plan's FSM with its parallel sensor sets.
     Check {
@@ -132,6 +136,16 @@ enum Command {
         /// Print the statistics as JSON.
         #[arg(long)]
         json: bool,
+        /// Also write one run of the sweep as an MCAP log for Foxglove (as `run --mcap`).
+        #[arg(long, value_name = "FILE.mcap")]
+        mcap: Option<PathBuf>,
+        /// The scenario written by --mcap: N of sweep-SEED-N, from 0 to runs - 1.
+        #[arg(long, value_name = "N", default_value_t = 0, requires = "mcap")]
+        mcap_run: u64,
+        /// The architecture written by --mcap (default: --arch, or psmpa when the sweep runs
+        /// both).
+        #[arg(long, value_enum, value_name = "ARCH", requires = "mcap")]
+        mcap_arch: Option<ArchArg>,
     },
 }
 
@@ -148,6 +162,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
             trace,
             plot,
             timeline,
+            mcap,
         } => {
             let bytes = files::read_input(&scenario, "scenario").map_err(Stop::Bad)?;
             let sc = load::parse(&scenario, &bytes).map_err(Stop::bad)?;
@@ -157,6 +172,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 ("--trace", &trace),
                 ("--plot", &plot),
                 ("--timeline", &timeline),
+                ("--mcap", &mcap),
             ] {
                 named.extend(path.as_deref().map(|p| (flag, p)));
             }
@@ -167,25 +183,30 @@ fn run(cli: Cli) -> Result<(), Stop> {
             // Outputs are opened before the run: a bad path fails before anything runs.
             let (trace, timeline) = (create(trace.as_deref())?, create(timeline.as_deref())?);
             let plot = create(plot.as_deref())?;
-            let (summary, done) = if trace.is_none() && timeline.is_none() && plot.is_none() {
-                // Nothing to write: keep no event log.
-                (run_summary(&sc, arch).map_err(Stop::internal)?, Vec::new())
-            } else {
-                let streams =
-                    RefCell::new(Streams::new(&sc, arch, trace, timeline, plot.is_some()));
-                let (summary, _, _) =
-                    run_logged(&sc, arch, WorldStream(&streams), TraceStream(&streams))
-                        .map_err(Stop::internal)?;
-                let (done, world) = streams
-                    .into_inner()
-                    .finish(summary.time_cost_ms)
-                    .map_err(Stop::Bad)?;
-                let mut done = done;
-                if let Some(out) = plot {
-                    done.push(plot_both(out, world, &summary, &sc)?);
-                }
-                (summary, done)
-            };
+            let mcap = create(mcap.as_deref())?;
+            let (summary, done) =
+                if trace.is_none() && timeline.is_none() && plot.is_none() && mcap.is_none() {
+                    // Nothing to write: keep no event log.
+                    (run_summary(&sc, arch).map_err(Stop::internal)?, Vec::new())
+                } else {
+                    let mut streams = Streams::new(&sc, arch, trace, timeline, plot.is_some());
+                    if let Some(out) = mcap {
+                        streams = streams.with_mcap(out, &sc).map_err(Stop::Bad)?;
+                    }
+                    let streams = RefCell::new(streams);
+                    let (summary, _, _) =
+                        run_logged(&sc, arch, WorldStream(&streams), TraceStream(&streams))
+                            .map_err(Stop::internal)?;
+                    let (done, world) = streams
+                        .into_inner()
+                        .finish(summary.time_cost_ms)
+                        .map_err(Stop::Bad)?;
+                    let mut done = done;
+                    if let Some(out) = plot {
+                        done.push(plot_both(out, world, &summary, &sc)?);
+                    }
+                    (summary, done)
+                };
             files::commit_all(done).map_err(Stop::Bad)?;
             let text = if json {
                 let j = report::RunJson::new(&sc, &summary);
@@ -282,9 +303,24 @@ fn run(cli: Cli) -> Result<(), Stop> {
             seed,
             arch,
             json,
+            mcap,
+            mcap_run,
+            mcap_arch,
         } => {
             let arches = sweep::arches(arch.map(Arch::from));
+            // The chosen run is streamed first, on its own: a run depends only on the seed,
+            // its number and the architecture, so it is the one the sweep runs.
+            let log = match mcap {
+                Some(path) => {
+                    let arch = sweep::mcap_arch(&arches, mcap_arch.map(Arch::from), mcap_run, runs)
+                        .map_err(Stop::Bad)?;
+                    let out = Output::create(&path).map_err(Stop::Bad)?;
+                    Some(log_run(out, &sweep::scenario(seed, mcap_run), arch)?)
+                }
+                None => None,
+            };
             let stats = sweep::sweep(seed, runs, &arches, !json).map_err(Stop::internal)?;
+            files::commit_all(log).map_err(Stop::Bad)?;
             let text = if json {
                 serde_json::to_string_pretty(&stats).map_err(Stop::internal)? + "\n"
             } else {
@@ -294,6 +330,23 @@ fn run(cli: Cli) -> Result<(), Stop> {
         }
     }
     Ok(())
+}
+
+/// Streams a run of `sc` under `arch` into the MCAP log `out` alone; gives it back to commit.
+fn log_run(out: Output, sc: &Scenario, arch: Arch) -> Result<Output, Stop> {
+    let streams = Streams::new(sc, arch, None, None, false)
+        .with_mcap(out, sc)
+        .map_err(Stop::Bad)?;
+    let streams = RefCell::new(streams);
+    let (summary, _, _) = run_logged(sc, arch, WorldStream(&streams), TraceStream(&streams))
+        .map_err(Stop::internal)?;
+    let (done, _) = streams
+        .into_inner()
+        .finish(summary.time_cost_ms)
+        .map_err(Stop::Bad)?;
+    done.into_iter()
+        .next()
+        .ok_or_else(|| Stop::internal("the MCAP log was lost"))
 }
 
 /// Draws the plot of a streamed run beside a recorded run of the other architecture, and

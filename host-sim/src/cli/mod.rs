@@ -1,8 +1,9 @@
 //! The pieces of the `psmpa-sim` command line: reports, Table I, sweeps and the trace, plot and
-//! timeline outputs.
+//! timeline outputs, and the MCAP log for Foxglove.
 
 pub mod check;
 pub mod files;
+pub mod foxglove;
 pub mod outputs;
 pub mod plan;
 pub mod report;

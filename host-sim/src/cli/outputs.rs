@@ -4,6 +4,7 @@
 use std::cell::RefCell;
 use std::collections::{HashMap, VecDeque};
 use std::io::{self, Write};
+use std::path::PathBuf;
 
 use embassy_time::Instant;
 
@@ -12,6 +13,7 @@ use psmpa_core::{Phase, TraceEvent, TraceSink};
 use serde_json::json;
 
 use crate::cli::files::Output;
+use crate::cli::foxglove::McapLog;
 use crate::cli::report::arch_title;
 use crate::robot::{Arch, FetchTea, codes};
 use crate::scenario::{Kind, Scenario};
@@ -37,7 +39,8 @@ pub fn describe(mission: &FetchTea<'_>, e: &TraceEvent) -> String {
     }
 }
 
-fn world_text(e: &WorldEvent) -> String {
+/// A world event in words, as the trace CSV shows it.
+pub(crate) fn world_text(e: &WorldEvent) -> String {
     match *e {
         WorldEvent::Appeared { index, kind, at_um } => format!(
             "#{} {} put down at {:.3} m",
@@ -57,11 +60,41 @@ fn world_text(e: &WorldEvent) -> String {
     }
 }
 
-/// Runtime events held back by [`TraceCsv`] at most: the world logs what happened since it
-/// was last looked at only when it is next looked at, so a runtime event may be followed by
-/// world events from before it. Past this many the oldest is written anyway (memory stays
-/// bounded; the rows may then be out of time order by that much).
+/// Runtime events held back by [`TraceCsv`] and the MCAP log at most: the world logs what
+/// happened since it was last looked at only when it is next looked at, so a runtime event may
+/// be followed by world events from before it. Past this many the oldest is written anyway
+/// (memory stays bounded; the rows may then be out of time order by that much).
 const HOLD: usize = 1 << 16;
+
+/// Runtime events (time in ms) waiting for the world's log to pass their instant, so that an
+/// output merges the two in time order, the world's first at the same millisecond.
+#[derive(Default)]
+pub struct Held(VecDeque<(u64, TraceEvent)>);
+
+impl Held {
+    /// When [`HOLD`] events wait, the instant before which the caller lets them out
+    /// ([`Held::pop_before`]) before it holds another.
+    pub fn overflow(&self) -> Option<u64> {
+        match self.0.front() {
+            Some(&(first, _)) if self.0.len() >= HOLD => Some(first.saturating_add(1)),
+            _ => None,
+        }
+    }
+
+    /// Holds a runtime event at `t` ms.
+    pub fn push(&mut self, t: u64, e: TraceEvent) {
+        self.0.push_back((t, e));
+    }
+
+    /// The oldest held event from before `before` (any, with `None`).
+    pub fn pop_before(&mut self, before: Option<u64>) -> Option<(u64, TraceEvent)> {
+        let &(t, _) = self.0.front()?;
+        if before.is_some_and(|b| t >= b) {
+            return None;
+        }
+        self.0.pop_front()
+    }
+}
 
 /// The trace as CSV, written row by row while the run goes (memory does not grow with the
 /// run): `time_s,sonar_m,bumper,position_m,source,event`. World and runtime events are merged
@@ -73,7 +106,7 @@ pub struct TraceCsv<W: Write> {
     sonar: f64,
     bumper: u32,
     pos: i64,
-    held: VecDeque<(u64, TraceEvent)>,
+    held: Held,
     error: Option<io::Error>,
 }
 
@@ -86,7 +119,7 @@ impl<W: Write> TraceCsv<W> {
             sonar: 0.0,
             bumper: 0,
             pos: 0,
-            held: VecDeque::new(),
+            held: Held::default(),
             error: None,
         };
         let header = csv
@@ -117,11 +150,7 @@ impl<W: Write> TraceCsv<W> {
     }
 
     fn release(&mut self, before: Option<u64>) {
-        while let Some(&(t, e)) = self.held.front() {
-            if before.is_some_and(|b| t >= b) {
-                break;
-            }
-            self.held.pop_front();
+        while let Some((t, e)) = self.held.pop_before(before) {
             let text = self
                 .mission
                 .as_ref()
@@ -146,12 +175,10 @@ impl<W: Write> TraceCsv<W> {
 
     /// A runtime event.
     pub fn runtime(&mut self, at: Instant, e: &TraceEvent) {
-        if self.held.len() >= HOLD {
-            if let Some(&(t, _)) = self.held.front() {
-                self.release(Some(t.saturating_add(1)));
-            }
+        if let Some(before) = self.held.overflow() {
+            self.release(Some(before));
         }
-        self.held.push_back((at.as_millis(), *e));
+        self.held.push(at.as_millis(), *e);
     }
 
     /// Writes what is held and gives the writer back, or the first write error.
@@ -549,11 +576,13 @@ pub fn plot_fits(scenario: &Scenario) -> Result<(), String> {
     Ok(())
 }
 
-/// The outputs a run writes while it goes, shared by the world's log and the runtime's
+/// The outputs a run writes while it goes (trace CSV, timeline, MCAP log), shared by the world's log and the runtime's
 /// trace sink ([`WorldStream`], [`TraceStream`]).
 pub struct Streams {
     csv: Option<TraceCsv<Output>>,
     timeline: Option<Timeline<Output>>,
+    /// The MCAP log and the path it is for (its errors name it).
+    mcap: Option<(McapLog<Output>, PathBuf)>,
     world: Option<WorldRecord>,
 }
 
@@ -570,8 +599,17 @@ impl Streams {
         Self {
             csv: csv.map(|o| TraceCsv::new(o, scenario)),
             timeline: timeline.map(|o| Timeline::new(o, scenario, arch)),
+            mcap: None,
             world: keep_world.then(WorldRecord::default),
         }
+    }
+
+    /// Also streams the run of `scenario` into an MCAP log (`--mcap`).
+    pub fn with_mcap(mut self, out: Output, scenario: &Scenario) -> Result<Self, String> {
+        let path = out.path().to_path_buf();
+        let log = McapLog::new(out, scenario).map_err(|e| format!("{}: {e}", path.display()))?;
+        self.mcap = Some((log, path));
+        Ok(self)
     }
 
     /// Ends the outputs of a run that ended at `end_ms`; gives back the outputs to commit
@@ -584,6 +622,12 @@ impl Streams {
         }
         if let Some(timeline) = self.timeline {
             outputs.push(timeline.finish(end_ms).map_err(fail)?);
+        }
+        if let Some((log, path)) = self.mcap {
+            outputs.push(
+                log.finish()
+                    .map_err(|e| format!("{}: {e}", path.display()))?,
+            );
         }
         Ok((outputs, self.world))
     }
@@ -600,6 +644,9 @@ impl WorldLog for WorldStream<'_> {
         }
         if let Some(timeline) = &mut s.timeline {
             timeline.world(at_ms, event);
+        }
+        if let Some((log, _)) = &mut s.mcap {
+            log.world(at_ms, pos_um, event);
         }
         if let Some(world) = &mut s.world {
             world.log(at_ms, pos_um, event);
@@ -618,6 +665,9 @@ impl TraceSink for TraceStream<'_> {
         }
         if let Some(timeline) = &mut s.timeline {
             timeline.runtime(at, event);
+        }
+        if let Some((log, _)) = &mut s.mcap {
+            log.runtime(at, event);
         }
     }
 }

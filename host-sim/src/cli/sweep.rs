@@ -202,6 +202,47 @@ pub fn arches(only: Option<Arch>) -> Vec<Arch> {
     only.map_or_else(|| Arch::ALL.to_vec(), |a| vec![a])
 }
 
+/// The architecture of the run `sweep --mcap` writes: `chosen` (`--mcap-arch`), else the one
+/// the sweep runs, else P-SMPA; refused when the sweep does not run it, or `run` is not one
+/// of the sweep's `runs` scenarios.
+pub fn mcap_arch(
+    arches: &[Arch],
+    chosen: Option<Arch>,
+    run: u64,
+    runs: u64,
+) -> Result<Arch, String> {
+    if run >= runs {
+        return Err(format!(
+            "--mcap-run {run}: the sweep runs scenarios 0 to {} (--runs {runs})",
+            runs.saturating_sub(1)
+        ));
+    }
+    let arch = chosen.unwrap_or(match arches {
+        [only] => *only,
+        _ => Arch::PSmpa,
+    });
+    if !arches.contains(&arch) {
+        return Err(format!(
+            "--mcap-arch {}: the sweep runs only {} (--arch)",
+            arch_flag(arch),
+            arches
+                .iter()
+                .map(|&a| arch_flag(a))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    Ok(arch)
+}
+
+/// An architecture as the command line spells it.
+fn arch_flag(arch: Arch) -> &'static str {
+    match arch {
+        Arch::PSmpa => "psmpa",
+        Arch::Smpa => "smpa",
+    }
+}
+
 /// What a sweep keeps of the scenarios run so far (on one thread, then merged).
 #[derive(Default)]
 struct Partial {
