@@ -5,29 +5,8 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n== %s\n' "$*"; }
 
-step "toolchain: MCU targets and components"
-installed_targets=$(rustup target list --installed)
-for target in thumbv7em-none-eabihf thumbv6m-none-eabi riscv32imac-unknown-none-elf; do
-  grep -qx "$target" <<<"$installed_targets" || rustup target add "$target"
-done
-installed_components=$(rustup component list --installed)
-for component in clippy rustfmt; do
-  grep -q "^$component" <<<"$installed_components" || rustup component add "$component"
-done
-
-step "system tools: QEMU, ARM binutils, valgrind, defmt-print, flip-link (installed only when missing)"
-missing=()
-command -v qemu-system-arm >/dev/null || missing+=(qemu-system-arm)
-command -v arm-none-eabi-objdump >/dev/null || missing+=(binutils-arm-none-eabi)
-command -v valgrind >/dev/null || missing+=(valgrind)
-if ((${#missing[@]})); then
-  sudo=""
-  [ "$(id -u)" -eq 0 ] || sudo=sudo
-  $sudo apt-get update -q
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q "${missing[@]}"
-fi
-command -v defmt-print >/dev/null || cargo install defmt-print --locked
-command -v flip-link >/dev/null || cargo install flip-link --locked
+step "tools: MCU targets, clippy, rustfmt, QEMU, ARM binutils, valgrind, defmt-print, flip-link (only what is missing)"
+bash scripts/install-tools.sh all
 
 step "format"
 cargo fmt --all --check

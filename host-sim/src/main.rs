@@ -1,4 +1,4 @@
-//! `psmpa-sim`: the P-SMPA simulator's command line. The contract (`SIMULATION.md`): exit
+//! `psmpa-sim`: the P-SMPA simulator's command line. The contract (README.md, "The simulator"): exit
 //! status 0 when the simulation ran, whatever its outcome (and when standard output was closed
 //! by its reader); 2 for bad input or an output that cannot be written, with one line on
 //! stderr naming the file and what is wrong; never a panic. Reading and writing go through
@@ -58,7 +58,7 @@ enum CheckPlatform {
 enum Command {
     /// Runs one scenario file under one architecture.
     Run {
-        /// Scenario file (JSON, see SIMULATION.md).
+        /// Scenario file (JSON; the format is in README.md, "The simulator").
         scenario: PathBuf,
         /// Architecture.
         #[arg(long, value_enum)]

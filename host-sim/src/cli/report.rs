@@ -28,7 +28,8 @@ pub struct SampleGaps {
     pub bumper: Option<u64>,
 }
 
-/// The JSON object `psmpa-sim run --json` prints (`SIMULATION.md`), field for field.
+/// The JSON object `psmpa-sim run --json` prints (the contract: README.md, "The simulator"),
+/// field for field.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunJson {
     /// Scenario name.
