@@ -72,7 +72,7 @@ const HOLD: usize = 1 << 16;
 pub struct Held(VecDeque<(u64, TraceEvent)>);
 
 impl Held {
-    /// When [`HOLD`] events wait, the instant before which the caller lets them out
+    /// When `HOLD` (65,536) events wait, the instant before which the caller lets them out
     /// ([`Held::pop_before`]) before it holds another.
     pub fn overflow(&self) -> Option<u64> {
         match self.0.front() {
