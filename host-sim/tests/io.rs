@@ -4,18 +4,12 @@
 
 mod common;
 
-use common::{assert_success, bin, file};
+use common::{assert_refused, assert_success, bin, file, folder, names_in, repo};
 
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-fn repo(path: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join(path)
-}
 
 fn sonar8() -> PathBuf {
     repo("scenarios/sonar-8.json")
@@ -39,14 +33,6 @@ fn long_scenario(dir: &Path, max_s: u32) -> PathBuf {
     path
 }
 
-/// A fresh folder for one test.
-fn folder(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("psmpa-io-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 /// Waits at most 20 s for `child` (a hang fails the test instead of stalling it).
 fn finish(mut child: Child) -> Output {
     let start = Instant::now();
@@ -58,18 +44,6 @@ fn finish(mut child: Child) -> Output {
         std::thread::sleep(Duration::from_millis(20));
     }
     child.wait_with_output().unwrap()
-}
-
-/// Exit status 2, nothing on stdout, one line on stderr containing each of `expected`.
-fn assert_refused(out: &Output, expected: &[&str]) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
-    assert!(out.stdout.is_empty(), "nothing printed before the failure");
-    assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    for e in expected {
-        assert!(stderr.contains(e), "expected `{e}` in: {stderr}");
-    }
 }
 
 /// The commands that print something, each with the arguments to print a lot or a little.
@@ -201,15 +175,6 @@ fn run_in(dir: &Path, extra: &[&str]) -> Output {
         .args(extra)
         .output()
         .unwrap()
-}
-
-fn names_in(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
 }
 
 #[test]

@@ -3,11 +3,10 @@
 
 mod common;
 
-use common::{assert_success, bin, file};
+use common::{assert_refused, assert_success, bin, file, folder, names_in, repo};
 
 use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
 use std::process::Output;
 
 use embassy_time::Instant;
@@ -18,41 +17,6 @@ use psmpa_sim::robot::Arch;
 use psmpa_sim::sim::run_logged;
 use psmpa_sim::world::{WorldEvent, WorldLog};
 use serde_json::Value;
-
-fn repo(path: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join(path)
-}
-
-/// A fresh folder for one test.
-fn folder(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("psmpa-mcap-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn names_in(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
-
-/// Exit status 2, nothing on stdout, one line on stderr containing each of `expected`.
-fn assert_refused(out: &Output, expected: &[&str]) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
-    assert!(out.stdout.is_empty(), "nothing printed before the failure");
-    assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    for e in expected {
-        assert!(stderr.contains(e), "expected `{e}` in: {stderr}");
-    }
-}
 
 /// One message read back: topic, log time (ns), sequence and JSON.
 struct Msg {

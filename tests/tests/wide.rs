@@ -195,7 +195,9 @@ fn the_trace_hash_covers_every_word_of_a_fact_set() {
     // Facts 70 and 71 differ only in the second word.
     assert_ne!(hash(70), hash(71));
     assert_ne!(hash(6), hash(70));
-    // A one-word runtime hashes its events as before fact sets had a width: three words.
+    // Every word is hashed, a 0 one too: the same facts hash differently in a one-word and a
+    // two-word runtime. (That one-word hashes are what they were before fact sets had a width
+    // is pinned by psmpa-sim's scenario hashes.)
     let mut one = TraceHash::new();
     one.add(
         at,
