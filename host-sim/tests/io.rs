@@ -454,3 +454,29 @@ fn an_interrupted_run_leaves_no_temporary_file() {
     assert_eq!(names_in(&dir), ["long.json", "t.csv"], "no .part left");
     assert_eq!(std::fs::read_to_string(dir.join("t.csv")).unwrap(), "keep");
 }
+
+#[test]
+fn each_file_written_is_named_once_on_stderr() {
+    let dir = folder("wrote");
+    let (trace, plot) = (dir.join("t.csv"), dir.join("p.svg"));
+    let out = psmpa(sonar8())
+        .arg("--trace")
+        .arg(&trace)
+        .arg("--plot")
+        .arg(&plot)
+        .args(["--timeline", "/dev/null"])
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // The files as given, in the order of the outputs; nothing for a device.
+    assert_eq!(
+        stderr,
+        format!(
+            "psmpa-sim: wrote {}\npsmpa-sim: wrote {}\n",
+            trace.display(),
+            plot.display()
+        )
+    );
+    assert!(trace.is_file() && plot.is_file());
+}

@@ -81,7 +81,8 @@ fn sections(elf: &Path) -> Result<(u64, u64), String> {
 /// sections, named by the first path segment of its demangled name (for `<T as Trait>::f`, the
 /// crate of `T`). Code inlined into another function counts for that function's crate, so the
 /// core's control loop, inlined into the executor's poll of the mission task, counts partly
-/// for `embassy_executor`. Bytes in no symbol (padding, the vector table) are `(other)`.
+/// for `embassy_executor`. Symbols without a Rust path are grouped by what they are
+/// ([`unnamed`]); bytes in no symbol at all count as [`CONSTANTS`].
 fn flash_by_crate(elf: &Path, flash: u64) -> Result<Vec<(String, u64)>, String> {
     use object::{ObjectSymbol, SectionIndex};
     let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
@@ -103,9 +104,7 @@ fn flash_by_crate(elf: &Path, flash: u64) -> Result<Vec<(String, u64)>, String> 
         *by_crate.entry(crate_of(&name)).or_default() += sym.size();
     }
     let named: u64 = by_crate.values().sum();
-    *by_crate
-        .entry("(in no symbol: vector table, literals, padding)".into())
-        .or_default() += flash.saturating_sub(named);
+    *by_crate.entry(CONSTANTS.into()).or_default() += flash.saturating_sub(named);
     let mut rows: Vec<(String, u64)> = by_crate.into_iter().collect();
     rows.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
     Ok(rows)
@@ -113,8 +112,8 @@ fn flash_by_crate(elf: &Path, flash: u64) -> Result<Vec<(String, u64)>, String> 
 
 /// The crate a demangled symbol belongs to: the first segment of its path, for `<T as
 /// Trait>::f` the crate of `T`, or of `Trait` when `T` is a primitive (`[char]`). The `[hash]`
-/// v0 mangling adds is dropped. Compiler-made constants (`.Lanon...`) and C names are
-/// `(unnamed)`.
+/// v0 mangling adds is dropped. A symbol without a path is put in a bucket that says what it
+/// is (see [`unnamed`]).
 fn crate_of(name: &str) -> String {
     let first_segment = |path: &str| -> Option<String> {
         let path = path.trim_start_matches(['<', '&', '[', '*']);
@@ -130,7 +129,34 @@ fn crate_of(name: &str) -> String {
     };
     first_segment(name)
         .or_else(|| name.split_once(" as ").and_then(|(_, t)| first_segment(t)))
-        .unwrap_or_else(|| "(unnamed)".into())
+        .unwrap_or_else(|| unnamed(name).into())
+}
+
+/// Constants that name no crate: LLVM's anonymous constants (`.Lanon.*`) and the bytes in no
+/// symbol at all (merged constants, padding). In these images: the source file names and
+/// messages of panic locations, string literals, `core::fmt`'s Unicode tables.
+const CONSTANTS: &str = "(constants of no crate: panic locations, tables)";
+
+/// What a symbol without a Rust path is: an anonymous constant ([`CONSTANTS`]); code LLVM's
+/// machine outliner (`opt-level = "z"`) moved out of several functions into one
+/// (`OUTLINED_FUNCTION_n`); a C-named routine of compiler_builtins (`__aeabi_*`, `mem*`,
+/// 64-bit division), counted with that crate; or another C name: cortex-m-rt's entry point
+/// and vector tables (`Reset`, `__EXCEPTIONS`, `__INTERRUPTS`, `HardFault`), defmt's logger
+/// and timestamp hooks (`_defmt_*`), the embassy hooks of the time driver and the executor
+/// (`_embassy_time_*`, `__embassy_time_queue_item_from_waker`) and `main`.
+fn unnamed(name: &str) -> &'static str {
+    let builtin = name.starts_with("__aeabi_")
+        || ["memcpy", "memmove", "memset", "memcmp", "bcmp"].contains(&name)
+        || (name.starts_with("__") && name.ends_with(|c: char| c.is_ascii_digit()));
+    if name.starts_with(".L") {
+        CONSTANTS
+    } else if name.starts_with("OUTLINED_FUNCTION_") {
+        "(outlined: code LLVM shares between functions)"
+    } else if builtin {
+        "compiler_builtins"
+    } else {
+        "(C names: entry, vectors, defmt and embassy hooks)"
+    }
 }
 
 /// Measures one image: sizes from its ELF, the stack from its run in QEMU.
@@ -259,7 +285,7 @@ pub fn run(bless: bool) -> Result<(), String> {
             "{name}: flash by crate (by symbol name; inlined code counts where it was inlined):"
         );
         for (krate, bytes) in flash_by_crate(elf, flash)? {
-            println!("  {krate:<48} {bytes:>6} B");
+            println!("  {krate:<52} {bytes:>6} B");
         }
     }
     // The product must carry neither the simulated world nor the scenario parser.
@@ -310,7 +336,13 @@ mod tests {
             crate_of("<[char] as core::str::pattern::Pattern>::f"),
             "core"
         );
-        assert_eq!(crate_of(".Lanon.88b94e.185"), "(unnamed)");
-        assert_eq!(crate_of("SysTick"), "(unnamed)");
+        assert_eq!(crate_of(".Lanon.88b94e.185"), super::CONSTANTS);
+        assert!(crate_of("OUTLINED_FUNCTION_12").starts_with("(outlined"));
+        assert_eq!(crate_of("__aeabi_memcpy4"), "compiler_builtins");
+        assert_eq!(crate_of("__udivmoddi4"), "compiler_builtins");
+        assert_eq!(crate_of("memcmp"), "compiler_builtins");
+        assert!(crate_of("_defmt_write").starts_with("(C names"));
+        assert!(crate_of("__INTERRUPTS").starts_with("(C names"));
+        assert!(crate_of("Reset").starts_with("(C names"));
     }
 }

@@ -168,6 +168,8 @@ enum Sink {
 /// [`commit`]: Output::commit
 pub struct Output {
     path: PathBuf,
+    /// The path as the user gave it (before following a symbolic link), for messages.
+    given: PathBuf,
     sink: Sink,
     error: Option<io::Error>,
     /// Dropped last, after the temporary file is renamed or removed.
@@ -225,6 +227,7 @@ impl Output {
         };
         Ok(Self {
             path: target,
+            given: path.to_path_buf(),
             sink,
             error: None,
             _pending: pending,
@@ -290,13 +293,30 @@ impl Write for Output {
 }
 
 /// Writes complete outputs: every one is flushed first, so a full disk fails before any is
-/// put in place, then each is renamed over its target.
+/// put in place, then each is renamed over its target. When all are in place, one line on
+/// stderr names each file written (`psmpa-sim: wrote t.csv`); a device or pipe written in
+/// place is not named, and a failure prints only its own line.
 pub fn commit_all(outputs: impl IntoIterator<Item = Output>) -> Result<(), String> {
     let mut outputs: Vec<Output> = outputs.into_iter().collect();
     for o in &mut outputs {
         o.finish()?;
     }
-    outputs.into_iter().try_for_each(Output::commit)
+    let written: Vec<PathBuf> = outputs
+        .iter()
+        .filter(|o| matches!(o.sink, Sink::Staged(_)))
+        .map(|o| o.given.clone())
+        .collect();
+    outputs.into_iter().try_for_each(Output::commit)?;
+    let mut stderr = io::stderr().lock();
+    for path in written {
+        let shown = path.display().to_string();
+        let _ = writeln!(
+            stderr,
+            "psmpa-sim: wrote {}",
+            crate::json::printable(&shown)
+        );
+    }
+    Ok(())
 }
 
 /// The file a path names: symbolic links and `..` resolved where the file or its folder

@@ -3,7 +3,7 @@
 //! Scenario `i` of a sweep depends only on the seed and `i` (its own PCG stream), so a sweep
 //! gives the same numbers on any number of threads.
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressState, ProgressStyle};
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 use rayon::prelude::*;
@@ -300,9 +300,15 @@ pub fn sweep(
     let bar = if progress {
         let bar = ProgressBar::new(runs);
         if let Ok(style) = ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} scenarios ({per_sec}, eta {eta})",
+            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} scenarios ({rate}/s, eta {eta})",
         ) {
-            bar.set_style(style);
+            // indicatif's `{per_sec}` prints every digit it has (`658.6149/s`): a whole number.
+            bar.set_style(style.with_key(
+                "rate",
+                |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                    let _ = write!(w, "{:.0}", state.per_sec());
+                },
+            ));
         }
         bar
     } else {
