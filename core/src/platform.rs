@@ -153,6 +153,18 @@ pub trait Sensor<const W: usize = 1> {
     /// and fails the state after [`Config::max_lost`](crate::exec::Config::max_lost) losses in
     /// a row.
     async fn sample(&self, sensor: SensorId) -> Result<Option<Reading<W>>, SensorFault>;
+
+    /// Completes when something makes a cyclic sensor's next sample due before its period
+    /// ends: a bump switch's edge, a data-ready interrupt. The sampler then samples at once and
+    /// keeps its period's grid afterwards. Awaited only between a cyclic sensor's samples, and
+    /// dropped when the sample falls due; never completes by default.
+    ///
+    /// It should complete once per event (await the edge, not the level): a future that is
+    /// always ready makes the sensor sample as fast as it can answer.
+    async fn wake(&self, sensor: SensorId) {
+        let _ = sensor;
+        core::future::pending::<()>().await;
+    }
 }
 
 /// The actuator behaviours of a platform (the acting side of the deliberative controller), in

@@ -31,7 +31,7 @@
 use core::cell::Cell;
 use core::convert::Infallible;
 use core::future::{Future, pending, poll_fn};
-use core::pin::Pin;
+use core::pin::{Pin, pin};
 use core::task::{Context, Poll};
 
 use embassy_futures::join::join_array;
@@ -174,8 +174,24 @@ impl<
                     (SensorMode::OnDemand, _) => {
                         self.bounded(epoch, None, self.requested(sensor)).await
                     }
-                    (_, Some(due)) => self.bounded(epoch, None, Timer::at(due)).await,
-                    (_, None) => self.bounded(epoch, None, pending::<()>()).await,
+                    // The sample's instant, if any (else the command's end); a cyclic
+                    // sensor's device may make it due early (`wake`). One wait for all.
+                    (mode, due) => {
+                        let early = matches!(mode, SensorMode::Cyclic { .. }) && due.is_some();
+                        let mut timer = due.map(Timer::at);
+                        let mut wake = pin!(self.platform.wake(sensor));
+                        let wait = poll_fn(move |cx| {
+                            let timed = timer
+                                .as_mut()
+                                .is_some_and(|t| Pin::new(t).poll(cx).is_ready());
+                            if timed || (early && wake.as_mut().poll(cx).is_ready()) {
+                                Poll::Ready(())
+                            } else {
+                                Poll::Pending
+                            }
+                        });
+                        self.bounded(epoch, None, wait).await
+                    }
                 };
                 if !matches!(waited, Bound::Done(())) {
                     break;
@@ -230,6 +246,8 @@ impl<
                 }
                 due = match (spec.mode, mode, due) {
                     (SensorMode::Cyclic { .. }, Mode::Once, _) => None,
+                    // An early sample (`wake`) that ended before its instant keeps it.
+                    (SensorMode::Cyclic { .. }, _, Some(due)) if Instant::now() < due => Some(due),
                     (SensorMode::Cyclic { period }, _, Some(due)) => {
                         Some(next_due(due, period.as_ticks(), Instant::now()))
                     }

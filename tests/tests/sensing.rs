@@ -121,6 +121,8 @@ struct Robot {
     seen: Cell<Option<Seen>>,
     /// When each behaviour started and what it saw then.
     started: RefCell<Vec<Seen>>,
+    /// When the cliff sensor's device signals an edge (`Sensor::wake`), ms.
+    edges: Vec<u64>,
 }
 
 impl Robot {
@@ -132,6 +134,7 @@ impl Robot {
             reads: RefCell::new(Vec::new()),
             seen: Cell::new(None),
             started: RefCell::new(Vec::new()),
+            edges: Vec::new(),
         }
     }
 
@@ -170,6 +173,14 @@ impl Sensor for Robot {
             end: Instant::now(),
         });
         Ok(Some(reading))
+    }
+
+    async fn wake(&self, sensor: SensorId) {
+        let now = Instant::now().as_millis();
+        match self.edges.iter().find(|&&e| e > now) {
+            Some(&edge) if sensor == self.ids.cliff => Timer::at(Instant::from_millis(edge)).await,
+            _ => core::future::pending().await,
+        }
     }
 }
 
@@ -309,6 +320,31 @@ fn a_sample_due_at_the_instant_a_behaviour_wakes_is_taken_first() {
             .count(),
         2
     );
+}
+
+#[test]
+fn an_edge_the_device_signals_makes_a_sample_due_at_once_and_the_grid_stays() {
+    let ids = mission().1;
+    // Two edges of the cliff sensor's device during a 1 s drive, between its 20 ms instants,
+    // and one at an instant it samples anyway.
+    let mut robot = Robot::new(0, 1_000);
+    let (_, start) = run(&robot);
+    let s = start.as_millis();
+    robot = Robot::new(0, 1_000);
+    robot.edges = vec![s + 307, s + 553, s + 600];
+    let (_, again) = run(&robot);
+    assert_eq!(again, start, "the edges do not move the state");
+    let end = start + Duration::from_millis(1_000);
+    let mut expected = grid(start, 20, end);
+    expected.extend([s + 307, s + 553]);
+    expected.sort();
+    assert_eq!(
+        robot.starts(ids.cliff, start),
+        expected,
+        "a read at each edge, the 20 ms grid unchanged, no instant read twice"
+    );
+    // The ranger, whose device signals nothing, keeps its own instants.
+    assert_eq!(robot.starts(ids.tof, start), grid(start, 100, end));
 }
 
 #[test]
