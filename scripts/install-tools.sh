@@ -6,8 +6,9 @@
 #
 # firmware: the thumbv7em-none-eabihf target (rustup), qemu-system-arm (apt), defmt-print and
 # flip-link (cargo install, about 4 minutes on 2 cores).
-# all: also the thumbv6m-none-eabi and riscv32imac-unknown-none-elf targets, clippy and
-# rustfmt, binutils-arm-none-eabi (objdump for `cargo xtask stack`) and valgrind (callgrind).
+# all: also the thumbv6m-none-eabi, riscv32imac-unknown-none-elf and thumbv8m.main-none-eabihf
+# (RP2350, for psmpa-drivers) targets, clippy and rustfmt, binutils-arm-none-eabi (objdump for
+# `cargo xtask stack`) and valgrind (callgrind).
 #
 # apt installs without recommended packages: qemu-system-arm then pulls 25 packages (80 MB
 # installed) instead of 165 (870 MB). On Debian 12 it comes with qemu-system-common 7.2,
@@ -28,7 +29,7 @@ targets=(thumbv7em-none-eabihf)
 components=()
 packages=(qemu-system-arm:qemu-system-arm)
 if [ "$what" = all ]; then
-  targets+=(thumbv6m-none-eabi riscv32imac-unknown-none-elf)
+  targets+=(thumbv6m-none-eabi riscv32imac-unknown-none-elf thumbv8m.main-none-eabihf)
   components+=(clippy rustfmt)
   packages+=(arm-none-eabi-objdump:binutils-arm-none-eabi valgrind:valgrind)
 fi

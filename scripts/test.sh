@@ -32,6 +32,12 @@ cargo build -p psmpa-sim --no-default-features --target thumbv7em-none-eabihf --
 step "the dock example builds for a microcontroller"
 cargo build -p psmpa-dock --target thumbv7em-none-eabihf --release
 
+step "the drivers build for microcontrollers (Cortex-M4F; Cortex-M33 as on the RP2350)"
+for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
+  cargo build -p psmpa-drivers --target "$target" --release
+  cargo build -p psmpa-drivers --target "$target" --release --features defmt
+done
+
 step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
 cargo test --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 

@@ -7,6 +7,8 @@
 //!   still running at the limit a [`SimError::TimeLimit`].
 //! * [`Recorder`] keeps the runtime's trace events; [`Script`] says what a scripted sensor
 //!   reads at each instant.
+//! * [`pins`] has `embedded-hal` pins for driver tests: an input whose level follows a script
+//!   of edges in virtual time, an output and a PWM channel that record what was written when.
 //! * [`beside`] (`no_std`, also without the `std` feature) is the placement itself: a
 //!   microcontroller's interrupt executor polls the sensing side through the same
 //!   [`beside::HighSlot`] the host loop does.
@@ -38,6 +40,8 @@
 #![deny(missing_docs)]
 
 pub mod beside;
+#[cfg(feature = "std")]
+pub mod pins;
 #[cfg(feature = "std")]
 pub mod sim;
 
