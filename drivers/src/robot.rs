@@ -5,7 +5,8 @@
 //!   [`Value::NoEcho`] when nothing is in range; `path_clear` when nothing is within
 //!   [`Settings::clearance_mm`]. How each outcome of a read becomes a sample, a lost sample or
 //!   a fault: [`sonar_reading`].
-//! * `bumper` ([`Switch`], cyclic, 20 ms): [`Value::Bool`] pressed; `path_clear` when not.
+//! * `bumper` ([`Switch`], cyclic, 20 ms, and at once on an edge: [`Sensor::wake`]):
+//!   [`Value::Bool`] pressed; `path_clear` when not.
 //! * `camera` ([`Marker`], once at the door): the reflectance sensor standing in for the
 //!   paper's camera; `handle_seen` when the marker is in view.
 //! * `handle` ([`Switch`], on demand): the limit switch the arm presses on the handle;
@@ -318,6 +319,20 @@ where
             None => return Err(SensorFault::Device(UNBOUND)),
         };
         Ok(Some(reading))
+    }
+
+    /// The bumper's next edge (a contact, a release, a bounce) makes its next sample due at
+    /// once: the read debounces it, and a contact is seen the debounce time after the switch
+    /// settles, not a period later. The runtime drops this future before it samples, so the
+    /// lock it holds never keeps a read waiting. A pin error never wakes (the periodic reads
+    /// report it).
+    async fn wake(&self, sensor: SensorId) {
+        if self.parts.sensor(sensor) == Some(Part::Bumper)
+            && self.bumper.lock().await.edge().await.is_ok()
+        {
+            return;
+        }
+        core::future::pending().await
     }
 }
 

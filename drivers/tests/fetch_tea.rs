@@ -174,18 +174,19 @@ fn a_bump_during_the_walk_brakes_once_and_the_walk_resumes_after_it() {
     });
     assert!(run.result.is_ok(), "{:?}", run.result);
     let walk = action("go to door");
-    // The walk's state started at 8 ms (the initial model's sonar read), so the bumper reads
-    // at 3,008 ms (pressed, mid-chatter), 3,028 (released, mid-chatter), 3,048 (pressed, at
-    // rest). Undebounced, that would be two contacts.
-    let bumper = run.bumper.reads();
-    for read in [3_008, 3_028, 3_048, 4_008, 4_028] {
+    // The edges wake the bumper between its periods (`Sensor::wake`): a read at the first
+    // edge, whose debounce window the next edge ends; a read at the edge after that; and so
+    // on, until a read at the last edge sees the level hold. Undebounced, those reads would
+    // see contact, release, contact, ...
+    let reads = run.bumper.reads();
+    for edge in (3_000..=3_030).step_by(6).chain((4_000..=4_012).step_by(6)) {
         assert!(
-            bumper.contains(&Instant::from_millis(read)),
-            "no read at {read}"
+            reads.contains(&Instant::from_millis(edge)),
+            "no read at {edge}"
         );
     }
-    // One contact: one violation of `path_clear`, one restoration, each once the level held
-    // for the debounce time at the first read at rest.
+    // One contact: one violation of `path_clear`, one restoration, each the debounce time
+    // after the last edge, not at the next period's read (3,048 and 4,028 ms).
     let violated = run
         .trace
         .find(|e| matches!(e, TraceEvent::PreconditionViolated { action, .. } if *action == walk));
@@ -196,11 +197,11 @@ fn a_bump_during_the_walk_brakes_once_and_the_walk_resumes_after_it() {
     let at = |ms| Instant::from_millis(ms);
     assert_eq!(
         violated.iter().map(|(t, _)| *t).collect::<Vec<_>>(),
-        [at(3_048 + d)]
+        [at(3_030 + d)]
     );
     assert_eq!(
         restored.iter().map(|(t, _)| *t).collect::<Vec<_>>(),
-        [at(4_028 + d)]
+        [at(4_012 + d)]
     );
     let (violated, restored) = (violated[0].0, restored[0].0);
     // The wheels braked at once, stayed braked, and drove on when the bumper was freed.
