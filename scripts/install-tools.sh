@@ -4,8 +4,9 @@
 #   bash scripts/install-tools.sh firmware   # build the firmware and run it in QEMU
 #   bash scripts/install-tools.sh            # everything scripts/test.sh (CI) runs
 #
-# firmware: the thumbv7em-none-eabihf target (rustup), qemu-system-arm (apt), defmt-print and
-# flip-link (cargo install, about 4 minutes on 2 cores).
+# firmware: the thumbv7em-none-eabihf and thumbv8m.main-none-eabihf targets (rustup; QEMU's
+# mps2-an386 and mps2-an505), qemu-system-arm (apt), defmt-print and flip-link (cargo install,
+# about 4 minutes on 2 cores).
 # all: also the thumbv6m-none-eabi and riscv32imac-unknown-none-elf targets, clippy and
 # rustfmt, binutils-arm-none-eabi (objdump for `cargo xtask stack`) and valgrind (callgrind).
 #
@@ -24,7 +25,7 @@ case "$what" in
     ;;
 esac
 
-targets=(thumbv7em-none-eabihf)
+targets=(thumbv7em-none-eabihf thumbv8m.main-none-eabihf)
 components=()
 packages=(qemu-system-arm:qemu-system-arm)
 if [ "$what" = all ]; then

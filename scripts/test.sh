@@ -35,8 +35,10 @@ cargo build -p psmpa-dock --target thumbv7em-none-eabihf --release
 step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
 cargo test --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 
-step "firmware: clippy for the target"
-cargo clippy -p psmpa-firmware --target thumbv7em-none-eabihf --profile firmware -- -D warnings
+step "firmware: clippy for both targets (mps2-an386's Cortex-M4F, mps2-an505's Cortex-M33)"
+for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
+  cargo clippy -p psmpa-firmware --target "$target" --profile firmware -- -D warnings
+done
 
 step "firmware in QEMU: every scenario, both architectures, equal to the host"
 cargo xtask qemu
