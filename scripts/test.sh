@@ -40,10 +40,10 @@ for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
   cargo clippy -p psmpa-firmware --target "$target" --profile firmware -- -D warnings
 done
 
-step "firmware in QEMU: every scenario, both architectures, equal to the host"
+step "firmware in QEMU on mps2-an386 and mps2-an505: every scenario, both architectures, equal to the host"
 cargo xtask qemu
 
-step "the check can fail: a deliberately broken scenario must be caught"
+step "the check can fail: a deliberately broken scenario must be caught (mps2-an386)"
 cargo xtask qemu --inject-fault --expect-failure
 
 step "firmware size: flash, static RAM, stack high-water against budget and snapshot"

@@ -1,8 +1,8 @@
 //! `cargo xtask`: the project's tasks around the firmware.
 //!
-//! * `qemu`: build the firmware, run it in QEMU (`-icount`: deterministic), decode its defmt
-//!   log and check that every embedded scenario, under both architectures, gives the same
-//!   result and trace hash as the host simulator.
+//! * `qemu`: build the firmware for both QEMU machines (mps2-an386's Cortex-M4F, mps2-an505's
+//!   Cortex-M33), run it (`-icount`: deterministic), decode its defmt log and check that every
+//!   embedded scenario, under both architectures, gives the same result as the host simulator.
 //! * `size`: flash and static RAM of the firmware and its stack high-water mark in QEMU,
 //!   checked against the budget and the committed snapshot `firmware/size.json`.
 //! * `stack`: a static bound on the firmware's stack from its call graph and frame sizes,
@@ -33,10 +33,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Task {
-    /// Runs the firmware in QEMU and checks every scenario against the host simulator.
+    /// Runs the firmware in QEMU on mps2-an386 and mps2-an505 and checks every scenario
+    /// against the host simulator.
     Qemu {
         /// Build with the `inject-fault` feature: one scenario is broken on purpose, and the
-        /// check must fail.
+        /// check must fail (on mps2-an386 only).
         #[arg(long)]
         inject_fault: bool,
         /// Succeed only if the check fails (to show that it can).
