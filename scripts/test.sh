@@ -52,7 +52,7 @@ cargo xtask size
 step "firmware stack: static worst case from the binary, at least the QEMU high-water mark"
 cargo xtask stack
 
-step "timing: response-time analysis from QEMU step costs; every measured reaction within its bound"
+step "timing: response-time analysis from QEMU step costs on both cores; every measured reaction within its bound"
 cargo xtask timing
 
 step "the analysis can fail: at 250 kHz the same jobs need more than the processor"

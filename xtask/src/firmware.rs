@@ -68,10 +68,19 @@ pub const AN505: Machine = Machine {
 /// Every machine `cargo xtask qemu` and `cargo xtask timing` run the firmware on.
 pub const MACHINES: [Machine; 2] = [AN386, AN505];
 
+/// QEMU's `-icount shift=5`: virtual time advances 32 ns per instruction.
+const NS_PER_INSTRUCTION: u64 = 32;
+
 impl Machine {
     /// Core cycles per 1 kHz tick.
     pub fn cycles_per_tick(self) -> u64 {
         self.clock_hz / 1_000
+    }
+
+    /// The instructions QEMU executed in `cycles` of this machine's timers (`-icount`: 32 ns
+    /// each), the one unit in which both machines' costs compare.
+    pub fn instructions(self, cycles: u64) -> u64 {
+        cycles.saturating_mul(1_000_000_000) / self.clock_hz / NS_PER_INSTRUCTION
     }
 }
 
@@ -610,7 +619,10 @@ mod tests {
     use super::{AN386, AN505, logged_clock_hz};
 
     #[test]
-    fn a_tick_is_a_millisecond_of_cycles() {
+    fn cycles_convert_to_instructions_at_32_ns_each() {
+        // A second of timer cycles is 31.25 million instructions on either machine.
+        assert_eq!(AN386.instructions(25_000_000), 31_250_000);
+        assert_eq!(AN505.instructions(20_000_000), 31_250_000);
         assert_eq!(AN386.cycles_per_tick(), 25_000);
         assert_eq!(AN505.cycles_per_tick(), 20_000);
     }
