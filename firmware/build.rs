@@ -1,5 +1,13 @@
-//! Links the firmware with the top-level `memory.x` and embeds its data:
+//! Links the firmware with the memory map of the machine its target runs on, tells the code
+//! which machine that is, and embeds its data:
 //!
+//! * `thumbv8m.main-none-eabihf` (Cortex-M33): QEMU's mps2-an505, `memory-an505.x` and the cfg
+//!   `board_an505`; any other target: mps2-an386 (Cortex-M4F) and `memory-an386.x`. The code
+//!   reads the board's addresses, interrupts and clock from `src/board.rs`, one set of
+//!   constants per machine. The chosen map is copied to `OUT_DIR` as the `memory.x` that
+//!   cortex-m-rt's `link.x` includes. No file named `memory.x` may sit in the workspace root:
+//!   the linker looks for an included script in its working directory (the root) before the
+//!   search path, so it would win over this one;
 //! * every `scenarios/*.json`, validated here by the host's parser and embedded in its
 //!   canonical form (integers only), which the firmware reads with serde-json-core at boot;
 //! * `missions/fetch-tea.json` without insignificant whitespace.
@@ -59,7 +67,18 @@ fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").unwrap_or_default());
     let root = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default()).join("..");
 
-    let memory = root.join("memory.x");
+    let target = env::var("TARGET").unwrap_or_default();
+    println!("cargo:rustc-check-cfg=cfg(board_an505)");
+    let an505 = target.starts_with("thumbv8m.main");
+    if an505 {
+        println!("cargo:rustc-cfg=board_an505");
+    }
+    // cortex-m-rt's link.x includes `memory.x`: the machine's map under that name.
+    let memory = root.join(if an505 {
+        "firmware/memory-an505.x"
+    } else {
+        "firmware/memory-an386.x"
+    });
     if let Err(e) = fs::copy(&memory, out.join("memory.x")) {
         panic!("cannot copy {}: {e}", memory.display());
     }
@@ -68,7 +87,7 @@ fn main() {
     write(&out.join("device.x"), b"");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed={}", memory.display());
-    if env::var("TARGET").is_ok_and(|t| t.starts_with("thumb")) {
+    if target.starts_with("thumb") {
         println!("cargo:rustc-link-arg-bins=--nmagic");
         println!("cargo:rustc-link-arg-bins=-Tlink.x");
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
@@ -112,11 +131,11 @@ fn main() {
             )
         });
         canonical.truncate(len);
-        let target = out.join(format!("canonical-{name}"));
-        write(&target, &canonical);
+        let file = out.join(format!("canonical-{name}"));
+        write(&file, &canonical);
         list.push_str(&format!(
             "    ({name:?}, include_bytes!({:?})),\n",
-            target.display().to_string()
+            file.display().to_string()
         ));
     }
     list.push_str("];\n");

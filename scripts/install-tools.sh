@@ -4,11 +4,11 @@
 #   bash scripts/install-tools.sh firmware   # build the firmware and run it in QEMU
 #   bash scripts/install-tools.sh            # everything scripts/test.sh (CI) runs
 #
-# firmware: the thumbv7em-none-eabihf target (rustup), qemu-system-arm (apt), defmt-print and
-# flip-link (cargo install, about 4 minutes on 2 cores).
-# all: also the thumbv6m-none-eabi, riscv32imac-unknown-none-elf and thumbv8m.main-none-eabihf
-# (RP2350, for psmpa-drivers) targets, clippy and rustfmt, binutils-arm-none-eabi (objdump for
-# `cargo xtask stack`) and valgrind (callgrind).
+# firmware: the thumbv7em-none-eabihf and thumbv8m.main-none-eabihf targets (rustup; QEMU's
+# mps2-an386 and mps2-an505; the Pico 2 board), qemu-system-arm (apt), defmt-print and flip-link (cargo install,
+# about 4 minutes on 2 cores).
+# all: also the thumbv6m-none-eabi and riscv32imac-unknown-none-elf targets, clippy and
+# rustfmt, binutils-arm-none-eabi (objdump for `cargo xtask stack`) and valgrind (callgrind).
 #
 # apt installs without recommended packages: qemu-system-arm then pulls 25 packages (80 MB
 # installed) instead of 165 (870 MB). On Debian 12 it comes with qemu-system-common 7.2,
@@ -25,11 +25,11 @@ case "$what" in
     ;;
 esac
 
-targets=(thumbv7em-none-eabihf)
+targets=(thumbv7em-none-eabihf thumbv8m.main-none-eabihf)
 components=()
 packages=(qemu-system-arm:qemu-system-arm)
 if [ "$what" = all ]; then
-  targets+=(thumbv6m-none-eabi riscv32imac-unknown-none-elf thumbv8m.main-none-eabihf)
+  targets+=(thumbv6m-none-eabi riscv32imac-unknown-none-elf)
   components+=(clippy rustfmt)
   packages+=(arm-none-eabi-objdump:binutils-arm-none-eabi valgrind:valgrind)
 fi

@@ -41,13 +41,15 @@ done
 step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
 cargo test --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 
-step "firmware: clippy for the target"
-cargo clippy -p psmpa-firmware --target thumbv7em-none-eabihf --profile firmware -- -D warnings
+step "firmware: clippy for both targets (mps2-an386's Cortex-M4F, mps2-an505's Cortex-M33)"
+for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
+  cargo clippy -p psmpa-firmware --target "$target" --profile firmware -- -D warnings
+done
 
-step "firmware in QEMU: every scenario, both architectures, equal to the host"
+step "firmware in QEMU on mps2-an386 and mps2-an505: every scenario, both architectures, equal to the host"
 cargo xtask qemu
 
-step "the check can fail: a deliberately broken scenario must be caught"
+step "the check can fail: a deliberately broken scenario must be caught (mps2-an386)"
 cargo xtask qemu --inject-fault --expect-failure
 
 step "firmware size: flash, static RAM, stack high-water against budget and snapshot"
@@ -56,7 +58,7 @@ cargo xtask size
 step "firmware stack: static worst case from the binary, at least the QEMU high-water mark"
 cargo xtask stack
 
-step "timing: response-time analysis from QEMU step costs; every measured reaction within its bound"
+step "timing: response-time analysis from QEMU step costs on both cores; every measured reaction within its bound"
 cargo xtask timing
 
 step "the analysis can fail: at 250 kHz the same jobs need more than the processor"

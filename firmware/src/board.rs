@@ -1,5 +1,19 @@
-//! The mps2-an386 board as both images use it: the interrupt vector, leaving QEMU, the stack's
-//! high-water mark, and what a fault or a panic does.
+//! The board as both images use it: what differs between the two QEMU machines (addresses,
+//! interrupts, clock), the interrupt vector, leaving QEMU, the stack's high-water mark, and what
+//! a fault or a panic does.
+//!
+//! The firmware runs on two machines, one code path: `firmware/build.rs` sets the cfg
+//! `board_an505` for a `thumbv8m.main` target, and the constants below are the one place the
+//! machines differ.
+//!
+//! * mps2-an386: a Cortex-M4F (`thumbv7em-none-eabihf`), CMSDK timers at 0x4000_0000, 25 MHz.
+//! * mps2-an505: a Cortex-M33 (`thumbv8m.main-none-eabihf`, the RP2350's core family) in Arm's
+//!   IoT Kit. The core starts in Secure state (vector table at 0x1000_0000, `memory-an505.x`);
+//!   the IoT Kit's own CMSDK timers sit behind its peripheral protection controller, which
+//!   leaves them Secure at reset, so the firmware uses their Secure aliases at 0x5000_0000
+//!   (QEMU's `hw/arm/armsse.c`: TIMER0 interrupt 3, TIMER1 4, the dual timer 5). QEMU clocks
+//!   them at the board's 20 MHz (`hw/arm/mps2-tz.c`). Interrupts 14 and 15 are wired to
+//!   nothing on either machine: the executors use them.
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -10,6 +24,41 @@ use defmt_semihosting as _;
 
 use crate::executor::{self, Irq};
 use crate::time_driver;
+
+#[cfg(not(board_an505))]
+mod machine {
+    /// QEMU's `-machine`.
+    pub const NAME: &str = "mps2-an386";
+    /// The system clock, which the core and the timers count.
+    pub const CORE_HZ: u32 = 25_000_000;
+    /// CMSDK APB TIMER0 (the clock), TIMER1 (the alarm), the dual timer (the reference).
+    pub const TIMER0: usize = 0x4000_0000;
+    /// See [`TIMER0`].
+    pub const TIMER1: usize = 0x4000_1000;
+    /// See [`TIMER0`].
+    pub const DUALTIMER: usize = 0x4000_2000;
+    /// TIMER1's interrupt.
+    pub const TIMER1_IRQ: u16 = 9;
+}
+
+#[cfg(board_an505)]
+mod machine {
+    /// QEMU's `-machine`.
+    pub const NAME: &str = "mps2-an505";
+    /// The system clock (MAINCLK), which the IoT Kit's timers count.
+    pub const CORE_HZ: u32 = 20_000_000;
+    /// CMSDK APB TIMER0 (the clock), TIMER1 (the alarm), the dual timer (the reference): the
+    /// Secure aliases.
+    pub const TIMER0: usize = 0x5000_0000;
+    /// See [`TIMER0`].
+    pub const TIMER1: usize = 0x5000_1000;
+    /// See [`TIMER0`].
+    pub const DUALTIMER: usize = 0x5000_2000;
+    /// TIMER1's interrupt.
+    pub const TIMER1_IRQ: u16 = 4;
+}
+
+pub use machine::*;
 
 defmt::timestamp!("{=u64:ms}", embassy_time::Instant::now().as_millis());
 

@@ -1,8 +1,9 @@
 //! Two priorities: the runtime's sensing side on an embassy `InterruptExecutor`, the deciding
 //! side on a raw executor polled in thread mode.
 //!
-//! * Sensing: interrupt 14 (spare on mps2-an386) at priority [`SENSING_PRIORITY`], below
-//!   the clock's alarm only. A sample preempts whatever the deciding side is computing.
+//! * Sensing: interrupt 14 (wired to nothing on either board) at priority
+//!   [`SENSING_PRIORITY`], below the clock's alarm only. A sample preempts whatever the
+//!   deciding side is computing.
 //! * Deciding: the executor's pender pends interrupt 15 (lowest priority), whose handler only
 //!   sets a flag; thread mode polls when the flag is set and sleeps with WFI otherwise (QEMU
 //!   treats WFE as a no-op, so embassy's thread executor would spin). embassy's
@@ -29,16 +30,16 @@ use crate::time_driver::counter;
 #[derive(Clone, Copy)]
 #[repr(u16)]
 pub enum Irq {
-    /// The clock's alarm: TIMER1 reaching 0.
-    Alarm = 9,
+    /// The clock's alarm: TIMER1 reaching 0 (9 on mps2-an386, 4 on mps2-an505).
+    Alarm = crate::board::TIMER1_IRQ,
     /// Runs the sensing executor.
     Sensing = 14,
     /// Wakes thread mode for the deciding executor.
     Deciding = 15,
 }
 
-// SAFETY: 9 is TIMER1's interrupt on mps2-an386; 14 and 15 are interrupts that nothing else
-// raises.
+// SAFETY: `Alarm` is TIMER1's interrupt on the board; 14 and 15 are interrupts that nothing
+// else raises on either board (`crate::board`).
 unsafe impl InterruptNumber for Irq {
     fn number(self) -> u16 {
         self as u16

@@ -1,5 +1,6 @@
-//! What both firmware images share on QEMU's mps2-an386 (Cortex-M4F): the two executors, the
-//! clock, and the board's vector table, fault and panic handling.
+//! What both firmware images share on QEMU's mps2-an386 (Cortex-M4F, `thumbv7em-none-eabihf`)
+//! and mps2-an505 (Cortex-M33, `thumbv8m.main-none-eabihf`): the two executors, the clock, and
+//! the board's constants, vector table, fault and panic handling.
 //!
 //! * `psmpa-firmware` (`src/main.rs`): the simulated NAO world and every embedded scenario,
 //!   checked against the host by `cargo xtask qemu`.

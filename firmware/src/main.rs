@@ -1,5 +1,5 @@
-//! psmpa on a Cortex-M4F (QEMU mps2-an386): the same core, the same Fetch Tea mission and the
-//! same simulated world as the host simulator. Every embedded scenario runs under both
+//! psmpa on a Cortex-M4F (QEMU mps2-an386) or a Cortex-M33 (QEMU mps2-an505): the same core,
+//! the same Fetch Tea mission and the same simulated world as the host simulator. Every embedded scenario runs under both
 //! architectures, one run per boot, from tick 0 of a fresh clock; each run logs the summary
 //! fields of `psmpa-sim run --json`, which `cargo xtask qemu` compares with the host, and what
 //! it measured in cycles. The runtime's sensing side runs on an interrupt executor that
@@ -10,7 +10,7 @@
 #[cfg(not(target_os = "none"))]
 fn main() {
     eprintln!(
-        "psmpa-firmware runs on the target: cargo run -p psmpa-firmware --target thumbv7em-none-eabihf --profile firmware"
+        "psmpa-firmware runs on the target: cargo run -p psmpa-firmware --target thumbv7em-none-eabihf --profile firmware (mps2-an386), or --target thumbv8m.main-none-eabihf (mps2-an505)"
     );
 }
 

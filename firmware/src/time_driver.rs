@@ -1,13 +1,15 @@
 //! The embassy-time driver: a free-running timer is the clock, a second one the alarm.
 //!
-//! * Clock: the CMSDK APB TIMER0 of mps2-an386 counts down at the core clock, reloading
-//!   2³² − 1 when it reaches 0, and nothing writes it after [`start`]: no cycle is ever lost.
-//!   [`cycles`] extends it to 64 bits from the value read last (under a critical section); the
-//!   alarm fires at least every 0.67 s and reads it, far more often than it wraps (171.8 s).
-//!   `now() = cycles / 25,000`: 1 kHz ticks, the host's rate, so `Duration` rounding agrees.
+//! * Clock: the CMSDK APB TIMER0 of the board ([`crate::board`]) counts down at the core clock,
+//!   reloading 2³² − 1 when it reaches 0, and nothing writes it after [`start`]: no cycle is
+//!   ever lost. [`cycles`] extends it to 64 bits from the value read last (under a critical
+//!   section); the alarm fires at least every 0.84 s and reads it, far more often than it wraps
+//!   (171.8 s at 25 MHz, 214.7 s at 20 MHz). `now() = cycles / CYCLES_PER_TICK` (25,000 on
+//!   mps2-an386, 20,000 on mps2-an505): 1 kHz ticks, the host's rate, so `Duration` rounding
+//!   agrees.
 //!   Monotonic by construction.
 //! * Alarm: TIMER1 is loaded with the exact number of cycles left to the earliest deadline
-//!   (at most 2²⁴, 0.67 s) and interrupts when it reaches 0; the handler wakes what is due and
+//!   (at most 2²⁴: 0.67 s at 25 MHz, 0.84 s at 20 MHz) and interrupts when it reaches 0; the handler wakes what is due and
 //!   loads the next. An alarm that comes before a far deadline only loads the next one.
 //!   (SysTick would do on silicon, but QEMU 7.2 restarts it a whole period late after a write
 //!   of its current value, so its alarms came twice as late as asked.)
@@ -15,13 +17,14 @@
 //!   read by the driver: [`reference_cycles`] lets `cargo xtask qemu` check every run's ticks
 //!   against a count the driver's arithmetic does not touch.
 //!
-//! TIMER0 starts 2²⁴ cycles before a wrap, so every run longer than 0.67 s crosses one and the
+//! TIMER0 starts 2²⁴ cycles before a wrap, so every run longer than 0.84 s crosses one and the
 //! check covers the extension.
 
 use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Waker;
 
+use crate::board;
 use crate::executor::Irq;
 
 use cortex_m::peripheral::NVIC;
@@ -29,8 +32,8 @@ use critical_section::{CriticalSection, Mutex};
 use embassy_time_driver::Driver;
 use embassy_time_queue_utils::Queue;
 
-/// Core clock of mps2-an386 in QEMU; the timers count it.
-pub const CORE_HZ: u32 = 25_000_000;
+/// The board's core clock in QEMU; the timers count it.
+pub const CORE_HZ: u32 = board::CORE_HZ;
 /// Core cycles per tick.
 pub const CYCLES_PER_TICK: u64 = CORE_HZ as u64 / embassy_time_driver::TICK_HZ;
 /// The longest alarm, cycles.
@@ -42,13 +45,14 @@ pub const REFERENCE_PRESCALE: u64 = 256;
 
 /// CMSDK APB timers: CTRL, VALUE, RELOAD, INTSTATUS/INTCLEAR. TIMER0 is the clock, TIMER1
 /// the alarm.
-const TIMER0: usize = 0x4000_0000;
-const TIMER1: usize = 0x4000_1000;
+const TIMER0: usize = board::TIMER0;
+const TIMER1: usize = board::TIMER1;
 /// CMSDK dual timer, timer 1: LOAD, VALUE, CONTROL.
-const DUALTIMER: usize = 0x4000_2000;
+const DUALTIMER: usize = board::DUALTIMER;
 
 fn write(address: usize, value: u32) {
-    // SAFETY: a register of a timer only this module touches, always mapped on mps2-an386.
+    // SAFETY: a register of a timer only this module touches, always mapped on the board (on
+    // mps2-an505 at its Secure alias, which the core, running Secure, may use).
     unsafe { (address as *mut u32).write_volatile(value) }
 }
 
@@ -130,7 +134,7 @@ embassy_time_driver::time_driver_impl!(static DRIVER: TimerDriver = TimerDriver 
 ///
 /// # Safety
 ///
-/// Only the vector table calls it, as interrupt 9's handler.
+/// Only the vector table calls it, as TIMER1's interrupt handler ([`Irq::Alarm`]).
 pub unsafe extern "C" fn alarm_interrupt() {
     let begin = counter();
     write(TIMER1 + 0xC, 1);
@@ -147,7 +151,7 @@ pub unsafe extern "C" fn alarm_interrupt() {
 }
 
 /// The longest alarm handler so far, in cycles from its first statement to its last
-/// (exception entry and exit, 12 cycles each on a Cortex-M4, come on top).
+/// (exception entry and exit, 12 cycles each on a Cortex-M4 or a Cortex-M33, come on top).
 static ISR_MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
 
 /// The longest alarm handler since the last call, which starts again.

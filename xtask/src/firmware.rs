@@ -1,6 +1,7 @@
 //! Building and running the firmware, and comparing it with the host.
 
 use std::collections::BTreeMap;
+use std::hash::{DefaultHasher, Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
@@ -33,8 +34,58 @@ pub fn build_host_sim() -> Result<PathBuf, String> {
     Ok(root().join("target/release/psmpa-sim"))
 }
 
-/// The firmware's target.
-pub const TARGET: &str = "thumbv7em-none-eabihf";
+/// A QEMU machine the firmware runs on, and the target it is built for to run there
+/// (`firmware/build.rs` picks the board's constants and memory map from the target).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Machine {
+    /// QEMU's `-machine`.
+    pub name: &'static str,
+    /// Its core.
+    pub core: &'static str,
+    /// The Rust target of its images.
+    pub target: &'static str,
+    /// The clock its timers count, Hz: the unit of every cycle the firmware logs
+    /// (`firmware/src/board.rs`, `CORE_HZ`).
+    pub clock_hz: u64,
+}
+
+/// QEMU's Cortex-M4F board.
+pub const AN386: Machine = Machine {
+    name: "mps2-an386",
+    core: "Cortex-M4F",
+    target: "thumbv7em-none-eabihf",
+    clock_hz: 25_000_000,
+};
+
+/// QEMU's Cortex-M33 board (the RP2350's core family, not its peripherals).
+pub const AN505: Machine = Machine {
+    name: "mps2-an505",
+    core: "Cortex-M33",
+    target: "thumbv8m.main-none-eabihf",
+    clock_hz: 20_000_000,
+};
+
+/// Every machine `cargo xtask qemu` and `cargo xtask timing` run the firmware on.
+pub const MACHINES: [Machine; 2] = [AN386, AN505];
+
+/// QEMU's `-icount shift=5`: virtual time advances 32 ns per instruction.
+const NS_PER_INSTRUCTION: u64 = 32;
+
+impl Machine {
+    /// Core cycles per 1 kHz tick.
+    pub fn cycles_per_tick(self) -> u64 {
+        self.clock_hz / 1_000
+    }
+
+    /// The instructions QEMU executed in `cycles` of this machine's timers (`-icount`: 32 ns
+    /// each), the one unit in which both machines' costs compare.
+    pub fn instructions(self, cycles: u64) -> u64 {
+        cycles.saturating_mul(1_000_000_000) / self.clock_hz / NS_PER_INSTRUCTION
+    }
+}
+
+/// The target `cargo xtask size` and `cargo xtask stack` measure: mps2-an386's.
+pub const TARGET: &str = AN386.target;
 /// The firmware's cargo profile.
 pub const PROFILE: &str = "firmware";
 
@@ -72,8 +123,8 @@ pub fn rustflags() -> String {
 
 /// Runs the `inject-fault` product image, which overflows its stack at boot: `true` when it
 /// faulted (flip-link: the stack runs off the start of RAM; QEMU stops on the lockup).
-fn stack_overflow_faults(elf: &Path) -> Result<bool, String> {
-    match run(elf) {
+fn stack_overflow_faults(machine: Machine, elf: &Path) -> Result<bool, String> {
+    match run_on(machine, elf) {
         Ok(log) => {
             println!("psmpa-product ran to its end with its stack overflowed:\n{log}");
             Ok(false)
@@ -100,20 +151,24 @@ pub fn product(elf: &Path) -> PathBuf {
     elf.with_file_name("psmpa-product")
 }
 
-/// Builds the firmware and the product-shaped image and returns the firmware's ELF.
+/// Builds the firmware and the product-shaped image for mps2-an386 and returns the firmware's
+/// ELF.
 pub fn build(features: &[&str]) -> Result<PathBuf, String> {
+    build_for(&[AN386], features)?
+        .pop()
+        .ok_or_else(|| "no firmware built".to_owned())
+}
+
+/// Builds the firmware and the product-shaped image for every machine of `machines`, in one
+/// cargo command, and returns the firmware's ELFs in their order.
+pub fn build_for(machines: &[Machine], features: &[&str]) -> Result<Vec<PathBuf>, String> {
     let mut cmd = cargo();
-    cmd.args([
-        "build",
-        "--quiet",
-        "-p",
-        "psmpa-firmware",
-        "--target",
-        TARGET,
-        "--profile",
-        PROFILE,
-    ])
-    .env("CARGO_ENCODED_RUSTFLAGS", rustflags());
+    cmd.args(["build", "--quiet", "-p", "psmpa-firmware"]);
+    for m in machines {
+        cmd.args(["--target", m.target]);
+    }
+    cmd.args(["--profile", PROFILE])
+        .env("CARGO_ENCODED_RUSTFLAGS", rustflags());
     // The injected fault builds elsewhere, so the good firmware is not rebuilt afterwards.
     let target_dir = if features.is_empty() {
         root().join("target")
@@ -126,14 +181,79 @@ pub fn build(features: &[&str]) -> Result<PathBuf, String> {
     if !status.success() {
         return Err("the firmware does not build".to_owned());
     }
-    Ok(target_dir.join(TARGET).join(PROFILE).join("psmpa-firmware"))
+    Ok(machines
+        .iter()
+        .map(|m| {
+            target_dir
+                .join(m.target)
+                .join(PROFILE)
+                .join("psmpa-firmware")
+        })
+        .collect())
 }
 
-/// Runs the ELF in QEMU through `scripts/qemu-run.sh` and returns the decoded log.
+/// Runs an mps2-an386 ELF in QEMU (see [`run_on`]).
 pub fn run(elf: &Path) -> Result<String, String> {
+    run_on(AN386, elf)
+}
+
+/// What decides a run's log: the ELF, the runner script, QEMU's version and the machine.
+/// `None` when one of them cannot be read.
+fn run_key(machine: Machine, elf: &Path) -> Option<u64> {
+    let mut h = DefaultHasher::new();
+    machine.name.hash(&mut h);
+    std::fs::read(elf).ok()?.hash(&mut h);
+    std::fs::read(root().join("scripts/qemu-run.sh"))
+        .ok()?
+        .hash(&mut h);
+    let qemu = Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .ok()?;
+    qemu.stdout.hash(&mut h);
+    Some(h.finish())
+}
+
+/// Where the log of the last successful run of `elf` on `machine` is kept.
+fn log_path(machine: Machine, elf: &Path) -> PathBuf {
+    let mut h = DefaultHasher::new();
+    elf.hash(&mut h);
+    root().join(format!(
+        "target/qemu-logs/{}-{:016x}.log",
+        machine.name,
+        h.finish()
+    ))
+}
+
+/// Runs the ELF in QEMU on `machine` through `scripts/qemu-run.sh` and returns the decoded
+/// log.
+///
+/// Under `-icount` a run is a function of the ELF, the runner and QEMU: a successful run's log
+/// is kept in `target/qemu-logs/` with a hash of the three, and the same ELF on the same
+/// machine is not run again while none of them changed (the tasks that follow `cargo xtask
+/// qemu` in CI read its logs). `PSMPA_QEMU_RERUN=1` runs it anyway.
+pub fn run_on(machine: Machine, elf: &Path) -> Result<String, String> {
+    let key = run_key(machine, elf).map(|k| format!("key {k:016x}\n"));
+    let kept = log_path(machine, elf);
+    let last = key
+        .as_ref()
+        .filter(|_| std::env::var_os("PSMPA_QEMU_RERUN").is_none())
+        .and_then(|key| {
+            let text = std::fs::read_to_string(&kept).ok()?;
+            text.strip_prefix(key.as_str()).map(str::to_owned)
+        });
+    if let Some(log) = last {
+        eprintln!(
+            "{}: the log of this ELF, runner and QEMU from its last run ({}; runs are deterministic)",
+            machine.name,
+            kept.display()
+        );
+        return Ok(log);
+    }
     let started = Instant::now();
     let out = Command::new("bash")
         .arg(root().join("scripts/qemu-run.sh"))
+        .args(["--machine", machine.name])
         .arg(elf)
         .stdin(Stdio::null())
         .stderr(Stdio::inherit())
@@ -141,14 +261,56 @@ pub fn run(elf: &Path) -> Result<String, String> {
         .map_err(|e| format!("cannot run QEMU: {e}"))?;
     let log = String::from_utf8_lossy(&out.stdout).into_owned();
     eprintln!(
-        "QEMU ran for {:.1} s of wall time",
+        "{}: QEMU ran for {:.1} s of wall time",
+        machine.name,
         started.elapsed().as_secs_f64()
     );
     match out.status.code() {
-        Some(0) => Ok(log),
-        Some(124) => Err(format!("the firmware hung (QEMU timed out); log:\n{log}")),
-        code => Err(format!("the firmware failed (exit {code:?}); log:\n{log}")),
+        Some(0) => {
+            if let Some(key) = key {
+                // A cache: not keeping it only costs a run next time.
+                let _ = std::fs::create_dir_all(root().join("target/qemu-logs"))
+                    .and_then(|()| std::fs::write(&kept, key + &log));
+            }
+            Ok(log)
+        }
+        Some(124) => Err(format!(
+            "{}: the firmware hung (QEMU timed out); log:\n{log}",
+            machine.name
+        )),
+        code => Err(format!(
+            "{}: the firmware failed (exit {code:?}); log:\n{log}",
+            machine.name
+        )),
     }
+}
+
+/// Runs each `(machine, ELF)` in QEMU, all at once (one QEMU per machine), and returns their
+/// logs in the same order.
+pub fn run_all(runs: &[(Machine, PathBuf)]) -> Vec<Result<String, String>> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = runs
+            .iter()
+            .map(|(m, elf)| scope.spawn(move || run_on(*m, elf)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err("a QEMU run panicked".to_owned()))
+            })
+            .collect()
+    })
+}
+
+/// The core clock the firmware's log says it counts, Hz.
+pub fn logged_clock_hz(log: &str) -> Option<u64> {
+    log.split_once("core clock ")?
+        .1
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
 }
 
 /// What must be equal on both sides for one run: what the robot met and how, and how
@@ -279,7 +441,7 @@ fn host_results() -> Result<Runs, String> {
 
 /// Ticks the firmware counted and core cycles by the reference timer, per run: they must
 /// agree within a tick.
-fn clock_errors(log: &str) -> Vec<String> {
+fn clock_errors(machine: Machine, log: &str) -> Vec<String> {
     let mut errors = Vec::new();
     for f in tagged(log, "clock") {
         let number = |k: &str| f.get(k).and_then(|v| v.parse::<u64>().ok());
@@ -290,7 +452,7 @@ fn clock_errors(log: &str) -> Vec<String> {
         );
         match (number("ticks"), number("reference_cycles")) {
             (Some(ticks), Some(reference)) => {
-                let by_reference = reference / CYCLES_PER_TICK;
+                let by_reference = reference / machine.cycles_per_tick();
                 if ticks.abs_diff(by_reference) > 1 {
                     errors.push(format!(
                         "{name}: the clock counted {ticks} ticks, the reference {reference} cycles ({by_reference} ticks)"
@@ -303,19 +465,20 @@ fn clock_errors(log: &str) -> Vec<String> {
     errors
 }
 
-/// Core cycles per tick of the QEMU firmware (`firmware/src/time_driver.rs`): 25 MHz, 1 kHz.
-pub const CYCLES_PER_TICK: u64 = 25_000;
-
-/// Builds and runs the firmware and compares it with the host. `Ok` only if every run of the
-/// host has a run on the firmware with the same outcome, and nothing else, and every run's
-/// clock kept time.
-pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
-    let features: &[&str] = if inject_fault { &["inject-fault"] } else { &[] };
-    let elf = build(features)?;
-    let log = run(&elf)?;
-    let target = parse_results(&log);
-    let host = host_results()?;
+/// Compares one machine's log with the host's runs and prints the table; returns the
+/// differences.
+fn compare(machine: Machine, log: &str, host: &Runs) -> Vec<String> {
+    let target = parse_results(log);
     let mut failures = Vec::new();
+    println!("\n{} ({}, {}):", machine.name, machine.core, machine.target);
+    // The image must be the one built for this machine: its clock says so.
+    match logged_clock_hz(log) {
+        Some(hz) if hz == machine.clock_hz => {}
+        logged => failures.push(format!(
+            "the firmware logged a core clock of {logged:?} Hz, not this machine's {} Hz",
+            machine.clock_hz
+        )),
+    }
     println!(
         "{:<12} {:<6} {:>8} {:>10} {:<8} {:>10} {:>9}  {:<5} {:<14}",
         "scenario",
@@ -329,7 +492,7 @@ pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
         "outcome equal"
     );
     let mut same_traces = 0;
-    for (key, (expected, host_timing)) in &host {
+    for (key, (expected, host_timing)) in host {
         let got = target.get(key);
         let same = got.is_some_and(|(o, _)| o == expected);
         let (shift, trace) = match got {
@@ -370,27 +533,62 @@ pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
             key.0, key.1
         ));
     }
-    let clock = clock_errors(&log);
-    if tagged(&log, "clock").len() != host.len() {
-        failures.push(format!(
-            "{} clock lines for {} runs",
-            tagged(&log, "clock").len(),
-            host.len()
-        ));
+    let clock_lines = tagged(log, "clock").len();
+    if clock_lines != host.len() {
+        failures.push(format!("{clock_lines} clock lines for {} runs", host.len()));
     }
-    failures.extend(clock);
-    if inject_fault && !stack_overflow_faults(&product(&elf))? {
-        // The second half of the failure the check must show is missing: it passes.
-        return Ok(());
-    }
+    failures.extend(clock_errors(machine, log));
     println!(
-        "traces equal to the host's: {same_traces} of {} (the others start or go on a few ms later: computing takes real time on the target, none in virtual time)",
+        "{}: traces equal to the host's: {same_traces} of {} (the others start or go on a few ms later: computing takes real time on the target, none in virtual time)",
+        machine.name,
         host.len()
     );
     if failures.is_empty() {
         println!(
-            "all {} runs: the same outcome and sampling on the host and the firmware; every clock within a tick of the reference",
+            "{}: all {} runs: the same outcome and sampling on the host and the firmware; every clock within a tick of the reference",
+            machine.name,
             host.len()
+        );
+    }
+    failures
+        .into_iter()
+        .map(|f| format!("{}: {f}", machine.name))
+        .collect()
+}
+
+/// Builds and runs the firmware on every machine and compares it with the host. `Ok` only if,
+/// on each machine, every run of the host has a run on the firmware with the same outcome, and
+/// nothing else, and every run's clock kept time. With `inject_fault`, mps2-an386 only.
+pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
+    let features: &[&str] = if inject_fault { &["inject-fault"] } else { &[] };
+    let machines: &[Machine] = if inject_fault { &[AN386] } else { &MACHINES };
+    let elfs = build_for(machines, features)?;
+    let runs: Vec<(Machine, PathBuf)> = machines.iter().copied().zip(elfs).collect();
+    let logs = run_all(&runs);
+    let host = host_results()?;
+    let mut failures = Vec::new();
+    for ((machine, _), log) in runs.iter().zip(logs) {
+        match log {
+            Ok(log) => failures.extend(compare(*machine, &log, &host)),
+            Err(e) => failures.push(e),
+        }
+    }
+    if inject_fault {
+        let elf = runs.first().map(|(_, elf)| product(elf));
+        if !elf.map_or(Ok(false), |e| stack_overflow_faults(AN386, &e))? {
+            // The second half of the failure the check must show is missing: it passes.
+            return Ok(());
+        }
+    }
+    if failures.is_empty() {
+        println!(
+            "\nall {} runs on each of {}: the same as the host",
+            host.len(),
+            machines
+                .iter()
+                .map(|m| format!("{} ({})", m.name, m.core))
+                .collect::<Vec<_>>()
+                .join(" and ")
         );
         Ok(())
     } else {
@@ -414,4 +612,25 @@ pub fn stack_high_water(log: &str) -> Option<u64> {
                 .ok()
         })
         .max()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{AN386, AN505, logged_clock_hz};
+
+    #[test]
+    fn cycles_convert_to_instructions_at_32_ns_each() {
+        // A second of timer cycles is 31.25 million instructions on either machine.
+        assert_eq!(AN386.instructions(25_000_000), 31_250_000);
+        assert_eq!(AN505.instructions(20_000_000), 31_250_000);
+        assert_eq!(AN386.cycles_per_tick(), 25_000);
+        assert_eq!(AN505.cycles_per_tick(), 20_000);
+    }
+
+    #[test]
+    fn the_logged_clock_is_read_from_the_first_line() {
+        let log = "0.000 INFO  psmpa firmware: 15 scenarios, core clock 20000000 Hz, tick 1000 Hz; one run per boot\n";
+        assert_eq!(logged_clock_hz(log), Some(20_000_000));
+        assert_eq!(logged_clock_hz("no clock here"), None);
+    }
 }

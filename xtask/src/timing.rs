@@ -1,5 +1,7 @@
 //! `cargo xtask timing`: the response-time analysis of the firmware, from step costs measured
-//! in QEMU, and its check against every reaction the runs measure, in cycles.
+//! in QEMU, and its check against every reaction the runs measure, in cycles; on both cores,
+//! mps2-an386's Cortex-M4F and mps2-an505's Cortex-M33, each analysed and checked on its own,
+//! then their step costs side by side.
 //!
 //! * Costs: the firmware tells its two executors' polls apart: a sensing poll (interrupt
 //!   priority) counts for the sensors whose events it emitted (sample, switch, fault); a
@@ -7,8 +9,9 @@
 //!   step. It logs, per run and in cycles, the longest of each kind, the longest deciding poll,
 //!   the longest critical section the deciding side held, and the alarm handler's longest run.
 //!   A poll's cost leaves out the time a preempting handler took. Under `-icount shift=5`
-//!   QEMU advances virtual time 32 ns per instruction, deterministically: a cycle of the 25 MHz
-//!   timers (40 ns) is 1.25 instructions.
+//!   QEMU advances virtual time 32 ns per instruction, deterministically, on both machines: a
+//!   cycle of mps2-an386's 25 MHz timers (40 ns) is 1.25 instructions, one of mps2-an505's
+//!   20 MHz timers (50 ns) 1.5625. Instructions are the unit in which the two cores compare.
 //! * Model ([`psmpa_core::timing`]): each cyclic sensor is a periodic job on the sensing side
 //!   whose processor time is its sample step and whose read waits the scenario's latency; the
 //!   alarm interrupt is a job of period one tick that interferes with everything; the reaction
@@ -25,7 +28,8 @@
 //!   cycles (from the release of the sample that registered an obstacle to the stop being
 //!   commanded) is within its `R`, and the world's measured reactions (obstacle to stop, ms)
 //!   are within the latency bound; otherwise the task fails, naming why. The measurements are
-//!   taken at the firmware's 25 MHz, so they are checked only there (not under `--clock-hz`).
+//!   taken at each machine's own clock, so they are checked only there (not under
+//!   `--clock-hz`).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -35,17 +39,18 @@ use psmpa_core::timing::{Blocking, Job, utilisation_ppm};
 use psmpa_sim::robot::{fetch_tea, latency_bounds};
 use serde::Serialize;
 
+use crate::firmware::{MACHINES, Machine};
 use crate::{callgrind, firmware};
 
-/// Exception entry and exit on a Cortex-M4, cycles: outside what the handler measures.
+/// Exception entry and exit on a Cortex-M4 or a Cortex-M33 (12 cycles each without a
+/// security state change), cycles: outside what the handler measures.
 const EXCEPTION_CYCLES: u64 = 24;
 
-/// The firmware's core clock, Hz: what its cycle counts are counted at.
-const FIRMWARE_HZ: u64 = 25_000_000;
-
-/// Cycles of the firmware's clock in ns, rounded up.
-fn firmware_ns(cycles: u64) -> u64 {
-    cycles.saturating_mul(1_000_000_000).div_ceil(FIRMWARE_HZ)
+/// Cycles of `machine`'s clock in ns, rounded up.
+fn firmware_ns(machine: Machine, cycles: u64) -> u64 {
+    cycles
+        .saturating_mul(1_000_000_000)
+        .div_ceil(machine.clock_hz)
 }
 
 /// Instructions per call of one core function on the host, from callgrind.
@@ -269,13 +274,24 @@ struct ScenarioTiming {
     measured_max_reaction_ms: Option<u64>,
 }
 
+/// One machine's analysis.
 #[derive(Debug, Serialize)]
-struct Report {
+struct MachineReport {
+    machine: &'static str,
+    core: &'static str,
+    /// The clock its timers count: the unit of its cycles.
+    firmware_clock_hz: u64,
+    /// The clock the cycles are converted to time at (`--clock-hz`, or the firmware's own).
     clock_hz: u64,
     /// The worst costs of all runs, cycles.
     costs_cycles: Costs,
     runs: usize,
     scenarios: Vec<ScenarioTiming>,
+}
+
+#[derive(Debug, Serialize)]
+struct Report {
+    machines: Vec<MachineReport>,
     host_instructions: Vec<HostCost>,
 }
 
@@ -286,20 +302,25 @@ fn show_ms(ns: u64) -> String {
 /// The sensors whose reactions the firmware measures, as `clock` names them.
 const MEASURED: [&str; 2] = ["sonar", "bumper"];
 
-/// Runs the firmware, analyses, checks, prints; writes the JSON report to `json`.
-pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
-    if clock_hz == 0 {
-        return Err("the clock must be at least 1 Hz".to_owned());
-    }
+/// What one machine's analysis found: its report, the step costs' rows (name, cycles) and
+/// what failed.
+struct Analysis {
+    report: MachineReport,
+    rows: Vec<(String, u64)>,
+    failures: Vec<String>,
+}
+
+/// Analyses one machine's log with its cycles converted at `clock_hz`, checks and prints.
+fn analyse(
+    machine: Machine,
+    clock_hz: u64,
+    log: &str,
+    scenarios_loaded: &[psmpa_sim::scenario::Scenario],
+) -> Result<Analysis, String> {
     let ns = |cycles: u64| (cycles.saturating_mul(1_000_000_000)).div_ceil(clock_hz);
-    let elf = firmware::build(&[])?;
-    let log = firmware::run(&elf)?;
-    let runs = runs(&log)?;
-    let files = firmware::scenario_files()?;
-    let scenarios_loaded = files
-        .iter()
-        .map(|f| psmpa_sim::load::load(f).map_err(|e| e.to_string()))
-        .collect::<Result<Vec<_>, _>>()?;
+    // The measurements are taken at the machine's own clock: checked only there.
+    let own_clock = clock_hz == machine.clock_hz;
+    let runs = runs(log)?;
     let plans = |name: &str| {
         scenarios_loaded
             .iter()
@@ -315,7 +336,11 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
         .fold(Costs::default(), |acc, (_, r)| acc.max(&r.costs));
 
     println!(
-        "step costs in QEMU (-icount: 1.25 instructions a 25 MHz cycle), worst of {} runs, at {} MHz:",
+        "\n{} ({}): step costs in QEMU (-icount: {} instructions a {} MHz cycle), worst of {} runs, at {} MHz:",
+        machine.name,
+        machine.core,
+        machine.instructions(1_000_000) as f64 / 1e6,
+        machine.clock_hz as f64 / 1e6,
         runs.len(),
         clock_hz as f64 / 1e6
     );
@@ -374,7 +399,7 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
         "bound",
         "measured"
     );
-    for sc in &scenarios_loaded {
+    for sc in scenarios_loaded {
         let robot = fetch_tea(sc).map_err(|e| format!("{}: {e:?}", sc.name))?;
         let domain = &robot.mission.domain;
         let own = runs
@@ -423,14 +448,14 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
                 .and_then(|i| psmpa.reaction_cycles.get(i).copied())
                 .filter(|c| *c > 0);
             // Measured at the firmware's clock; under another `--clock-hz` the reads and the
-            // tick grid would not scale with it, so the comparison is made at 25 MHz only.
-            if let Some(c) = measured
-                .filter(|c| clock_hz == FIRMWARE_HZ && firmware_ns(*c) > b.response.response_ns)
+            // tick grid would not scale with it, so the comparison is made at its own only.
+            if let Some(c) =
+                measured.filter(|c| own_clock && firmware_ns(machine, *c) > b.response.response_ns)
             {
                 failures.push(format!(
                     "{}: a {name} reaction of {c} cycles ({}) exceeds its response time of {}",
                     sc.name,
-                    show_ms(firmware_ns(c)),
+                    show_ms(firmware_ns(machine, c)),
                     show_ms(b.response.response_ns)
                 ));
             }
@@ -468,7 +493,7 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
         }
         // A box is perceived by the sonar and the bumper: the larger bound holds for either.
         let bound = tasks.iter().map(|t| t.latency_bound_ns).max().unwrap_or(0);
-        if let Some(m) = measured_ms.filter(|m| clock_hz == FIRMWARE_HZ && m * 1_000_000 > bound) {
+        if let Some(m) = measured_ms.filter(|m| own_clock && m * 1_000_000 > bound) {
             failures.push(format!(
                 "{}: a reaction of {m} ms exceeds the bound of {}",
                 sc.name,
@@ -483,6 +508,94 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
             measured_max_reaction_ms: measured_ms,
         });
     }
+    if !own_clock {
+        println!(
+            "(the measured reactions were taken at the firmware's {} MHz: they are shown, not checked, against bounds at another clock)",
+            machine.clock_hz as f64 / 1e6
+        );
+    }
+    if failures.is_empty() {
+        let worst = scenarios
+            .iter()
+            .map(|s| s.utilisation_ppm)
+            .max()
+            .unwrap_or(0);
+        println!(
+            "{}: schedulable in every scenario (utilisation at most {:.2} %); every measured reaction is within its bound",
+            machine.name,
+            worst as f64 / 1e4
+        );
+    }
+    Ok(Analysis {
+        report: MachineReport {
+            machine: machine.name,
+            core: machine.core,
+            firmware_clock_hz: machine.clock_hz,
+            clock_hz,
+            costs_cycles: all,
+            runs: runs.len(),
+            scenarios,
+        },
+        rows,
+        failures: failures
+            .into_iter()
+            .map(|f| format!("{}: {f}", machine.name))
+            .collect(),
+    })
+}
+
+/// The step costs of every machine side by side: cycles of each machine's timers, and the
+/// instructions they are under `-icount`, the unit in which the cores compare.
+fn print_comparison(analyses: &[(Machine, Analysis)]) {
+    let Some((_, first)) = analyses.first() else {
+        return;
+    };
+    println!(
+        "\nstep costs side by side (cycles of each machine's timers; instructions: QEMU runs 32 ns an instruction on both):"
+    );
+    print!("  {:<40}", "step");
+    for (m, _) in analyses {
+        print!(" {:>20} {:>8}", format!("{} cycles", m.name), "instr.");
+    }
+    println!();
+    for (name, _) in &first.rows {
+        print!("  {name:<40}");
+        for (m, a) in analyses {
+            match a.rows.iter().find(|(n, _)| n == name) {
+                Some((_, c)) => print!(" {c:>20} {:>8}", m.instructions(*c)),
+                None => print!(" {:>20} {:>8}", "-", "-"),
+            }
+        }
+        println!();
+    }
+}
+
+/// Runs the firmware on every machine, analyses, checks, prints; writes the JSON report to
+/// `json`. `clock_hz` converts every machine's cycles at that clock instead of its own.
+pub fn run(clock_hz: Option<u64>, json: Option<PathBuf>) -> Result<(), String> {
+    if clock_hz == Some(0) {
+        return Err("the clock must be at least 1 Hz".to_owned());
+    }
+    let elfs = firmware::build_for(&MACHINES, &[])?;
+    let runs: Vec<(Machine, PathBuf)> = MACHINES.iter().copied().zip(elfs).collect();
+    let logs = firmware::run_all(&runs);
+    let files = firmware::scenario_files()?;
+    let scenarios_loaded = files
+        .iter()
+        .map(|f| psmpa_sim::load::load(f).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut analyses = Vec::new();
+    for ((machine, _), log) in runs.iter().zip(logs) {
+        let machine = *machine;
+        let a = analyse(
+            machine,
+            clock_hz.unwrap_or(machine.clock_hz),
+            &log?,
+            &scenarios_loaded,
+        )?;
+        analyses.push((machine, a));
+    }
+    print_comparison(&analyses);
     let host_scenarios = ["sonar-8", "locked-door"];
     let host = host_costs(&host_scenarios)?;
     println!(
@@ -499,32 +612,27 @@ pub fn run(clock_hz: u64, json: Option<PathBuf>) -> Result<(), String> {
             per_call.map_or("-".to_owned(), |p| p.to_string())
         );
     }
+    let failures: Vec<String> = analyses
+        .iter()
+        .flat_map(|(_, a)| a.failures.iter().cloned())
+        .collect();
     let report = Report {
-        clock_hz,
-        costs_cycles: all,
-        runs: runs.len(),
-        scenarios,
+        machines: analyses.into_iter().map(|(_, a)| a.report).collect(),
         host_instructions: host,
     };
     let path = json.unwrap_or_else(|| firmware::root().join("target/timing.json"));
     let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
     std::fs::write(&path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
     println!("\nwritten to {}", path.display());
-    if clock_hz != FIRMWARE_HZ {
-        println!(
-            "(the measured reactions were taken at the firmware's 25 MHz: they are shown, not checked, against bounds at another clock)"
-        );
-    }
     if failures.is_empty() {
-        let worst = report
-            .scenarios
-            .iter()
-            .map(|s| s.utilisation_ppm)
-            .max()
-            .unwrap_or(0);
         println!(
-            "schedulable in every scenario (utilisation at most {:.2} %); every measured reaction is within its bound",
-            worst as f64 / 1e4
+            "on every machine ({}): schedulable in every scenario; every measured reaction is within its bound",
+            report
+                .machines
+                .iter()
+                .map(|m| m.machine)
+                .collect::<Vec<_>>()
+                .join(", ")
         );
         Ok(())
     } else {

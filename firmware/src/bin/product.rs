@@ -15,7 +15,7 @@
 #[cfg(not(target_os = "none"))]
 fn main() {
     eprintln!(
-        "psmpa-product runs on the target: cargo run -p psmpa-firmware --bin psmpa-product --target thumbv7em-none-eabihf --profile firmware"
+        "psmpa-product runs on the target: cargo run -p psmpa-firmware --bin psmpa-product --target thumbv7em-none-eabihf --profile firmware (mps2-an386), or --target thumbv8m.main-none-eabihf (mps2-an505)"
     );
 }
 
