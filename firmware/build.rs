@@ -4,10 +4,10 @@
 //! * `thumbv8m.main-none-eabihf` (Cortex-M33): QEMU's mps2-an505, `memory-an505.x` and the cfg
 //!   `board_an505`; any other target: mps2-an386 (Cortex-M4F) and `memory-an386.x`. The code
 //!   reads the board's addresses, interrupts and clock from `src/board.rs`, one set of
-//!   constants per machine. The chosen map is copied to `OUT_DIR` as the `memory.x` that
-//!   cortex-m-rt's `link.x` includes. No file named `memory.x` may sit in the workspace root:
-//!   the linker looks for an included script in its working directory (the root) before the
-//!   search path, so it would win over this one;
+//!   constants per machine. cortex-m-rt's `link.x` includes `memory.x`, which the linker
+//!   finds in its working directory, the workspace root (before any search path): the
+//!   top-level `memory.x` includes `psmpa-machine.x`, the chosen map, copied here to
+//!   `OUT_DIR`. (flip-link follows the include and moves the stack in the copy.)
 //! * every `scenarios/*.json`, validated here by the host's parser and embedded in its
 //!   canonical form (integers only), which the firmware reads with serde-json-core at boot;
 //! * `missions/fetch-tea.json` without insignificant whitespace.
@@ -73,13 +73,15 @@ fn main() {
     if an505 {
         println!("cargo:rustc-cfg=board_an505");
     }
-    // cortex-m-rt's link.x includes `memory.x`: the machine's map under that name.
+    // cortex-m-rt's link.x includes the top-level `memory.x`, which includes the machine's
+    // map under this name.
     let memory = root.join(if an505 {
         "firmware/memory-an505.x"
     } else {
         "firmware/memory-an386.x"
     });
-    if let Err(e) = fs::copy(&memory, out.join("memory.x")) {
+    println!("cargo:rerun-if-changed={}", root.join("memory.x").display());
+    if let Err(e) = fs::copy(&memory, out.join("psmpa-machine.x")) {
         panic!("cannot copy {}: {e}", memory.display());
     }
     // No device interrupts are used: the vector table ends after 16 default entries
