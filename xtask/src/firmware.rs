@@ -146,6 +146,22 @@ fn stack_overflow_faults(machine: Machine, elf: &Path) -> Result<bool, String> {
     }
 }
 
+/// Builds the Pico 2 board's image as its README says (`cargo build --release` in
+/// `boards/pico2`, whose `.cargo/config.toml` sets the target and linker) and returns its ELF:
+/// the image a user flashes, so no flags of this task's.
+pub fn build_board() -> Result<PathBuf, String> {
+    let dir = root().join("boards/pico2");
+    let status = cargo()
+        .current_dir(&dir)
+        .args(["build", "--quiet", "--release"])
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err("the Pico 2 board does not build".to_owned());
+    }
+    Ok(dir.join("target/thumbv8m.main-none-eabihf/release/psmpa-pico2"))
+}
+
 /// The product-shaped image beside the firmware `elf` (one build makes both).
 pub fn product(elf: &Path) -> PathBuf {
     elf.with_file_name("psmpa-product")

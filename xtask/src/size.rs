@@ -1,9 +1,10 @@
-//! Flash and RAM of both firmware images against their budgets and the committed snapshot
-//! (RTIC style).
+//! Flash and RAM of the two QEMU firmware images and the Pico 2 board's image against their
+//! budgets and the committed snapshot (RTIC style).
 //!
 //! * Flash is what is written to the chip: `.vector_table + .text + .rodata + .data` (the
-//!   initial values of `.data` are flashed and copied at boot).
-//! * RAM is `.data + .bss` and the stack's high-water mark measured in QEMU.
+//!   initial values of `.data` are flashed and copied at boot), and the board's boot block.
+//! * RAM is `.data + .bss + .uninit` and, for the QEMU images, the stack's high-water mark
+//!   measured in QEMU (the board's stack: `cargo xtask stack`).
 
 use std::path::Path;
 
@@ -40,6 +41,13 @@ const PRODUCT: Budget = Budget {
     flash_enforced: false,
 };
 
+/// The Fetch Tea robot on a Pico 2 (`boards/pico2`, `cargo build --release` there): budgets
+/// set from its first measurement (65,024 B flash and 6,456 B static RAM at b35a701), with
+/// about 10 % and 25 % headroom. Its stack: `cargo xtask stack` (no QEMU runs the RP2350).
+const BOARD_FLASH: u64 = 72 * 1024;
+/// Static RAM budget of the board image (it has 512 KiB).
+const BOARD_STATIC_RAM: u64 = 8 * 1024;
+
 /// Growth over the snapshot that fails the check.
 const GROWTH_PERCENT: u64 = 2;
 
@@ -54,6 +62,15 @@ pub struct Sizes {
     pub stack: u64,
 }
 
+/// The sizes of the board image, which no emulator runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BoardSizes {
+    /// `.vector_table + .start_block + .text + .rodata + .data`, bytes.
+    pub flash: u64,
+    /// `.data + .bss + .uninit`, bytes.
+    pub static_ram: u64,
+}
+
 /// What `firmware/size.json` holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Snapshot {
@@ -61,10 +78,21 @@ pub struct Snapshot {
     pub firmware: Sizes,
     /// `psmpa-product`: the core, the mission loader and stub drivers.
     pub product: Sizes,
+    /// `psmpa-pico2`: the Fetch Tea robot on a Raspberry Pi Pico 2.
+    pub pico2: BoardSizes,
 }
 
-const FLASH_SECTIONS: [&str; 4] = [".vector_table", ".text", ".rodata", ".data"];
+const FLASH_SECTIONS: [&str; 5] = [
+    ".vector_table",
+    // The RP2350's boot block (the QEMU images have none).
+    ".start_block",
+    ".text",
+    ".rodata",
+    ".data",
+];
 
+/// Flash and static RAM (`.data + .bss`, and `.uninit`: RAM left uninitialised, such as RTT's
+/// buffer), bytes.
 fn sections(elf: &Path) -> Result<(u64, u64), String> {
     let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
     let file = object::File::parse(&*data).map_err(|e| format!("{}: {e}", elf.display()))?;
@@ -74,7 +102,7 @@ fn sections(elf: &Path) -> Result<(u64, u64), String> {
             .map(|s| s.size())
             .sum()
     };
-    Ok((size(&FLASH_SECTIONS), size(&[".data", ".bss"])))
+    Ok((size(&FLASH_SECTIONS), size(&[".data", ".bss", ".uninit"])))
 }
 
 /// Flash bytes by crate, from the size of every function and constant symbol in the flash
@@ -204,7 +232,7 @@ fn report(
         },
     );
     row(
-        "static RAM (.data+.bss)",
+        "static RAM (.data+.bss+.uninit)",
         now.static_ram,
         old.map(|s| s.static_ram),
         String::new(),
@@ -248,13 +276,53 @@ fn report(
     failures
 }
 
-/// Measures both images, compares, and with `bless` writes the snapshot.
+/// Prints the board image's rows and returns what breaks its budget or grew past the snapshot.
+fn report_board(now: BoardSizes, old: Option<BoardSizes>, check_growth: bool) -> Vec<String> {
+    println!("psmpa-pico2 (Fetch Tea robot on a Pico 2: core, loader, drivers, embassy-rp):");
+    let mut failures = Vec::new();
+    for (what, value, old, budget) in [
+        (
+            "flash (.vector_table+.start_block+.text+..)",
+            now.flash,
+            old.map(|s| s.flash),
+            BOARD_FLASH,
+        ),
+        (
+            "static RAM (.data+.bss+.uninit)",
+            now.static_ram,
+            old.map(|s| s.static_ram),
+            BOARD_STATIC_RAM,
+        ),
+    ] {
+        let delta = old.map_or(String::new(), |o| format!("{:+}", value as i64 - o as i64));
+        println!(
+            "  {what:<42} {value:>8} B  {delta:>8}  {} KiB",
+            budget / 1024
+        );
+        if value > budget {
+            failures.push(format!(
+                "psmpa-pico2: {what} {value} B is over the budget of {budget} B"
+            ));
+        }
+        if let Some(old) = old.filter(|_| check_growth)
+            && value * 100 > old * (100 + GROWTH_PERCENT)
+        {
+            failures.push(format!("psmpa-pico2: {what} grew from {old} B to {value} B (more than {GROWTH_PERCENT} %); if intended, run cargo xtask size --bless"));
+        }
+    }
+    failures
+}
+
+/// Measures the three images, compares, and with `bless` writes the snapshot.
 pub fn run(bless: bool) -> Result<(), String> {
     let elf = firmware::build(&[])?;
     let product_elf = firmware::product(&elf);
+    let board_elf = firmware::build_board()?;
+    let (flash, static_ram) = sections(&board_elf)?;
     let now = Snapshot {
         firmware: measure(&elf)?,
         product: measure(&product_elf)?,
+        pico2: BoardSizes { flash, static_ram },
     };
     let path = firmware::root().join("firmware/size.json");
     let snapshot: Option<Snapshot> = std::fs::read(&path)
@@ -276,9 +344,11 @@ pub fn run(bless: bool) -> Result<(), String> {
         &PRODUCT,
         !bless,
     ));
+    failures.extend(report_board(now.pico2, snapshot.map(|s| s.pico2), !bless));
     for (name, elf, flash) in [
         ("psmpa-firmware", &elf, now.firmware.flash),
         ("psmpa-product", &product_elf, now.product.flash),
+        ("psmpa-pico2", &board_elf, now.pico2.flash),
     ] {
         println!();
         println!(
