@@ -38,6 +38,9 @@ for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
   cargo build -p psmpa-drivers --target "$target" --release --features defmt
 done
 
+step "the Pico 2 board: formatted, clippy-clean and built as its README says (cargo build --release in boards/pico2)"
+(cd boards/pico2 && cargo fmt --check && cargo clippy --release -- -D warnings && cargo build --release)
+
 step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
 cargo test --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 
@@ -52,7 +55,7 @@ cargo xtask qemu
 step "the check can fail: a deliberately broken scenario must be caught (mps2-an386)"
 cargo xtask qemu --inject-fault --expect-failure
 
-step "firmware size: flash, static RAM, stack high-water against budget and snapshot"
+step "firmware size: flash, static RAM, stack high-water against budget and snapshot (the QEMU images and the Pico 2 board)"
 cargo xtask size
 
 step "firmware stack: static worst case from the binary, at least the QEMU high-water mark"
