@@ -26,91 +26,300 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use object::{Object, ObjectSection, ObjectSymbol, RelocationKind, SectionFlags, SymbolKind};
+use object::{
+    Object, ObjectSection, ObjectSymbol, RelocationFlags, RelocationKind, SectionFlags, SymbolKind,
+};
 
 use crate::firmware;
 
-/// Cycles in the call graph that the code bounds: a cycle through a function whose name
+/// A cycle in the call graph that the code bounds: a cycle through a function whose name
 /// contains the pattern repeats at most `depth` times, for the reason given.
-const BOUNDED_RECURSION: &[(&str, u64, &str)] = &[
-    (
-        "deserialize_ignored_any",
-        psmpa_core::mission::MAX_DEPTH as u64,
-        "skipping a JSON value recurses per level; the mission loader refuses nesting deeper \
-         than psmpa_core::mission::MAX_DEPTH before it parses",
-    ),
+type Recursion = (&'static str, u64, &'static str);
+
+/// A function pointer stored at run time that only its callers call: (callee pattern, caller
+/// patterns, why).
+type OnlyFrom = (&'static str, &'static [&'static str], &'static str);
+
+/// The mission loader's JSON recursion, in both images.
+const MISSION_DEPTH: Recursion = (
+    "deserialize_ignored_any",
+    psmpa_core::mission::MAX_DEPTH as u64,
+    "skipping a JSON value recurses per level; the mission loader refuses nesting deeper \
+     than psmpa_core::mission::MAX_DEPTH before it parses",
+);
+
+/// core's string-slicing panic, in both images.
+const SLICE_ERROR: Recursion = (
+    "core::str::slice_error_fail",
+    2,
+    "core's string-slicing panic slices its message at a char boundary it has just found, \
+     which cannot fail again",
+);
+
+/// core's formatting, in both images.
+const FORMATTING: OnlyFrom = (
+    " as core::fmt::",
+    &["core::fmt::write"],
+    "the formatting functions in fmt::Arguments are called by core::fmt::write only",
+);
+
+/// The firmware's bounded cycles.
+const BOUNDED_RECURSION: &[Recursion] = &[
+    MISSION_DEPTH,
     (
         "core::panicking::panic_fmt",
         2,
         "the panic handler logs on its first entry only, so a panic while logging ends there",
     ),
-    (
-        "core::str::slice_error_fail",
-        2,
-        "core's string-slicing panic slices its message at a char boundary it has just found, \
-         which cannot fail again",
-    ),
+    SLICE_ERROR,
 ];
 
-/// Function pointers stored at run time that only one caller calls: (callee pattern, caller
-/// pattern, why).
-const ONLY_FROM: &[(&str, &str, &str)] = &[
+/// The firmware's function pointers stored at run time that only one caller calls.
+const ONLY_FROM: &[OnlyFrom] = &[
     (
         "embassy_executor::raw::TaskStorage<",
-        "<embassy_executor::raw::Executor>::poll",
+        &["<embassy_executor::raw::Executor>::poll"],
         "embassy's poll loop is the only caller of a task's poll function",
     ),
     (
         "as psmpa_sim::run::Sides>::compute",
-        "psmpa_sim::robot::Nao<",
+        &["psmpa_sim::robot::Nao<"],
         "the robot's walk is the only user of the platform's computation hook",
     ),
-    (
-        " as core::fmt::",
-        "core::fmt::write",
-        "the formatting functions in fmt::Arguments are called by core::fmt::write only",
-    ),
+    FORMATTING,
     (
         "psmpa_testkit::beside::poll_erased",
-        "TaskStorage<psmpa_firmware::executor::__trampoline_task",
+        &["TaskStorage<psmpa_firmware::executor::__trampoline_task"],
         "a run's sensing side is installed for the sensing executor's trampoline task only",
     ),
 ];
 
+/// A task's poll function: its name contains `name` and, if `calls` is not empty, it calls a
+/// function whose name contains `calls` (legacy symbol names drop generic arguments, so every
+/// task's poll function is `TaskStorage<F>::poll`: what it polls tells them apart).
+#[derive(Debug, Clone, Copy)]
+struct Task {
+    name: &'static str,
+    calls: &'static str,
+}
+
+/// No task.
+const NO_TASK: Task = Task {
+    name: "",
+    calls: "",
+};
+
+/// A level of preemption: its entry symbol, a task it never polls (and why), and whether the
+/// report shows its deepest path.
+struct Level {
+    label: &'static str,
+    entry: &'static str,
+    excluded: Task,
+    why: &'static str,
+    show_path: bool,
+}
+
 /// The levels of preemption, least urgent first: each may interrupt those before it, so the
-/// bound stacks them all. (label, entry symbol, a task the level never polls, why.) The two
-/// executors share embassy's poll loop, and their tasks' poll functions are stored at run
-/// time: which task a level polls follows from where it was spawned, not from the code.
-const LEVELS: &[(&str, &str, &str, &str)] = &[
-    (
-        "thread mode (main, deciding executor)",
-        "Reset",
-        "TaskStorage<psmpa_firmware::executor::__trampoline_task",
-        "the trampoline is spawned on the sensing executor, which interrupt 14 polls",
-    ),
-    (
-        "interrupt 15 (deciding wake)",
-        "psmpa_firmware::executor::deciding_interrupt",
-        "",
-        "",
-    ),
-    (
-        "interrupt 14 (sensing executor)",
-        "psmpa_firmware::executor::sensing_interrupt",
-        "TaskStorage<psmpa_firmware::firmware::__one_run_task",
-        "the run task is spawned on the deciding executor, which thread mode polls",
-    ),
-    (
-        "interrupt 9 (alarm, time driver)",
-        "psmpa_firmware::time_driver::alarm_interrupt",
-        "",
-        "",
-    ),
-    ("HardFault", "HardFault", "", ""),
+/// bound stacks them all. The two executors share embassy's poll loop, and their tasks' poll
+/// functions are stored at run time: which task a level polls follows from where it was
+/// spawned, not from the code.
+const LEVELS: &[Level] = &[
+    Level {
+        label: "thread mode (main, deciding executor)",
+        entry: "Reset",
+        excluded: Task {
+            name: "TaskStorage<psmpa_firmware::executor::__trampoline_task",
+            calls: "",
+        },
+        why: "the trampoline is spawned on the sensing executor, which interrupt 14 polls",
+        show_path: true,
+    },
+    Level {
+        label: "interrupt 15 (deciding wake)",
+        entry: "psmpa_firmware::executor::deciding_interrupt",
+        excluded: NO_TASK,
+        why: "",
+        show_path: false,
+    },
+    Level {
+        label: "interrupt 14 (sensing executor)",
+        entry: "psmpa_firmware::executor::sensing_interrupt",
+        excluded: Task {
+            name: "TaskStorage<psmpa_firmware::firmware::__one_run_task",
+            calls: "",
+        },
+        why: "the run task is spawned on the deciding executor, which thread mode polls",
+        show_path: true,
+    },
+    Level {
+        label: "interrupt 9 (alarm, time driver)",
+        entry: "psmpa_firmware::time_driver::alarm_interrupt",
+        excluded: NO_TASK,
+        why: "",
+        show_path: false,
+    },
+    Level {
+        label: "HardFault",
+        entry: "HardFault",
+        excluded: NO_TASK,
+        why: "",
+        show_path: false,
+    },
 ];
 
-/// Hardware exception frame with the floating-point context, plus the alignment word.
+/// The Pico 2 board's bounded cycles. Its panic handler is panic-probe's.
+const PICO2_RECURSION: &[Recursion] = &[
+    MISSION_DEPTH,
+    (
+        "core::panicking::panic_fmt",
+        2,
+        "panic-probe masks interrupts and prints on its first entry only (its PANICKED flag), \
+         then raises a HardFault, so a panic while printing ends there",
+    ),
+    SLICE_ERROR,
+    (
+        "core::fmt::write",
+        4,
+        "the board formats with core::fmt only in panic-probe's panic message (its own errors \
+         go through defmt::Format): write(the PanicInfo) -> write(its message) -> write(the \
+         message's arguments: str, u32, char, Range<usize>, core's and embassy's errors) -> \
+         write(a char's escape or a range's \"..\"), none of them recursive types",
+    ),
+];
+
+/// The Pico 2 board's function pointers stored at run time that only their callers call.
+const PICO2_ONLY_FROM: &[OnlyFrom] = &[
+    (
+        "embassy_executor::raw::TaskStorage<",
+        &["embassy_rp::executor::thread::Executor::run", "SWI_IRQ_1"],
+        "embassy's poll loop is the only caller of a task's poll function; here it is inlined \
+         into the thread-mode executor's run loop and the interrupt executor's handler",
+    ),
+    FORMATTING,
+];
+
+/// The task `main` runs (`#[embassy_executor::main]`): its poll function polls main's body.
+const PICO2_MAIN_TASK: Task = Task {
+    name: "embassy_executor::raw::TaskStorage<",
+    calls: "psmpa_pico2::____embassy_main_task",
+};
+
+/// The task `psmpa_pico2::sensing`: its poll function runs the runtime's sensing side.
+const PICO2_SENSING_TASK: Task = Task {
+    name: "embassy_executor::raw::TaskStorage<",
+    calls: ">>::sensing",
+};
+
+/// The Pico 2 board's levels of preemption, least urgent first. On the Cortex-M33 a lower
+/// priority number is more urgent; an interrupt preempts only a less urgent one, so handlers
+/// of one priority never nest, and each priority is one level. What embassy-rp 0.10 and the
+/// board enable (embassy-rp's `init`, `time_driver::init`, `gpio::init`, `dma::init`):
+/// * `IO_IRQ_BANK0` at priority 3 (`gpio::init`): wakes the tasks waiting on a pin's edge;
+/// * `SWI_IRQ_1` at priority 2 (the board's `main`): polls the sensing executor;
+/// * `TIMER0_IRQ_0`, enabled by `time_driver::init` without a priority, so at the reset
+///   value 0, the most urgent: the alarm wakes the timers' tasks;
+/// * HardFault above them all (panic-probe ends a panic in one).
+///
+/// Not levels: `DMA_IRQ_0` (given priority 3 by `dma::init`, never enabled: the board uses no
+/// DMA, and its vector is the default handler), `IO_IRQ_QSPI` (feature `qspi-as-gpio` off),
+/// `SIO_IRQ_FIFO` (enabled by `multicore::spawn_core1`, which the board never calls); SysTick,
+/// PendSV and SVCall are unused (the time driver is TIMER0), NMI is not routed (the RP2350's
+/// NMI mask is zero at reset). Every other vector is cortex-m-rt's `DefaultHandler`, never
+/// enabled.
+const PICO2_LEVELS: &[Level] = &[
+    Level {
+        label: "thread mode (main, deciding executor)",
+        entry: "Reset",
+        excluded: PICO2_SENSING_TASK,
+        why: "the sensing task is spawned on the interrupt executor, which SWI_IRQ_1 polls",
+        show_path: true,
+    },
+    Level {
+        label: "IO_IRQ_BANK0, priority 3 (GPIO edges)",
+        entry: "IO_IRQ_BANK0",
+        excluded: NO_TASK,
+        why: "",
+        show_path: true,
+    },
+    Level {
+        label: "SWI_IRQ_1, priority 2 (sensing executor)",
+        entry: "SWI_IRQ_1",
+        excluded: PICO2_MAIN_TASK,
+        why: "main's task is spawned on the thread-mode executor, which thread mode polls",
+        show_path: true,
+    },
+    Level {
+        label: "TIMER0_IRQ_0, priority 0 (alarm, time driver)",
+        entry: "TIMER0_IRQ_0",
+        excluded: NO_TASK,
+        why: "",
+        show_path: true,
+    },
+    Level {
+        label: "HardFault",
+        entry: "HardFault",
+        excluded: NO_TASK,
+        why: "",
+        show_path: true,
+    },
+];
+
+/// The Pico 2 board's stack budget, set from the first bound (14,888 B, no board to measure
+/// on) with 10 % to spare: 16 KiB, 3 % of its RAM.
+const PICO2_BUDGET: u64 = 16 * 1024;
+
+/// The Pico 2's RAM (the 512 KiB striped over SRAM0-7, as its memory.x says).
+const PICO2_RAM: u64 = 512 * 1024;
+
+/// Hardware exception frame with the floating-point context, plus the alignment word. The
+/// same on the RP2350's Cortex-M33: its image runs Secure and leaves FPCCR.TS at 0, so no
+/// extra Secure context is stacked.
 const EXCEPTION_FRAME: u64 = 108;
+
+/// An image to analyse: how to build it (as shipped, and for the analysis), the sections that
+/// must be equal, its task line, levels and rules.
+struct Image {
+    /// What the image is, for messages.
+    what: &'static str,
+    shipped: fn() -> Result<PathBuf, String>,
+    analysed: fn() -> Result<PathBuf, String>,
+    sections: &'static [&'static str],
+    /// The label and poll function of the task reported on its own.
+    task: (&'static str, Task),
+    levels: &'static [Level],
+    only_from: &'static [OnlyFrom],
+    recursion: &'static [Recursion],
+}
+
+/// The QEMU firmware (mps2-an386).
+const FIRMWARE: Image = Image {
+    what: "firmware",
+    shipped: || firmware::build(&[]),
+    analysed: build,
+    sections: &[".vector_table", ".text", ".rodata", ".data"],
+    task: (
+        "run task (one deciding poll)",
+        Task {
+            name: "TaskStorage<psmpa_firmware::firmware::__one_run_task",
+            calls: "",
+        },
+    ),
+    levels: LEVELS,
+    only_from: ONLY_FROM,
+    recursion: BOUNDED_RECURSION,
+};
+
+/// The Fetch Tea robot on a Pico 2 (`boards/pico2`).
+const PICO2: Image = Image {
+    what: "Pico 2 image",
+    shipped: firmware::build_board,
+    analysed: build_board,
+    sections: &[".vector_table", ".start_block", ".text", ".rodata", ".data"],
+    task: ("main task (one deciding poll)", PICO2_MAIN_TASK),
+    levels: PICO2_LEVELS,
+    only_from: PICO2_ONLY_FROM,
+    recursion: PICO2_RECURSION,
+};
 
 /// One disassembled instruction.
 #[derive(Debug, Clone)]
@@ -144,6 +353,9 @@ struct Function {
 /// The firmware's functions and what its pointers may reach.
 struct Program {
     funcs: BTreeMap<u64, Function>,
+    /// Every function symbol's address by name: a function may have several (`HardFault` and
+    /// cortex-m-rt's `HardFault_`), `funcs` keeps one.
+    names: BTreeMap<String, u64>,
     /// Functions stored in an allocated section (a vtable, a waker vtable) by the address of
     /// the word.
     table_words: BTreeMap<u64, u64>,
@@ -225,6 +437,36 @@ fn build() -> Result<PathBuf, String> {
         .join(firmware::TARGET)
         .join(firmware::PROFILE)
         .join("psmpa-firmware"))
+}
+
+/// Builds the Pico 2 board for analysis, from `boards/pico2` so that its `.cargo/config.toml`
+/// applies (target, linker), into `target/stack` there: the shipped image's build (a plain
+/// `cargo build --release`, no flags) plus `-Z emit-stack-sizes` and `--emit-relocs`.
+/// `RUSTC_BOOTSTRAP` makes the compiler mangle with v0 as a nightly one does, which reorders
+/// the code and constants; `-C symbol-mangling-version=legacy` (unstable, hence
+/// `-Z unstable-options`) keeps the stable compiler's names, so [`run`] finds the same bytes.
+fn build_board() -> Result<PathBuf, String> {
+    let dir = firmware::root().join("boards/pico2");
+    let target_dir = dir.join("target/stack");
+    let flags = [
+        "-Zemit-stack-sizes",
+        "-Clink-arg=--emit-relocs",
+        "-Zunstable-options",
+        "-Csymbol-mangling-version=legacy",
+    ]
+    .join("\x1f");
+    let status = firmware::cargo()
+        .current_dir(&dir)
+        .args(["build", "--quiet", "--release"])
+        .env("CARGO_ENCODED_RUSTFLAGS", flags)
+        .env("CARGO_TARGET_DIR", &target_dir)
+        .env("RUSTC_BOOTSTRAP", "1")
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err("the Pico 2 board does not build with -Z emit-stack-sizes".to_owned());
+    }
+    Ok(target_dir.join("thumbv8m.main-none-eabihf/release/psmpa-pico2"))
 }
 
 /// LLVM's frame sizes by function address: `(u32 address, ULEB128 size)` records.
@@ -405,6 +647,81 @@ fn conditional(mnemonic: &str) -> bool {
 enum Resolved {
     Direct(u64),
     Site(Site),
+    /// Loaded from the stack slot at this offset (only while resolving).
+    Spill(u64),
+}
+
+/// What an instruction does to the stack slot at `k` (a spill), looking back.
+enum Spill {
+    /// Stores this register there.
+    Stored(String),
+    Untouched,
+    /// Moves the stack pointer, writes part of the slot, or may write it through a pointer.
+    Unknown,
+}
+
+/// What `insn` does to the stack slot at offset `k`; `aliased`: a pointer the function made
+/// into its frame may reach the slot, so calls and stores through registers may write it.
+fn spill_store(insn: &Insn, k: u64, aliased: bool) -> Spill {
+    let m = insn.mnemonic.split('.').next().unwrap_or("");
+    let args = insn.args.split('@').next().unwrap_or("");
+    let moves_sp = matches!(m, "push" | "pop" | "vpush" | "vpop")
+        || args.starts_with("sp,")
+        || args.contains("sp!")
+        || (m.starts_with("ldm") || m.starts_with("stm")) && args.starts_with("sp");
+    if moves_sp || conditional(&insn.mnemonic) && m.starts_with("str") {
+        return Spill::Unknown;
+    }
+    let call = m == "bl" || m == "blx";
+    if !(m.starts_with("str") || m.starts_with("stm") || m.starts_with("vst") || call) {
+        return Spill::Untouched;
+    }
+    let Some((regs, addr)) = args.split_once('[') else {
+        return if call && aliased {
+            Spill::Unknown
+        } else {
+            Spill::Untouched
+        };
+    };
+    let (base, rest) = addr.split_once(']').unwrap_or((addr, ""));
+    if base.split(',').next().map(str::trim) != Some("sp") {
+        return if aliased {
+            Spill::Unknown
+        } else {
+            Spill::Untouched
+        };
+    }
+    let offset = match base.split_once('#') {
+        Some((_, o)) => parse_imm(o),
+        None => Some(0),
+    };
+    let width = match m {
+        "str" => 4,
+        "strd" => 8,
+        "strb" => 1,
+        "strh" => 2,
+        _ => return Spill::Unknown,
+    };
+    let Some(offset) = offset.filter(|_| rest.trim().is_empty()) else {
+        return Spill::Unknown;
+    };
+    if offset + width <= k || k + 4 <= offset {
+        return Spill::Untouched;
+    }
+    let regs: Vec<&str> = regs
+        .split(',')
+        .map(str::trim)
+        .filter(|r| !r.is_empty())
+        .collect();
+    match (width, k - offset.min(k)) {
+        (4, 0) if offset == k => regs
+            .first()
+            .map_or(Spill::Unknown, |r| Spill::Stored((*r).to_owned())),
+        (8, d) if offset <= k && (d == 0 || d == 4) => regs
+            .get(d as usize / 4)
+            .map_or(Spill::Unknown, |r| Spill::Stored((*r).to_owned())),
+        _ => Spill::Unknown,
+    }
 }
 
 /// Whether control never falls through to the next instruction.
@@ -417,8 +734,8 @@ fn ends_flow(insn: &Insn) -> bool {
 
 /// What a call through `reg` at `code[i]` reaches: the loads that set the register, found by
 /// walking back along every path into the call (fall-through and branches) until each one
-/// meets its load. A path that starts at the function's entry (an argument), meets a spill,
-/// an arithmetic result or a conditional write, is unknown.
+/// meets its load. A path that starts at the function's entry (an argument), meets a spill
+/// or an arithmetic result, is unknown; a conditional write adds its value to the one before.
 fn resolve(
     code: &[Insn],
     i: usize,
@@ -428,6 +745,28 @@ fn resolve(
     used_literals: &mut BTreeSet<u64>,
 ) -> BTreeSet<Resolved> {
     let unknown = Resolved::Site(Site::Unknown(code.get(i).map_or(0, |c| c.addr)));
+    // The lowest stack offset a pointer the function makes into its frame may reach
+    // (`add rN, sp, #j`); anything made from the frame pointer may reach all of it.
+    let aliased_from = code
+        .iter()
+        .filter_map(|c| {
+            let m = c.mnemonic.split('.').next().unwrap_or("");
+            let mut ops = c.args.split('@').next().unwrap_or("").split(',');
+            let (dst, src) = (ops.next()?.trim(), ops.next()?.trim());
+            let arithmetic = matches!(m, "add" | "addw" | "sub" | "subw" | "mov");
+            if !arithmetic || dst == "sp" || dst == "r7" || (src != "sp" && src != "r7") {
+                return None;
+            }
+            let imm = ops
+                .next()
+                .and_then(|k| parse_imm(k.trim().trim_start_matches('#')));
+            Some(if src == "sp" && m.starts_with("add") || m == "mov" {
+                imm.unwrap_or(0)
+            } else {
+                0
+            })
+        })
+        .min();
     let mut out = BTreeSet::new();
     let mut seen = BTreeSet::new();
     let mut work = vec![(i, reg.to_owned())];
@@ -451,6 +790,18 @@ fn resolve(
         }
         for p in preds {
             let Some(insn) = code.get(p) else { continue };
+            if let Some(slot) = reg.strip_prefix("[sp+").and_then(|k| k.strip_suffix(']')) {
+                // A spilled value: back to the store of its stack slot.
+                let k: u64 = slot.parse().unwrap_or(u64::MAX);
+                match spill_store(insn, k, aliased_from.is_some_and(|a| a <= k)) {
+                    Spill::Stored(r) => work.push((p, r)),
+                    Spill::Untouched => work.push((p, reg.clone())),
+                    Spill::Unknown => {
+                        out.insert(unknown);
+                    }
+                }
+                continue;
+            }
             let written = writes(insn);
             let Some(pos) = written.iter().position(|w| *w == reg) else {
                 work.push((p, reg.clone()));
@@ -458,9 +809,14 @@ fn resolve(
             };
             let m = insn.mnemonic.split('.').next().unwrap_or("");
             let src = insn.args.split_once('[').map(|(_, s)| s);
-            let found = if conditional(&insn.mnemonic) {
-                None
-            } else if m == "ldr" && src.is_some_and(|s| s.starts_with("pc")) {
+            let m = if conditional(&insn.mnemonic) {
+                // The write may not happen: the value before it may reach the call too.
+                work.push((p, reg.clone()));
+                m.get(..m.len() - 2).unwrap_or(m)
+            } else {
+                m
+            };
+            let found = if m == "ldr" && src.is_some_and(|s| s.starts_with("pc")) {
                 comment_address(&insn.args)
                     .and_then(word)
                     .filter(|t| t & 1 == 1)
@@ -468,11 +824,22 @@ fn resolve(
                         used_literals.insert(insn.addr);
                         Resolved::Direct(t & !1)
                     })
+            } else if m == "movt" {
+                word(insn.addr).filter(|t| t & 1 == 1).map(|t| {
+                    used_literals.insert(insn.addr);
+                    Resolved::Direct(t & !1)
+                })
             } else if m == "ldr" || m == "ldrd" {
                 src.and_then(|src| {
                     let (base, rest) = src.split_once(']').unwrap_or((src, ""));
                     if base.trim() == "sp" || base.trim_start().starts_with("sp,") {
-                        return None; // a spill
+                        // A spill (`[sp]`, `[sp, #k]`): follow the slot back to its store.
+                        let k = match base.split_once('#') {
+                            Some((_, k)) => parse_imm(k)?,
+                            None => 0,
+                        };
+                        let plain = rest.trim().is_empty() && !insn.args.contains('!');
+                        return plain.then(|| Resolved::Spill(k + 4 * pos as u64));
                     }
                     // `[rN, #k]`, or `[rN], #k` post-indexed (slot 0).
                     let offset = if rest.starts_with(',') {
@@ -494,7 +861,12 @@ fn resolve(
             } else {
                 None
             };
-            out.insert(found.unwrap_or(unknown));
+            match found {
+                Some(Resolved::Spill(k)) => work.push((p, format!("[sp+{k}]"))),
+                found => {
+                    out.insert(found.unwrap_or(unknown));
+                }
+            }
         }
     }
     out
@@ -506,6 +878,11 @@ fn program(elf_path: &Path) -> Result<Program, String> {
     let elf = object::File::parse(&*data).map_err(|e| e.to_string())?;
     let sizes = stack_sizes(&elf)?;
     let mut funcs: BTreeMap<u64, Function> = BTreeMap::new();
+    let mut names = BTreeMap::new();
+    for sym in elf.symbols().filter(|s| s.kind() == SymbolKind::Text) {
+        // Aliases without a size of their own too (cortex-m-rt's `HardFault`).
+        names.insert(demangle(sym.name().unwrap_or("?")), sym.address() & !1);
+    }
     for sym in elf.symbols() {
         if sym.kind() == SymbolKind::Text && sym.size() > 0 {
             let addr = sym.address() & !1;
@@ -521,6 +898,9 @@ fn program(elf_path: &Path) -> Result<Program, String> {
     // hardware calls through it).
     let mut relocated: BTreeMap<u64, u64> = BTreeMap::new();
     let mut text_words: BTreeMap<u64, u64> = BTreeMap::new();
+    // `movw`/`movt` instructions that the linker filled with an address's halves (Armv8-M
+    // code builds addresses so, where Armv7-M code loads them from literal pools).
+    let (mut movw, mut movt) = (BTreeSet::new(), BTreeSet::new());
     for section in elf.sections() {
         let allocated = matches!(
             section.flags(),
@@ -532,6 +912,15 @@ fn program(elf_path: &Path) -> Result<Program, String> {
         let is_text = section.name() == Ok(".text");
         let bytes = section.data().map_err(|e| e.to_string())?;
         for (offset, reloc) in section.relocations() {
+            if let RelocationFlags::Elf { r_type } = reloc.flags()
+                && is_text
+            {
+                match r_type {
+                    object::elf::R_ARM_THM_MOVW_ABS_NC => movw.insert(offset),
+                    object::elf::R_ARM_THM_MOVT_ABS => movt.insert(offset),
+                    _ => false,
+                };
+            }
             if reloc.kind() != RelocationKind::Absolute || reloc.size() != 32 {
                 continue;
             }
@@ -555,35 +944,6 @@ fn program(elf_path: &Path) -> Result<Program, String> {
         return Err("no relocations in the ELF: was it linked with --emit-relocs?".to_owned());
     }
     let starts: BTreeSet<u64> = funcs.keys().copied().collect();
-    let is_function = |v: u64| v & 1 == 1 && starts.contains(&(v & !1));
-    let table_words = relocated
-        .iter()
-        .filter(|(_, v)| is_function(**v))
-        .map(|(at, v)| (*at, *v & !1))
-        .collect();
-    let referenced: BTreeSet<u64> = relocated
-        .values()
-        .chain(text_words.values())
-        .copied()
-        .collect();
-    let zero = elf
-        .sections()
-        .filter(|s| s.name() != Ok(".text"))
-        .flat_map(|s| {
-            let base = s.address();
-            let bytes = s.data().unwrap_or_default();
-            referenced
-                .iter()
-                .filter(move |r| (base..base + bytes.len() as u64).contains(r))
-                .filter(move |r| {
-                    let at = (*r - base) as usize;
-                    bytes.get(at..at + 4) == Some(&[0u8; 4][..])
-                })
-                .copied()
-                .collect::<Vec<_>>()
-        })
-        .collect();
-
     let out = Command::new("arm-none-eabi-objdump")
         .args(["-d", "--no-show-raw-insn"])
         .arg(elf_path)
@@ -613,6 +973,57 @@ fn program(elf_path: &Path) -> Result<Program, String> {
             });
         }
     }
+
+    // An address built by a relocated `movw` and `movt` pair, as a word at the `movt`: the
+    // pair's `movw` is the last write of the register before it.
+    for code in bodies.values() {
+        for (j, insn) in code.iter().enumerate() {
+            if !movt.contains(&insn.addr) {
+                continue;
+            }
+            let reg = insn.args.split(',').next().unwrap_or("").trim();
+            let imm = |i: &Insn| i.args.split('#').nth(1).and_then(parse_imm);
+            let low = code
+                .get(..j)
+                .unwrap_or_default()
+                .iter()
+                .rev()
+                .find(|i| writes(i).iter().any(|w| w == reg))
+                .filter(|i| movw.contains(&i.addr))
+                .and_then(imm);
+            if let Some((low, high)) = low.zip(imm(insn)) {
+                text_words.insert(insn.addr, high << 16 | low);
+            }
+        }
+    }
+    let is_function = |v: u64| v & 1 == 1 && starts.contains(&(v & !1));
+    let table_words = relocated
+        .iter()
+        .filter(|(_, v)| is_function(**v))
+        .map(|(at, v)| (*at, *v & !1))
+        .collect();
+    let referenced: BTreeSet<u64> = relocated
+        .values()
+        .chain(text_words.values())
+        .copied()
+        .collect();
+    let zero = elf
+        .sections()
+        .filter(|s| s.name() != Ok(".text"))
+        .flat_map(|s| {
+            let base = s.address();
+            let bytes = s.data().unwrap_or_default();
+            referenced
+                .iter()
+                .filter(move |r| (base..base + bytes.len() as u64).contains(r))
+                .filter(move |r| {
+                    let at = (*r - base) as usize;
+                    bytes.get(at..at + 4) == Some(&[0u8; 4][..])
+                })
+                .copied()
+                .collect::<Vec<_>>()
+        })
+        .collect();
 
     let word = |addr: u64| text_words.get(&addr).copied();
     let mut literal_loads: BTreeMap<u64, u64> = BTreeMap::new();
@@ -656,6 +1067,12 @@ fn program(elf_path: &Path) -> Result<Program, String> {
             {
                 literal_loads.insert(insn.addr, v & !1);
             }
+            if m == "movt"
+                && let Some(v) = word(insn.addr)
+                && is_function(v)
+            {
+                literal_loads.insert(insn.addr, v & !1);
+            }
             let reg = insn.args.split_whitespace().next().unwrap_or("");
             let through_register =
                 (m == "blx" || m == "bx") && reg != "lr" && target_of(insn).is_none();
@@ -678,6 +1095,10 @@ fn program(elf_path: &Path) -> Result<Program, String> {
                         Resolved::Site(site) => {
                             f.sites.insert(site);
                         }
+                        // `resolve` follows every spill to its store.
+                        Resolved::Spill(_) => {
+                            f.sites.insert(Site::Unknown(insn.addr));
+                        }
                     }
                 }
             } else if loads_pc || (m == "mov" && insn.args.starts_with("pc,")) {
@@ -692,6 +1113,7 @@ fn program(elf_path: &Path) -> Result<Program, String> {
         .collect();
     Ok(Program {
         funcs,
+        names,
         table_words,
         referenced,
         relocated,
@@ -710,11 +1132,23 @@ struct Analysis<'a> {
     unknown_frame: BTreeSet<String>,
     /// Calls through registers: caller, site, number of targets.
     indirect: BTreeMap<(String, Site), usize>,
-    /// Functions this level never calls through a pointer (a name pattern; "" for none).
-    excluded: &'static str,
+    /// A task this level never calls through a pointer.
+    excluded: Task,
+    /// The image's rules.
+    image: &'static Image,
 }
 
 impl Analysis<'_> {
+    /// Whether the function at `addr` is `task`'s poll function (never, for [`NO_TASK`]).
+    fn is_task(&self, addr: u64, task: Task) -> bool {
+        let Some(f) = self.program.funcs.get(&addr) else {
+            return false;
+        };
+        !task.name.is_empty()
+            && f.name.contains(task.name)
+            && (task.calls.is_empty() || f.calls.iter().any(|c| self.name(*c).contains(task.calls)))
+    }
+
     fn name(&self, addr: u64) -> &str {
         self.program
             .funcs
@@ -727,11 +1161,10 @@ impl Analysis<'_> {
         let p = self.program;
         let allowed = |t: &u64| {
             let name = self.name(*t);
-            let excluded = !self.excluded.is_empty() && name.contains(self.excluded);
-            !excluded
-                && ONLY_FROM
-                    .iter()
-                    .all(|(callee, only, _)| !name.contains(callee) || caller.contains(only))
+            !self.is_task(*t, self.excluded)
+                && self.image.only_from.iter().all(|(callee, only, _)| {
+                    !name.contains(callee) || only.iter().any(|o| caller.contains(o))
+                })
         };
         let tables = p.table_words.iter().filter(|(at, _)| match site {
             Site::Slot(k) => at.checked_sub(k).is_some_and(|start| p.is_table(start, k)),
@@ -757,7 +1190,7 @@ impl Analysis<'_> {
         if let Some(i) = self.path.iter().position(|a| *a == addr) {
             let bounded = self.path.get(i..).unwrap_or_default().iter().any(|a| {
                 let n = self.name(*a);
-                BOUNDED_RECURSION.iter().any(|(p, _, _)| n.contains(p))
+                self.image.recursion.iter().any(|(p, _, _)| n.contains(p))
             });
             if bounded {
                 // The repetitions are paid for where the bounded function multiplies.
@@ -791,7 +1224,9 @@ impl Analysis<'_> {
         }
         self.path.pop();
         let mut w = f.frame.zip(deepest).map(|(a, b)| a + b);
-        if let Some((_, depth, _)) = BOUNDED_RECURSION
+        if let Some((_, depth, _)) = self
+            .image
+            .recursion
             .iter()
             .find(|(p, _, _)| f.name.contains(p))
         {
@@ -876,16 +1311,19 @@ impl Analysis<'_> {
     }
 }
 
-fn by_name(funcs: &BTreeMap<u64, Function>, name: &str) -> Option<u64> {
-    funcs.iter().find(|(_, f)| f.name == name).map(|(a, _)| *a)
+/// The function named `name`, or one of whose other names it is.
+fn by_name(program: &Program, name: &str) -> Option<u64> {
+    let funcs = &program.funcs;
+    let own = funcs.iter().find(|(_, f)| f.name == name).map(|(a, _)| *a);
+    own.or_else(|| program.names.get(name).copied())
 }
 
 /// The bytes of the code and constants, to check that the analysed binary is the shipped one.
-fn code(elf: &Path) -> Result<Vec<u8>, String> {
+fn code(elf: &Path, sections: &[&str]) -> Result<Vec<u8>, String> {
     let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
     let file = object::File::parse(&*data).map_err(|e| e.to_string())?;
     let mut out = Vec::new();
-    for name in [".vector_table", ".text", ".rodata", ".data"] {
+    for name in sections {
         let section = file
             .section_by_name(name)
             .ok_or_else(|| format!("{}: no {name} section", elf.display()))?;
@@ -898,16 +1336,21 @@ fn show(w: Option<u64>) -> String {
     w.map_or("unbounded".to_owned(), |w| format!("{w} B"))
 }
 
-/// Analyses, runs in QEMU, compares, prints.
-pub fn run() -> Result<(), String> {
-    let shipped = firmware::build(&[])?;
-    let elf = build()?;
-    if code(&elf)? != code(&shipped)? {
-        return Err("the analysed build's code differs from the shipped firmware's".to_owned());
+/// Builds an image twice (shipped, analysed), checks they are the same code, and prints its
+/// bound per level, deepest paths, indirect calls and rules. Returns the analysed ELF and the
+/// bound (`None`: unbounded).
+fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
+    let shipped = (image.shipped)()?;
+    let elf = (image.analysed)()?;
+    if code(&elf, image.sections)? != code(&shipped, image.sections)? {
+        return Err(format!(
+            "the analysed build's code differs from the shipped {}'s",
+            image.what
+        ));
     }
     let program = program(&elf)?;
     let funcs = &program.funcs;
-    let analysis = |excluded: &'static str| Analysis {
+    let analysis = |excluded: Task| Analysis {
         program: &program,
         memo: HashMap::new(),
         path: Vec::new(),
@@ -915,31 +1358,34 @@ pub fn run() -> Result<(), String> {
         unknown_frame: BTreeSet::new(),
         indirect: BTreeMap::new(),
         excluded,
+        image,
     };
     println!("{:<46} {:>10}", "entry", "worst stack");
+    let (task_label, task) = image.task;
     let task = funcs
-        .iter()
-        .find(|(_, f)| {
-            f.name
-                .contains("TaskStorage<psmpa_firmware::firmware::__one_run_task")
-        })
-        .map(|(a, _)| *a);
-    let w = task.and_then(|t| analysis("").worst(t).0);
-    println!("{:<46} {:>10}", "run task (one deciding poll)", show(w));
+        .keys()
+        .find(|a| analysis(NO_TASK).is_task(**a, task))
+        .copied();
+    let w = task.and_then(|t| analysis(NO_TASK).worst(t).0);
+    println!("{task_label:<46} {:>10}", show(w));
     let (mut recursion, mut unknown_frame, mut indirect) =
         (BTreeSet::new(), BTreeSet::new(), BTreeMap::new());
+    let mut missing = BTreeSet::new();
     let mut deepest = Vec::new();
     let mut total = Some(0);
-    for (i, (label, symbol, excluded, _)) in LEVELS.iter().enumerate() {
-        let mut a = analysis(excluded);
-        let addr = by_name(funcs, symbol);
+    for (i, level) in image.levels.iter().enumerate() {
+        let mut a = analysis(level.excluded);
+        let addr = by_name(&program, level.entry);
+        if addr.is_none() {
+            missing.insert(level.entry.to_owned());
+        }
         let w = addr.and_then(|addr| a.worst(addr).0);
-        println!("{label:<46} {:>10}", show(w));
+        println!("{:<46} {:>10}", level.label, show(w));
         // A preempting level adds its hardware frame.
         let frame = if i == 0 { 0 } else { EXCEPTION_FRAME };
         total = total.zip(w).map(|(t, w)| t + w + frame);
-        if let Some(addr) = addr.filter(|_| !excluded.is_empty()) {
-            deepest.push((label, a.deepest_path(addr)));
+        if let Some(addr) = addr.filter(|_| level.show_path) {
+            deepest.push((level.label, a.deepest_path(addr)));
         }
         recursion.append(&mut a.recursion);
         unknown_frame.append(&mut a.unknown_frame);
@@ -981,14 +1427,21 @@ pub fn run() -> Result<(), String> {
             funcs.get(f).map_or("?", |f| f.name.as_str())
         );
     }
-    for (pattern, depth, why) in BOUNDED_RECURSION {
+    for (pattern, depth, why) in image.recursion {
         println!("recursion through `{pattern}` bounded by {depth}: {why}");
     }
-    for (callee, only, why) in ONLY_FROM {
+    for (callee, only, why) in image.only_from {
+        let only = only.join("` or `");
         println!("`{callee}` is called through a pointer from `{only}` only: {why}");
     }
-    for (label, _, excluded, why) in LEVELS.iter().filter(|l| !l.2.is_empty()) {
-        println!("{label} never calls `{excluded}`: {why}");
+    for level in image.levels.iter().filter(|l| !l.excluded.name.is_empty()) {
+        let Task { name, calls } = level.excluded;
+        let (label, why) = (level.label, level.why);
+        if calls.is_empty() {
+            println!("{label} never calls `{name}`: {why}");
+        } else {
+            println!("{label} never calls the `{name}` that calls `{calls}`: {why}");
+        }
     }
     let report = |title: &str, set: &BTreeSet<String>| {
         if !set.is_empty() {
@@ -1000,8 +1453,13 @@ pub fn run() -> Result<(), String> {
     };
     report("unbounded recursion", &recursion);
     report("reachable functions without a known frame", &unknown_frame);
+    report("entry symbols not in the image", &missing);
+    Ok((elf, total))
+}
 
-    let log = firmware::run(&elf)?;
+/// The firmware's bound against the high-water mark it measures in QEMU.
+fn check_firmware(elf: &Path, total: Option<u64>) -> Result<(), String> {
+    let log = firmware::run(elf)?;
     let measured = firmware::stack_high_water(&log)
         .ok_or("the firmware did not report its stack high-water mark")?;
     println!("\nmeasured in QEMU (same code, every scenario): {measured} B");
@@ -1017,5 +1475,37 @@ pub fn run() -> Result<(), String> {
             "the bound {bound} B is below the measured {measured} B: the analysis is wrong"
         )),
         None => Err("the stack is unbounded (see above)".to_owned()),
+    }
+}
+
+/// The board's bound against its budget and its RAM (no QEMU for the RP2350: nothing measured).
+fn check_board(total: Option<u64>) -> Result<(), String> {
+    let Some(bound) = total else {
+        return Err("psmpa-pico2: the stack is unbounded (see above)".to_owned());
+    };
+    println!(
+        "\nbound {bound} B: {:.1} % of the budget of {PICO2_BUDGET} B, {:.1} % of the Pico 2's {} KiB of RAM",
+        100.0 * bound as f64 / PICO2_BUDGET as f64,
+        100.0 * bound as f64 / PICO2_RAM as f64,
+        PICO2_RAM / 1024
+    );
+    if bound > PICO2_BUDGET {
+        return Err(format!(
+            "psmpa-pico2: the stack bound {bound} B is over the budget of {PICO2_BUDGET} B"
+        ));
+    }
+    Ok(())
+}
+
+/// Analyses the firmware (and runs it in QEMU), then the Pico 2 board; prints, compares.
+pub fn run() -> Result<(), String> {
+    let (elf, total) = analyse(&FIRMWARE)?;
+    let firmware = check_firmware(&elf, total);
+    println!("\npsmpa-pico2 (the Fetch Tea robot on a Raspberry Pi Pico 2, embassy-rp):");
+    let board = analyse(&PICO2).and_then(|(_, total)| check_board(total));
+    match (firmware, board) {
+        (Ok(()), Ok(())) => Ok(()),
+        (Err(e), Ok(())) | (Ok(()), Err(e)) => Err(e),
+        (Err(f), Err(b)) => Err(format!("{f}\n{b}")),
     }
 }

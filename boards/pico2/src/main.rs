@@ -82,7 +82,7 @@ async fn main(_spawner: Spawner) {
     let loaded = match mission() {
         Ok(loaded) => MISSION.init(loaded),
         Err(e) => {
-            error!("the mission does not load: {}", defmt::Debug2Format(&e));
+            error!("the mission does not load: {}", e);
             return;
         }
     };
