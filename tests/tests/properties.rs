@@ -1,6 +1,6 @@
 //! Properties of the core, checked on generated inputs (proptest).
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeSet, HashMap, HashSet};
 
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::Instant;
@@ -8,7 +8,7 @@ use proptest::prelude::*;
 use psmpa_core::planner::{Planner, Strategy};
 use psmpa_core::{
     ActionId, ActuatorAction, DataStore, Domain, FactId, FactSet, Fsm, Key, Plan, PlanId,
-    SensorAction, SensorMode, SensorSet, StoreAccess, Target, Value,
+    SensorAction, SensorMode, StoreAccess, Target, Value,
 };
 
 fn facts(bits: u64, n: u32) -> FactSet {
@@ -16,44 +16,63 @@ fn facts(bits: u64, n: u32) -> FactSet {
 }
 
 proptest! {
-    /// Algorithm 2: every action state runs exactly the sensors s with per(s) ≠ ∅ and
-    /// per(s) ⊆ pre(a), and the transitions chain the body in order.
+    /// Algorithm 2, against an oracle written from the paper, not from the core: the facts
+    /// are names, `per(s)` and `pre(a)` are `BTreeSet`s of names drawn as lists, and action
+    /// state `δᵢ` gets the parallel sensor `s_k` exactly when `per(s_k) ⊆ pre(aᵢ)` (line 11)
+    /// and `per(s_k)` is not empty (the runtime's reading: a sensor that perceives nothing is
+    /// no one's). The transitions chain the body in order (lines 7 to 10).
     #[test]
     fn fsm_states_run_exactly_the_sensors_their_precondition_needs(
-        pers in prop::collection::vec(any::<u64>(), 0..8),
-        pres in prop::collection::vec(any::<u64>(), 1..8),
+        pers in prop::collection::vec(prop::collection::vec(0usize..12, 0..4), 0..8),
+        pres in prop::collection::vec(prop::collection::vec(0usize..12, 0..8), 1..8),
         body in prop::collection::vec(0usize..8, 1..8),
     ) {
-        const N: u32 = 12;
-        let names: Vec<String> = (0..N).map(|i| format!("f{i}")).collect();
-        let sensor_names: Vec<String> = (0..pers.len()).map(|i| format!("s{i}")).collect();
-        let action_names: Vec<String> = (0..pres.len()).map(|i| format!("a{i}")).collect();
+        let fact_names: Vec<String> = (0..12).map(|i| format!("f{i}")).collect();
+        let named = |ids: &Vec<usize>| -> BTreeSet<&str> {
+            ids.iter().map(|i| fact_names[*i].as_str()).collect()
+        };
+        let sensors: Vec<(String, BTreeSet<&str>)> =
+            pers.iter().enumerate().map(|(i, p)| (format!("s{i}"), named(p))).collect();
+        let actions: Vec<(String, BTreeSet<&str>)> =
+            pres.iter().enumerate().map(|(i, p)| (format!("a{i}"), named(p))).collect();
+        let body: Vec<usize> = body.iter().map(|b| b % actions.len()).collect();
+
+        // The oracle: for each step of the body, the names of its parallel sensors.
+        let expected: Vec<BTreeSet<&str>> = body
+            .iter()
+            .map(|a| {
+                let pre = &actions[*a].1;
+                sensors
+                    .iter()
+                    .filter(|(_, per)| !per.is_empty() && per.is_subset(pre))
+                    .map(|(name, _)| name.as_str())
+                    .collect()
+            })
+            .collect();
+
+        // The same domain, given to the core by name.
         let mut d: Domain<'_, 8, 8> = Domain::new();
-        for n in &names {
-            d.add_fact(n).unwrap();
-        }
+        let ids: HashMap<&str, FactId> =
+            fact_names.iter().map(|n| (n.as_str(), d.add_fact(n).unwrap())).collect();
+        let set = |names: &BTreeSet<&str>| -> FactSet { names.iter().map(|n| ids[n]).collect() };
         let ev = d.add_event("e").unwrap();
-        for (n, per) in sensor_names.iter().zip(&pers) {
-            d.add_sensor(SensorAction::new(n, facts(*per, N), SensorMode::OneShot)).unwrap();
+        for (name, per) in &sensors {
+            d.add_sensor(SensorAction::new(name, set(per), SensorMode::OneShot)).unwrap();
         }
-        for (n, pre) in action_names.iter().zip(&pres) {
-            d.add_action(ActuatorAction::new(n, facts(*pre, N), FactSet::EMPTY, FactSet::EMPTY)).unwrap();
+        for (name, pre) in &actions {
+            d.add_action(ActuatorAction::new(name, set(pre), FactSet::EMPTY, FactSet::EMPTY)).unwrap();
         }
-        let body: Vec<ActionId> = body.iter().map(|b| ActionId::new(b % pres.len()).unwrap()).collect();
-        let plan: Plan<'_, 8> = Plan::new("p", ev, FactSet::EMPTY, &body).unwrap();
+        let body_ids: Vec<ActionId> = body.iter().map(|a| ActionId::new(*a).unwrap()).collect();
+        let plan: Plan<'_, 8> = Plan::new("p", ev, FactSet::EMPTY, &body_ids).unwrap();
         let fsm = Fsm::compile(PlanId::new(0).unwrap(), &plan, &d).unwrap();
+
         prop_assert_eq!(fsm.states().len(), body.len());
         for (i, state) in fsm.states().iter().enumerate() {
-            let pre = d.action(state.action).unwrap().pre;
-            let expected: SensorSet = d
-                .sensors()
-                .iter()
-                .enumerate()
-                .filter(|(_, s)| !s.per.is_empty() && s.per.is_subset(pre))
-                .map(|(k, _)| psmpa_core::SensorId::new(k).unwrap())
-                .collect();
-            prop_assert_eq!(state.action, body[i]);
-            prop_assert_eq!(state.sensors, expected);
+            let action = d.action(state.action).unwrap().name;
+            prop_assert_eq!(action, actions[body[i]].0.as_str());
+            let got: BTreeSet<&str> =
+                state.sensors.iter().map(|s| d.sensor(s).unwrap().name).collect();
+            prop_assert_eq!(&got, &expected[i], "state {} ({})", i, action);
             let next = if i + 1 == body.len() { Target::Done } else { Target::State(i as u8 + 1) };
             prop_assert_eq!(state.on_success, next);
             prop_assert_eq!(state.on_failure, Target::Failed);
