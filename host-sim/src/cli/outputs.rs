@@ -3,6 +3,7 @@
 
 use std::cell::RefCell;
 use std::collections::{HashMap, VecDeque};
+use std::fmt::Write as _;
 use std::io::{self, Write};
 use std::path::PathBuf;
 
@@ -189,6 +190,40 @@ impl<W: Write> TraceCsv<W> {
             None => Ok(self.out),
         }
     }
+}
+
+/// A recorded run as text, the form of the expected traces in `scenarios/traces/`: a first
+/// line naming the run and its trace hash, then one line per event, `MS w TEXT` for the
+/// world and `MS r TEXT` for the runtime, merged in time order with the world's first at the
+/// same millisecond (as the CSV). Integer milliseconds and the mission's names only, so
+/// the text is the same on every machine.
+pub fn trace_text(scenario: &Scenario, arch: Arch, rec: &Recorded) -> String {
+    let mission = crate::robot::fetch_tea(scenario).map(|r| r.mission).ok();
+    let runtime = |e: &TraceEvent| {
+        mission
+            .as_ref()
+            .map_or_else(|| format!("{e:?}"), |m| describe(m, e))
+    };
+    let mut out = format!(
+        "# {} {} trace_hash {:016x}\n",
+        scenario.name,
+        arch.name(),
+        rec.summary.trace_hash
+    );
+    let mut line = |t: u64, source: char, text: &str| {
+        let _ = writeln!(out, "{t} {source} {text}");
+    };
+    let mut trace = rec.trace.0.iter().peekable();
+    for &(t, _, e) in &rec.world.0 {
+        while let Some((at, e)) = trace.next_if(|(at, _)| at.as_millis() < t) {
+            line(at.as_millis(), 'r', &runtime(e));
+        }
+        line(t, 'w', &world_text(&e));
+    }
+    for (at, e) in trace {
+        line(at.as_millis(), 'r', &runtime(e));
+    }
+    out
 }
 
 /// Step series of one device's readings (0 while off), in seconds and reading units.
