@@ -37,22 +37,10 @@ fn table1_psmpa_detects_every_interference_and_smpa_fewer_and_slower() {
             r.scenario
         );
         assert!(s.time_s > p.time_s, "{}: SMPA takes longer", r.scenario);
-        // The rows were built to mirror the paper's SMPA counts and P-SMPA times.
-        assert_eq!(s.detected, r.paper.smpa_detected, "{}", r.scenario);
-        // A touch registers within one bumper period (20 ms) after contact.
-        assert!(
-            (p.time_s - r.paper.psmpa_time_s).abs() < 0.5,
-            "{}: {}",
-            r.scenario,
-            p.time_s
-        );
+        // Not asserted: the paper's SMPA counts, its P-SMPA times and the time ratio. The
+        // rows' interference instants and door distances were chosen to mirror them (the
+        // README says how), so asserting them would test the choice, not the runtime.
     }
-    let ratio = rows.iter().map(|r| r.smpa.time_s).sum::<f64>()
-        / rows.iter().map(|r| r.psmpa.time_s).sum::<f64>();
-    assert!(
-        ratio > 1.8,
-        "SMPA about twice as slow as P-SMPA, got {ratio:.2}"
-    );
 }
 
 /// With nothing in the way the times follow from distance, speed and the phases alone.
