@@ -117,6 +117,11 @@ enum Command {
         /// Print the rows as JSON.
         #[arg(long)]
         json: bool,
+        /// Runs of each row with its interference instants shifted by a random offset within
+        /// one SMPA cycle (1 to 100,000).
+        #[arg(long, default_value_t = psmpa_sim::cli::table1::SHIFTS,
+              value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        shifts: u32,
         /// Also write each row's plot as DIR/<scenario>.svg.
         #[arg(long, value_name = "DIR")]
         plots: Option<PathBuf>,
@@ -262,7 +267,11 @@ fn run(cli: Cli) -> Result<(), Stop> {
             }
             printed?;
         }
-        Command::Table1 { json, plots } => {
+        Command::Table1 {
+            json,
+            shifts,
+            plots,
+        } => {
             if let Some(dir) = &plots {
                 if dir.exists() && !dir.is_dir() {
                     return Err(Stop::bad(format!(
@@ -274,7 +283,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
                     Stop::bad(format!("{}: cannot create the folder: {e}", dir.display()))
                 })?;
             }
-            let rows = table1::compute().map_err(Stop::internal)?;
+            let rows = table1::compute(shifts).map_err(Stop::internal)?;
             let mut done = Vec::new();
             if let Some(dir) = plots {
                 for sc in table1::scenarios().map_err(Stop::internal)? {

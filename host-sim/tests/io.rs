@@ -54,8 +54,8 @@ fn printing_commands() -> Vec<Vec<String>> {
     vec![
         args(&["run", &s, "--arch", "psmpa"]),
         args(&["run", &s, "--arch", "psmpa", "--json"]),
-        args(&["table1"]),
-        args(&["table1", "--json"]),
+        args(&["table1", "--shifts", "20"]),
+        args(&["table1", "--json", "--shifts", "20"]),
         args(&["sweep", "--runs", "4"]),
         args(&["check", &m]),
     ]

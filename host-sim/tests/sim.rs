@@ -20,7 +20,7 @@ fn scenario(name: &str) -> Scenario {
 
 #[test]
 fn table1_psmpa_detects_every_interference_and_smpa_fewer_and_slower() {
-    let rows = table1::compute().unwrap();
+    let rows = table1::compute(20).unwrap();
     assert_eq!(rows.len(), 6);
     for r in &rows {
         let (p, s) = (&r.psmpa, &r.smpa);
@@ -37,6 +37,23 @@ fn table1_psmpa_detects_every_interference_and_smpa_fewer_and_slower() {
             r.scenario
         );
         assert!(s.time_s > p.time_s, "{}: SMPA takes longer", r.scenario);
+        // Shifted at random, P-SMPA still never collides: its bumper is on for the whole walk.
+        let h = &r.shifted;
+        assert_eq!(h.shifts, 20);
+        assert_eq!(h.psmpa_collisions.mean, 0.0, "{}", r.scenario);
+        for i in [
+            h.psmpa_percent,
+            h.smpa_percent,
+            h.smpa_collisions,
+            h.time_ratio,
+        ] {
+            assert!(i.lo <= i.mean && i.mean <= i.hi, "{}: {i:?}", r.scenario);
+        }
+        assert!(
+            h.time_ratio.lo > 1.0,
+            "{}: SMPA stands still to sense",
+            r.scenario
+        );
         // Not asserted: the paper's SMPA counts, its P-SMPA times and the time ratio. The
         // rows' interference instants and door distances were chosen to mirror them (the
         // README says how), so asserting them would test the choice, not the runtime.

@@ -4,6 +4,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use rand_core::Rng;
+use rand_pcg::Pcg32;
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::cli::report::rate;
@@ -124,6 +127,105 @@ pub struct Row {
     pub psmpa: Ours,
     /// SMPA.
     pub smpa: Ours,
+    /// The same row with its interference instants shifted at random.
+    pub shifted: Shifted,
+}
+
+/// A mean over runs and its 95 % confidence interval (mean ± 1.96 standard errors).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Interval {
+    /// The mean.
+    pub mean: f64,
+    /// Lower end.
+    pub lo: f64,
+    /// Upper end.
+    pub hi: f64,
+}
+
+impl Interval {
+    /// Of `xs` (empty: zeros).
+    pub fn of(xs: &[f64]) -> Self {
+        let n = xs.len() as f64;
+        if xs.is_empty() {
+            return Self {
+                mean: 0.0,
+                lo: 0.0,
+                hi: 0.0,
+            };
+        }
+        let mean = xs.iter().sum::<f64>() / n;
+        let var = if xs.len() > 1 {
+            xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+        } else {
+            0.0
+        };
+        let half = 1.96 * (var / n).sqrt();
+        Self {
+            mean,
+            lo: mean - half,
+            hi: mean + half,
+        }
+    }
+}
+
+/// A row run again with every interference instant moved by one offset drawn uniformly from
+/// one SMPA cycle (`[0, sense + act)`), so that nobody chose where the instants fall in SMPA's
+/// phases; means over the shifts.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Shifted {
+    /// How many shifts.
+    pub shifts: u32,
+    /// P-SMPA: interferences detected, % of those put down (a late shift may put one
+    /// down after the robot is through the door).
+    pub psmpa_percent: Interval,
+    /// P-SMPA: collisions.
+    pub psmpa_collisions: Interval,
+    /// SMPA: interferences detected, % of those put down.
+    pub smpa_percent: Interval,
+    /// SMPA: collisions.
+    pub smpa_collisions: Interval,
+    /// SMPA's time cost over P-SMPA's, run by run.
+    pub time_ratio: Interval,
+}
+
+/// Shifts per row by default.
+pub const SHIFTS: u32 = 1000;
+
+/// The seed of the shifts: row `r`'s shift `i` draws from PCG stream `r * 2^32 + i`, so the
+/// table is the same on any number of threads.
+const SHIFT_SEED: u64 = 0x7ab1e1;
+
+fn shifted(scenario: &Scenario, row: u64, shifts: u32) -> Result<Shifted, RunError> {
+    let cycle = (scenario.sense_ms + scenario.act_ms).max(1);
+    let runs: Vec<[f64; 5]> = (0..shifts)
+        .into_par_iter()
+        .map(|i| {
+            let mut rng = Pcg32::new(SHIFT_SEED, row << 32 | u64::from(i));
+            let offset = u64::from(rng.next_u32()) % cycle;
+            let mut sc = scenario.clone();
+            for it in sc.interferences.iter_mut() {
+                it.at_ms = it.at_ms.saturating_add(offset as u32);
+            }
+            let p = run_summary(&sc, Arch::PSmpa)?;
+            let s = run_summary(&sc, Arch::Smpa)?;
+            Ok([
+                100.0 * rate(p.tally.detected, p.tally.interferences),
+                f64::from(p.tally.collisions),
+                100.0 * rate(s.tally.detected, s.tally.interferences),
+                f64::from(s.tally.collisions),
+                s.time_cost_ms as f64 / p.time_cost_ms.max(1) as f64,
+            ])
+        })
+        .collect::<Result<_, RunError>>()?;
+    let column = |k: usize| Interval::of(&runs.iter().map(|r| r[k]).collect::<Vec<_>>());
+    Ok(Shifted {
+        shifts,
+        psmpa_percent: column(0),
+        psmpa_collisions: column(1),
+        smpa_percent: column(2),
+        smpa_collisions: column(3),
+        time_ratio: column(4),
+    })
 }
 
 /// Why Table I could not be computed.
@@ -165,18 +267,20 @@ fn ours(scenario: &Scenario, arch: Arch) -> Result<Ours, RunError> {
     })
 }
 
-/// Runs the six rows under both architectures.
-pub fn compute() -> Result<Vec<Row>, TableError> {
+/// Runs the six rows under both architectures, as built and with `shifts` random shifts.
+pub fn compute(shifts: u32) -> Result<Vec<Row>, TableError> {
     let scenarios = scenarios().map_err(TableError::Load)?;
     scenarios
         .iter()
         .zip(PAPER)
-        .map(|(sc, paper)| {
+        .enumerate()
+        .map(|(i, (sc, paper))| {
             Ok(Row {
                 scenario: sc.name.as_str().to_owned(),
                 paper,
                 psmpa: ours(sc, Arch::PSmpa).map_err(TableError::Run)?,
                 smpa: ours(sc, Arch::Smpa).map_err(TableError::Run)?,
+                shifted: shifted(sc, i as u64, shifts).map_err(TableError::Run)?,
             })
         })
         .collect()
@@ -187,7 +291,7 @@ pub fn render(rows: &[Row]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "Table I reproduced: \"go to door\" under interference, ours [paper]\n"
+        "Table I, rows built to mirror the paper: \"go to door\" under interference, ours [paper]\n"
     );
     let half = |title: &str| format!("{title:^41}");
     let _ = writeln!(
@@ -235,5 +339,39 @@ pub fn render(rows: &[Row]) -> String {
         st / pt,
         pst / ppt
     );
+    let shifts = rows.first().map_or(0, |r| r.shifted.shifts);
+    let _ = writeln!(
+        out,
+        "\nThe same rows, every interference instant shifted by one offset drawn from one SMPA \
+         cycle,\n{shifts} shifts a row: mean [95 % interval]\n"
+    );
+    let _ = writeln!(
+        out,
+        "{:<7} {:>6} | {:^20} | {:^17} | {:^20} | {:^17} | {:^17}",
+        "sensor",
+        "interf",
+        "P-SMPA detected %",
+        "P-SMPA collisions",
+        "SMPA detected %",
+        "SMPA collisions",
+        "time SMPA/P-SMPA"
+    );
+    let _ = writeln!(out, "{}", "-".repeat(15 + 2 * 23 + 3 * 20));
+    let iv = |i: Interval| format!("{:.2} [{:.2}, {:.2}]", i.mean, i.lo, i.hi);
+    let pc = |i: Interval| format!("{:.1} [{:.1}, {:.1}]", i.mean, i.lo, i.hi);
+    for r in rows {
+        let h = &r.shifted;
+        let _ = writeln!(
+            out,
+            "{:<7} {:>6} | {:>20} | {:>17} | {:>20} | {:>17} | {:>17}",
+            r.paper.sensor,
+            r.psmpa.interferences,
+            pc(h.psmpa_percent),
+            iv(h.psmpa_collisions),
+            pc(h.smpa_percent),
+            iv(h.smpa_collisions),
+            iv(h.time_ratio),
+        );
+    }
     out
 }
