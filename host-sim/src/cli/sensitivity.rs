@@ -152,6 +152,9 @@ struct RunVals {
     /// Detected / detectable, over the obstacles detectable in the world's P-SMPA run;
     /// `None` when none was.
     detection: Option<f64>,
+    /// Detected / (detected + collided), over the same obstacles; `None` when the robot met
+    /// none of them (each was taken away first).
+    met: Option<f64>,
     collisions: u32,
     time_ms: u64,
     reached: bool,
@@ -159,15 +162,17 @@ struct RunVals {
 
 impl RunVals {
     fn new(s: &Summary, detectable: &[bool]) -> Self {
-        let (mut of, mut hit) = (0u32, 0u32);
+        let (mut of, mut hit, mut met) = (0u32, 0u32, 0u32);
         for (o, &d) in s.obstacles.iter().zip(detectable) {
             if d {
                 of += 1;
                 hit += u32::from(matches!(o.fate, Fate::Detected(_)));
+                met += u32::from(!matches!(o.fate, Fate::Unmet));
             }
         }
         Self {
             detection: (of > 0).then(|| f64::from(hit) / f64::from(of)),
+            met: (met > 0).then(|| f64::from(hit) / f64::from(met)),
             collisions: s.tally.collisions,
             time_ms: s.time_cost_ms,
             reached: s.tally.reached_door,
@@ -254,6 +259,9 @@ pub struct Interval {
 pub struct ArchCell {
     /// Fraction of the detectable obstacles detected, per run (runs with at least one).
     pub detection_rate: Option<Interval>,
+    /// Of those detectable obstacles the robot met (detected or collided with; not those taken
+    /// away before it came near), the fraction detected, per run that met at least one.
+    pub met_detection_rate: Option<Interval>,
     /// Collisions per run.
     pub collisions: Option<Interval>,
     /// Runs that did not reach the door within the time limit.
@@ -263,6 +271,7 @@ pub struct ArchCell {
 #[derive(Clone, Copy, Default)]
 struct ArchSums {
     detection: Moments,
+    met: Moments,
     collisions: Moments,
     not_reached: u64,
 }
@@ -272,6 +281,9 @@ impl ArchSums {
         if let Some(d) = v.detection {
             self.detection.add(d);
         }
+        if let Some(m) = v.met {
+            self.met.add(m);
+        }
         self.collisions.add(f64::from(v.collisions));
         self.not_reached += u64::from(!v.reached);
     }
@@ -279,6 +291,7 @@ impl ArchSums {
     fn cell(&self) -> ArchCell {
         ArchCell {
             detection_rate: self.detection.interval(0.0, 1.0),
+            met_detection_rate: self.met.interval(0.0, 1.0),
             collisions: self.collisions.interval(0.0, f64::INFINITY),
             not_reached: self.not_reached,
         }
@@ -500,6 +513,9 @@ pub fn paper_time_ratio() -> f64 {
 /// The sense fraction at which the paper's points are drawn (the paper does not say).
 pub const PAPER_FRACTION_PCT: u64 = 50;
 
+/// The cycle length of the Table I scenario files (1.5 s sense, 1.5 s act).
+pub const TABLE1_CYCLE_MS: u64 = 3_000;
+
 fn pct(i: Option<Interval>) -> String {
     i.map_or("-".to_owned(), |i| {
         format!(
@@ -562,6 +578,13 @@ fn render_pass(out: &mut String, pass: &Pass, heading: &str, full: bool) {
         |c| num(c.time_ratio),
     );
     if full {
+        grid(
+            out,
+            "SMPA detection rate of the detectable obstacles it met (detected or collided \
+             with), % [95 % interval]",
+            pass,
+            |c| pct(c.smpa.met_detection_rate),
+        );
         grid(out, "SMPA collisions per run [95 % interval]", pass, |c| {
             num(c.smpa.collisions)
         });
@@ -572,6 +595,16 @@ fn render_pass(out: &mut String, pass: &Pass, heading: &str, full: bool) {
         "SMPA runs that did not reach the door (left out of the time ratio): {not_reached} of {}",
         pass.cells.len() as u64 * pass.psmpa.collisions.map_or(0, |c| c.n)
     );
+    if let Some(c) = pass.cell(PAPER_FRACTION_PCT, TABLE1_CYCLE_MS) {
+        let _ = writeln!(
+            out,
+            "SMPA at the setting of the Table I scenarios (sense 50 %, cycle 3 s): detection \
+             rate {} %, collisions per run {}, time ratio {}",
+            pct(c.smpa.detection_rate),
+            num(c.smpa.collisions),
+            num(c.time_ratio)
+        );
+    }
     if let Some(c) = pass.closest() {
         let _ = writeln!(
             out,
@@ -726,6 +759,8 @@ pub fn plot(study: &Study) -> Result<String, String> {
             .x_desc("SMPA sense fraction, sense / (sense + act) (%)")
             .y_desc("detection rate (%)")
             .light_line_style(WHITE)
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.0}"))
             .draw()
             .map_err(|e| e.to_string())?;
         lines(
@@ -760,15 +795,17 @@ pub fn plot(study: &Study) -> Result<String, String> {
             .label(PAPER_LABEL)
             .legend(|(x, y)| Cross::new((x + 8, y), 5, BLACK.stroke_width(2)));
         chart
-            .draw_series(paper_detection().iter().zip(&paper_points).map(
-                |(&(sensor, _), &(px, py))| {
-                    Text::new(sensor, (px + 2.0, py + 2.5), ("sans-serif", 11))
+            .draw_series(paper_detection().iter().zip(&paper_points).enumerate().map(
+                |(k, (&(sensor, _), &(px, py)))| {
+                    // Sonar's label above its mark, bumper's below: the two nearly coincide.
+                    let dy = if k == 0 { 5.0 } else { -1.0 };
+                    Text::new(sensor, (px + 1.5, py + dy), ("sans-serif", 11))
                 },
             ))
             .map_err(|e| e.to_string())?;
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
+            .position(SeriesLabelPosition::MiddleRight)
             .background_style(WHITE.mix(0.9))
             .border_style(BLACK.mix(0.3))
             .label_font(("sans-serif", 12))
@@ -795,6 +832,7 @@ pub fn plot(study: &Study) -> Result<String, String> {
             .x_desc("SMPA sense fraction, sense / (sense + act) (%)")
             .y_desc("time ratio (SMPA s / P-SMPA s)")
             .light_line_style(WHITE)
+            .x_label_formatter(&|x| format!("{x:.0}"))
             .draw()
             .map_err(|e| e.to_string())?;
         lines(&mut chart, study, |c| c.time_ratio.map(|t| t.mean), true)?;
