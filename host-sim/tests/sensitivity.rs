@@ -40,7 +40,7 @@ fn interval(v: &Value, max: f64, what: &str) -> u64 {
     v["n"].as_u64().unwrap()
 }
 
-fn cell<'a>(pass: &'a Value, fraction: u64, cycle: u64) -> &'a Value {
+fn cell(pass: &Value, fraction: u64, cycle: u64) -> &Value {
     pass["cells"]
         .as_array()
         .unwrap()
