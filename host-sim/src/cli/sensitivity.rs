@@ -805,7 +805,7 @@ pub fn plot(study: &Study) -> Result<String, String> {
             .map_err(|e| e.to_string())?;
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::MiddleRight)
+            .position(SeriesLabelPosition::UpperRight)
             .background_style(WHITE.mix(0.9))
             .border_style(BLACK.mix(0.3))
             .label_font(("sans-serif", 12))
