@@ -147,11 +147,15 @@ enum Command {
         #[arg(long, value_enum, value_name = "ARCH", requires = "mcap")]
         mcap_arch: Option<ArchArg>,
     },
-    /// How SMPA's settings change the comparison: sense fraction 10 % to 90 % x cycle length
-    /// 0.5 s to 6 s, each cell on the same random worlds as P-SMPA, clean and with sensor
-    /// faults and read latencies. Prints SMPA's detection rate, collisions and time ratio
-    /// (SMPA / P-SMPA, over worlds where both reached the door) per cell and P-SMPA's; each
-    /// with a 95 % interval, mean ± 1.96·sd/√n over the runs.
+    /// How SMPA's settings change the comparison with P-SMPA (a sensitivity study).
+    ///
+    /// A grid of sense fraction (10 % to 90 %) x cycle length (0.5 s to 6 s), every cell on the
+    /// same random worlds, clean and again with sensor faults and read latencies. P-SMPA runs
+    /// once a world, SMPA once a world a cell. Per cell: SMPA's detection rate (of the
+    /// obstacles detectable in the world's P-SMPA run; also of those it met), collisions per
+    /// run, and the time ratio SMPA / P-SMPA over the worlds where both reached the door (the
+    /// others are left out and counted); P-SMPA's rates and collisions. Each with a 95 %
+    /// interval: mean ± 1.96·sd/√n over the runs.
     Sensitivity {
         /// Random worlds per cell (at most 100,000); each runs once under P-SMPA and once per
         /// cell under SMPA, clean and with faults.
