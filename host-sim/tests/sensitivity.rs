@@ -214,3 +214,43 @@ fn plot_writes_an_svg_with_its_legend() {
 fn names_of(dir: &std::path::Path) -> Vec<String> {
     common::names_in(dir)
 }
+
+/// Common random numbers: a world and its faulty twin differ only in the faults, and a clean
+/// world has none; every interference falls within the unhindered walk.
+#[test]
+fn a_clean_world_and_its_faulty_twin_differ_only_in_the_faults() {
+    use psmpa_sim::cli::sensitivity::{with_phases, world};
+    let mut faulty = 0;
+    for i in 0..200 {
+        let (clean, faults) = (world(9, i, false), world(9, i, true));
+        assert_eq!(clean.interferences, faults.interferences);
+        assert_eq!(
+            (clean.door_um, clean.speed_um_per_ms, clean.avoid_ms),
+            (faults.door_um, faults.speed_um_per_ms, faults.avoid_ms)
+        );
+        assert_eq!(
+            (clean.sonar.period_ms, clean.bumper_period_ms),
+            (faults.sonar.period_ms, faults.bumper_period_ms)
+        );
+        assert_eq!(clean.seed, faults.seed, "the same noise stream");
+        assert_eq!(
+            (
+                clean.sonar.noise_um,
+                clean.sonar.dropout,
+                clean.sonar.latency_ms
+            ),
+            (0, 0, 0)
+        );
+        assert_eq!(clean.bumper_latency_ms, 0);
+        faulty += u32::from(
+            faults.sonar.noise_um > 0 || faults.sonar.dropout > 0 || faults.sonar.latency_ms > 0,
+        );
+        assert!(!clean.interferences.is_empty());
+        let walk_ms = (clean.door_um / clean.speed_um_per_ms) as u32;
+        assert!(clean.interferences.iter().all(|x| x.at_ms <= walk_ms));
+        let cell = with_phases(&clean, 30, 2_000);
+        assert_eq!((cell.sense_ms, cell.act_ms), (600, 1_400));
+        assert_eq!(cell.interferences, clean.interferences);
+    }
+    assert!(faulty > 150, "faults drawn in most worlds: {faulty} of 200");
+}
