@@ -1,4 +1,4 @@
-//! The pieces of the `psmpa-sim` command line: reports, Table I, sweeps and the trace, plot and
+//! The pieces of the `psmpa-sim` command line: reports, Table I, sweeps, the sensitivity study and the trace, plot and
 //! timeline outputs, and the MCAP log for Foxglove.
 
 pub mod check;
@@ -7,5 +7,6 @@ pub mod foxglove;
 pub mod outputs;
 pub mod plan;
 pub mod report;
+pub mod sensitivity;
 pub mod sweep;
 pub mod table1;
