@@ -9,7 +9,6 @@ use std::fmt::Write as _;
 
 use indicatif::{ProgressBar, ProgressState, ProgressStyle};
 use plotters::prelude::*;
-use rand_core::Rng;
 use rand_pcg::Pcg32;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -17,7 +16,8 @@ use serde::Serialize;
 use crate::cli::table1::PAPER;
 use crate::robot::Arch;
 use crate::run::Summary;
-use crate::scenario::{Interference, Kind, Scenario, Sonar};
+use crate::cli::sweep::{obstacles, uniform};
+use crate::scenario::{Scenario, Sonar};
 use crate::sim::{RunError, run_summary};
 use crate::world::Fate;
 
@@ -43,9 +43,6 @@ const CHUNK: u64 = 4_096;
 /// The 95 % normal quantile.
 const Z95: f64 = 1.96;
 
-fn uniform(rng: &mut Pcg32, lo: u64, hi: u64) -> u64 {
-    lo + u64::from(rng.next_u32()) % (hi - lo + 1)
-}
 
 /// World `index` of the study with `seed`; with `faults`, the same world with sonar noise,
 /// dropout and read latencies drawn at random. Its SMPA phases are left at 1 s / 3 s: each
@@ -67,25 +64,7 @@ pub fn world(seed: u64, index: u64, faults: bool) -> Scenario {
     let bumper_period_ms = [10, 20, 50][uniform(r, 0, 2) as usize];
     // At least one: a world without obstacles says nothing about detection.
     let n = uniform(r, 1, 8);
-    let mut interferences = heapless::Vec::new();
-    for _ in 0..n {
-        let kind = if uniform(r, 0, 1) == 0 {
-            Kind::Box
-        } else {
-            Kind::Ball
-        };
-        let ahead_um = match kind {
-            Kind::Box => uniform(r, 150, 1_000),
-            Kind::Ball => uniform(r, 0, 300),
-        } as i64
-            * 1_000;
-        let _ = interferences.push(Interference {
-            kind,
-            at_ms: uniform(r, 0, walk_ms) as u32,
-            ahead_um: ahead_um as i32,
-            hold_ms: uniform(r, 500, 10_000) as u32,
-        });
-    }
+    let interferences = obstacles(r, n, walk_ms);
     // The sweep's faults: noise up to 30 mm and dropout up to 10 %, each in half the worlds;
     // a sonar echo of up to 40 ms and a bumper debounce of up to 5 ms.
     let noise_um = if uniform(r, 0, 1) == 0 {

@@ -11,11 +11,41 @@ use serde::Serialize;
 
 use crate::robot::Arch;
 use crate::run::Summary;
-use crate::scenario::{Interference, Kind, Scenario, Sonar};
+use crate::scenario::{Interference, Kind, MAX_INTERFERENCES, Scenario, Sonar};
 use crate::sim::{RunError, run_summary};
 
-fn uniform(rng: &mut Pcg32, lo: u64, hi: u64) -> u64 {
+/// A whole number drawn uniformly from `lo..=hi`.
+pub(crate) fn uniform(rng: &mut Pcg32, lo: u64, hi: u64) -> u64 {
     lo + u64::from(rng.next_u32()) % (hi - lo + 1)
+}
+
+/// `n` interferences put down uniformly over a walk of `walk_ms`: a box 0.15 to 1 m ahead or
+/// a ball 0 to 0.3 m ahead, held 0.5 to 10 s (the sweep's and the sensitivity study's draws).
+pub(crate) fn obstacles(
+    r: &mut Pcg32,
+    n: u64,
+    walk_ms: u64,
+) -> heapless::Vec<Interference, MAX_INTERFERENCES> {
+    let mut interferences = heapless::Vec::new();
+    for _ in 0..n {
+        let kind = if uniform(r, 0, 1) == 0 {
+            Kind::Box
+        } else {
+            Kind::Ball
+        };
+        let ahead_um = match kind {
+            Kind::Box => uniform(r, 150, 1_000),
+            Kind::Ball => uniform(r, 0, 300),
+        } as i64
+            * 1_000;
+        let _ = interferences.push(Interference {
+            kind,
+            at_ms: uniform(r, 0, walk_ms) as u32,
+            ahead_um: ahead_um as i32,
+            hold_ms: uniform(r, 500, 10_000) as u32,
+        });
+    }
+    interferences
 }
 
 /// Scenario `index` of the sweep with `seed`.
@@ -37,25 +67,7 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
         (uniform(r, 0, 100) << 32) / 1000
     };
     let n = uniform(r, 0, 8);
-    let mut interferences = heapless::Vec::new();
-    for _ in 0..n {
-        let kind = if uniform(r, 0, 1) == 0 {
-            Kind::Box
-        } else {
-            Kind::Ball
-        };
-        let ahead_um = match kind {
-            Kind::Box => uniform(r, 150, 1_000),
-            Kind::Ball => uniform(r, 0, 300),
-        } as i64
-            * 1_000;
-        let _ = interferences.push(Interference {
-            kind,
-            at_ms: uniform(r, 0, walk_ms) as u32,
-            ahead_um: ahead_um as i32,
-            hold_ms: uniform(r, 500, 10_000) as u32,
-        });
-    }
+    let interferences = obstacles(r, n, walk_ms);
     let mut name = heapless::String::new();
     let _ = core::fmt::write(&mut name, format_args!("sweep-{seed}-{index}"));
     let avoid_ms = uniform(r, 1_000, 3_000);
