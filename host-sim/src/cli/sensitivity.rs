@@ -13,10 +13,10 @@ use rand_pcg::Pcg32;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::cli::sweep::{obstacles, uniform};
 use crate::cli::table1::PAPER;
 use crate::robot::Arch;
 use crate::run::Summary;
-use crate::cli::sweep::{obstacles, uniform};
 use crate::scenario::{Scenario, Sonar};
 use crate::sim::{RunError, run_summary};
 use crate::world::Fate;
@@ -42,7 +42,6 @@ const CHUNK: u64 = 4_096;
 
 /// The 95 % normal quantile.
 const Z95: f64 = 1.96;
-
 
 /// World `index` of the study with `seed`; with `faults`, the same world with sonar noise,
 /// dropout and read latencies drawn at random. Its SMPA phases are left at 1 s / 3 s: each
