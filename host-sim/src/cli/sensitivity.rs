@@ -7,13 +7,13 @@
 
 use std::fmt::Write as _;
 
-use indicatif::{ProgressBar, ProgressState, ProgressStyle};
+use indicatif::ProgressBar;
 use plotters::prelude::*;
 use rand_pcg::Pcg32;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::cli::sweep::{obstacles, uniform};
+use crate::cli::sweep::{self, obstacles, uniform};
 use crate::cli::table1::PAPER;
 use crate::robot::Arch;
 use crate::run::Summary;
@@ -183,21 +183,21 @@ fn run_world(sc: &Scenario) -> Result<WorldVals, RunError> {
 
 /// Running sums of one quantity, added in world order.
 #[derive(Clone, Copy, Debug, Default)]
-struct Moments {
+pub(crate) struct Moments {
     n: u64,
     sum: f64,
     sum_sq: f64,
 }
 
 impl Moments {
-    fn add(&mut self, x: f64) {
+    pub(crate) fn add(&mut self, x: f64) {
         self.n += 1;
         self.sum += x;
         self.sum_sq += x * x;
     }
 
     /// Mean ± 1.96 sd/√n, clamped to `[lo_bound, hi_bound]`; `None` without data.
-    fn interval(&self, lo_bound: f64, hi_bound: f64) -> Option<Interval> {
+    pub(crate) fn interval(&self, lo_bound: f64, hi_bound: f64) -> Option<Interval> {
         if self.n == 0 {
             return None;
         }
@@ -405,29 +405,13 @@ impl PassSums {
     }
 }
 
-fn progress_bar(len: u64) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    if let Ok(style) = ProgressStyle::with_template(
-        "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} runs ({rate}/s, eta {eta})",
-    ) {
-        // indicatif's `{per_sec}` prints every digit it has: a whole number.
-        bar.set_style(style.with_key(
-            "rate",
-            |state: &ProgressState, w: &mut dyn std::fmt::Write| {
-                let _ = write!(w, "{:.0}", state.per_sec());
-            },
-        ));
-    }
-    bar
-}
-
 /// Runs the study: `runs` worlds, each under P-SMPA once and under SMPA in every cell, clean
 /// and with faults, in parallel; a progress bar on stderr when `progress` (indicatif hides it
 /// when stderr is not a terminal).
 pub fn study(seed: u64, runs: u64, progress: bool) -> Result<Study, RunError> {
     let per_world = 1 + CELLS as u64;
     let bar = if progress {
-        progress_bar(2 * runs * per_world)
+        sweep::progress_bar(2 * runs * per_world, "runs")
     } else {
         ProgressBar::hidden()
     };

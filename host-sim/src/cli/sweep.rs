@@ -301,6 +301,24 @@ impl Partial {
     }
 }
 
+/// A progress bar over `len` items called `unit`, with a whole-number rate.
+pub(crate) fn progress_bar(len: u64, unit: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    let template = format!(
+        "{{spinner}} [{{elapsed_precise}}] {{wide_bar}} {{pos}}/{{len}} {unit} ({{rate}}/s, eta {{eta}})"
+    );
+    if let Ok(style) = ProgressStyle::with_template(&template) {
+        // indicatif's `{per_sec}` prints every digit it has (`658.6149/s`): a whole number.
+        bar.set_style(style.with_key(
+            "rate",
+            |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = write!(w, "{:.0}", state.per_sec());
+            },
+        ));
+    }
+    bar
+}
+
 /// Runs `runs` scenarios from `seed` under `arches` (in parallel), with a progress bar when
 /// `progress`. Memory holds the totals and one ratio a scenario, not the runs.
 pub fn sweep(
@@ -310,19 +328,7 @@ pub fn sweep(
     progress: bool,
 ) -> Result<SweepStats, RunError> {
     let bar = if progress {
-        let bar = ProgressBar::new(runs);
-        if let Ok(style) = ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} scenarios ({rate}/s, eta {eta})",
-        ) {
-            // indicatif's `{per_sec}` prints every digit it has (`658.6149/s`): a whole number.
-            bar.set_style(style.with_key(
-                "rate",
-                |state: &ProgressState, w: &mut dyn std::fmt::Write| {
-                    let _ = write!(w, "{:.0}", state.per_sec());
-                },
-            ));
-        }
-        bar
+        progress_bar(runs, "scenarios")
     } else {
         ProgressBar::hidden()
     };

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::cli::report::rate;
+use crate::cli::sensitivity::{Interval, Moments};
 use crate::load::{LoadError, parse};
 use crate::robot::Arch;
 use crate::scenario::Scenario;
@@ -131,43 +132,6 @@ pub struct Row {
     pub shifted: Shifted,
 }
 
-/// A mean over runs and its 95 % confidence interval (mean ± 1.96 standard errors).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Interval {
-    /// The mean.
-    pub mean: f64,
-    /// Lower end.
-    pub lo: f64,
-    /// Upper end.
-    pub hi: f64,
-}
-
-impl Interval {
-    /// Of `xs` (empty: zeros).
-    pub fn of(xs: &[f64]) -> Self {
-        let n = xs.len() as f64;
-        if xs.is_empty() {
-            return Self {
-                mean: 0.0,
-                lo: 0.0,
-                hi: 0.0,
-            };
-        }
-        let mean = xs.iter().sum::<f64>() / n;
-        let var = if xs.len() > 1 {
-            xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
-        } else {
-            0.0
-        };
-        let half = 1.96 * (var / n).sqrt();
-        Self {
-            mean,
-            lo: mean - half,
-            hi: mean + half,
-        }
-    }
-}
-
 /// A row run again with every interference instant moved by one offset drawn uniformly from
 /// one SMPA cycle (`[0, sense + act)`), so that nobody chose where the instants fall in SMPA's
 /// phases; means over the shifts.
@@ -217,14 +181,24 @@ fn shifted(scenario: &Scenario, row: u64, shifts: u32) -> Result<Shifted, RunErr
             ])
         })
         .collect::<Result<_, RunError>>()?;
-    let column = |k: usize| Interval::of(&runs.iter().map(|r| r[k]).collect::<Vec<_>>());
+    // Mean ± 1.96 standard errors, within each quantity's range (as the sensitivity study).
+    let column = |k: usize, hi: f64| {
+        let mut m = Moments::default();
+        runs.iter().for_each(|r| m.add(r[k]));
+        m.interval(0.0, hi).unwrap_or(Interval {
+            mean: 0.0,
+            lo: 0.0,
+            hi: 0.0,
+            n: 0,
+        })
+    };
     Ok(Shifted {
         shifts,
-        psmpa_percent: column(0),
-        psmpa_collisions: column(1),
-        smpa_percent: column(2),
-        smpa_collisions: column(3),
-        time_ratio: column(4),
+        psmpa_percent: column(0, 100.0),
+        psmpa_collisions: column(1, f64::INFINITY),
+        smpa_percent: column(2, 100.0),
+        smpa_collisions: column(3, f64::INFINITY),
+        time_ratio: column(4, f64::INFINITY),
     })
 }
 
