@@ -87,6 +87,13 @@ pub struct SonarFile {
     /// How long a sample takes, from its start to its result, ms (whole, 0 to 1000).
     #[serde(default, deserialize_with = "number")]
     pub latency_ms: Option<f64>,
+    /// Extension: how high the sonar sits, m; 0 (the default) sees every box at any distance.
+    #[serde(default, deserialize_with = "number")]
+    pub height_m: Option<f64>,
+    /// Extension: how far the cone's lower edge drops per metre ahead (0 to 100, default 0.5):
+    /// a box lower than the sonar is seen only from `(height_m - box height) / cone_slope` on.
+    #[serde(default, deserialize_with = "number")]
+    pub cone_slope: Option<f64>,
 }
 
 /// `bumper` as written in the file.
@@ -99,6 +106,10 @@ pub struct BumperFile {
     /// How long a sample takes, from its start to its result, ms (whole, 0 to 1000).
     #[serde(default, deserialize_with = "number")]
     pub latency_ms: Option<f64>,
+    /// Extension: how long a contact must last before a sample feels it, ms (whole, 0 to
+    /// 1000; default 0).
+    #[serde(default, deserialize_with = "number")]
+    pub min_contact_ms: Option<f64>,
 }
 
 /// `smpa` as written in the file.
@@ -165,6 +176,14 @@ pub struct InterferenceFile {
     /// After how long the person takes it away again, s (default 4.0).
     #[serde(default, deserialize_with = "number")]
     pub hold_s: Option<f64>,
+    /// Extension: the obstacle walks towards the robot along its path at this speed while it
+    /// is there, until it touches the robot, m/s (0 to 10, default 0).
+    #[serde(default, deserialize_with = "number")]
+    pub speed_mps: Option<f64>,
+    /// Extension: its height, for the sonar cone, m (0 to 10; default 0.8 for a box, 0.1 for
+    /// a ball).
+    #[serde(default, deserialize_with = "number")]
+    pub height_m: Option<f64>,
 }
 
 /// A scenario file as written, before validation.
@@ -250,6 +269,10 @@ pub struct Sonar {
     pub dropout: u64,
     /// How long a sample takes, ms.
     pub latency_ms: u64,
+    /// How high it sits, µm (0: it sees every box).
+    pub height_um: i64,
+    /// The cone's lower edge drops this many thousandths of a metre per metre ahead.
+    pub cone_slope_permille: i64,
 }
 
 impl Sonar {
@@ -262,6 +285,20 @@ impl Sonar {
     /// obstacle when it is above 0 (0 is a switched-off sonar) and below the threshold.
     pub const fn registers(&self, mm: i64) -> bool {
         mm > 0 && mm < self.threshold_mm()
+    }
+
+    /// From how far the cone takes in a box `height_um` high, µm: 0 for one as high as the
+    /// sonar, `i64::MAX` for a lower one under a level cone.
+    pub fn seen_from_um(&self, height_um: i64) -> i64 {
+        let below = self.height_um - height_um;
+        if below <= 0 {
+            0
+        } else if self.cone_slope_permille <= 0 {
+            i64::MAX
+        } else {
+            // Whole µm, rounded up: below that the edge still passes above the box.
+            (below * 1000 + self.cone_slope_permille - 1) / self.cone_slope_permille
+        }
     }
 }
 
@@ -281,6 +318,10 @@ pub struct Interference {
     pub ahead_um: i32,
     /// How long until a person takes it away, ms.
     pub hold_ms: u32,
+    /// How fast it walks towards the robot while there, µm per ms (= mm/s; at most 10,000).
+    pub speed_um_per_ms: u16,
+    /// Its height, µm.
+    pub height_um: u32,
 }
 
 /// A validated scenario in integer units.
@@ -315,6 +356,8 @@ pub struct Scenario {
     pub bumper_period_ms: u64,
     /// How long a bumper sample takes, ms.
     pub bumper_latency_ms: u64,
+    /// How long a contact must last before a bumper sample feels it, ms.
+    pub bumper_min_contact_ms: u64,
     /// SMPA sense phase, ms.
     pub sense_ms: u64,
     /// SMPA act phase, ms.
@@ -329,10 +372,12 @@ pub struct Scenario {
     pub interferences: Vec<Interference, MAX_INTERFERENCES>,
 }
 
-/// The canonical sonar: `[period, min, max, threshold, noise, dropout, latency]`.
-type SonarRow = (u64, i64, i64, i64, i64, u64, u64);
-/// A canonical interference: `[kind, at, ahead, hold]`, kind 0 for a box, 1 for a ball.
-type InterferenceRow = (u8, u32, i32, u32);
+/// The canonical sonar: `[period, min, max, threshold, noise, dropout, latency, height,
+/// cone slope]`.
+type SonarRow = (u64, i64, i64, i64, i64, u64, u64, i64, i64);
+/// A canonical interference: `[kind, at, ahead, hold, speed, height]`, kind 0 for a box, 1
+/// for a ball.
+type InterferenceRow = (u8, u32, i32, u32, u16, u32);
 
 impl Kind {
     const fn code(self) -> u8 {
@@ -374,6 +419,8 @@ impl Serialize for Scenario {
             o.noise_um,
             o.dropout,
             o.latency_ms,
+            o.height_um,
+            o.cone_slope_permille,
         );
         let mut t = serializer.serialize_tuple(CANONICAL_FIELDS)?;
         t.serialize_element(self.name.as_str())?;
@@ -387,6 +434,7 @@ impl Serialize for Scenario {
         t.serialize_element(&sonar)?;
         t.serialize_element(&self.bumper_period_ms)?;
         t.serialize_element(&self.bumper_latency_ms)?;
+        t.serialize_element(&self.bumper_min_contact_ms)?;
         t.serialize_element(&self.sense_ms)?;
         t.serialize_element(&self.act_ms)?;
         t.serialize_element(&self.door_locked)?;
@@ -402,16 +450,21 @@ struct Rows<'v>(&'v [Interference]);
 
 impl Serialize for Rows<'_> {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        serializer.collect_seq(
-            self.0
-                .iter()
-                .map(|i| -> InterferenceRow { (i.kind.code(), i.at_ms, i.ahead_um, i.hold_ms) }),
-        )
+        serializer.collect_seq(self.0.iter().map(|i| -> InterferenceRow {
+            (
+                i.kind.code(),
+                i.at_ms,
+                i.ahead_um,
+                i.hold_ms,
+                i.speed_um_per_ms,
+                i.height_um,
+            )
+        }))
     }
 }
 
 /// Elements of the canonical array.
-const CANONICAL_FIELDS: usize = 17;
+const CANONICAL_FIELDS: usize = 18;
 
 /// Fills a scenario from its canonical form, element by element.
 struct Fill<'s>(&'s mut Scenario);
@@ -447,8 +500,17 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
         s.avoid_ms = element(&mut seq, 5)?;
         s.slow_um = element(&mut seq, 6)?;
         s.plan_us = element(&mut seq, 7)?;
-        let (period_ms, min_um, max_um, threshold_um, noise_um, dropout, latency_ms): SonarRow =
-            element(&mut seq, 8)?;
+        let (
+            period_ms,
+            min_um,
+            max_um,
+            threshold_um,
+            noise_um,
+            dropout,
+            latency_ms,
+            height_um,
+            cone_slope_permille,
+        ): SonarRow = element(&mut seq, 8)?;
         s.sonar = Sonar {
             period_ms,
             min_um,
@@ -457,14 +519,17 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
             noise_um,
             dropout,
             latency_ms,
+            height_um,
+            cone_slope_permille,
         };
         s.bumper_period_ms = element(&mut seq, 9)?;
         s.bumper_latency_ms = element(&mut seq, 10)?;
-        s.sense_ms = element(&mut seq, 11)?;
-        s.act_ms = element(&mut seq, 12)?;
-        s.door_locked = element(&mut seq, 13)?;
-        s.back_door_um = element(&mut seq, 14)?;
-        let fault: Option<(u8, u32)> = element(&mut seq, 15)?;
+        s.bumper_min_contact_ms = element(&mut seq, 11)?;
+        s.sense_ms = element(&mut seq, 12)?;
+        s.act_ms = element(&mut seq, 13)?;
+        s.door_locked = element(&mut seq, 14)?;
+        s.back_door_um = element(&mut seq, 15)?;
+        let fault: Option<(u8, u32)> = element(&mut seq, 16)?;
         s.fault = match fault {
             Some((code, at)) => Some((
                 FaultKind::from_code(code).ok_or_else(|| {
@@ -476,10 +541,10 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
         };
         s.interferences.clear();
         seq.next_element_seed(Items(&mut s.interferences))?
-            .ok_or_else(|| serde::de::Error::invalid_length(16, &"a canonical scenario"))?;
+            .ok_or_else(|| serde::de::Error::invalid_length(17, &"a canonical scenario"))?;
         if seq.next_element::<serde::de::IgnoredAny>()?.is_some() {
             return Err(serde::de::Error::invalid_length(
-                18,
+                CANONICAL_FIELDS + 1,
                 &"a canonical scenario",
             ));
         }
@@ -503,7 +568,9 @@ impl<'de> serde::de::Visitor<'de> for Items<'_> {
         write!(f, "at most {MAX_INTERFERENCES} interferences")
     }
     fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
-        while let Some((kind, at_ms, ahead_um, hold_ms)) = seq.next_element::<InterferenceRow>()? {
+        while let Some((kind, at_ms, ahead_um, hold_ms, speed_um_per_ms, height_um)) =
+            seq.next_element::<InterferenceRow>()?
+        {
             let kind = match kind {
                 0 => Kind::Box,
                 1 => Kind::Ball,
@@ -514,6 +581,8 @@ impl<'de> serde::de::Visitor<'de> for Items<'_> {
                 at_ms,
                 ahead_um,
                 hold_ms,
+                speed_um_per_ms,
+                height_um,
             };
             self.0
                 .push(item)
@@ -819,6 +888,29 @@ fn metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
     Ok((value * 1_000_000.0 + 0.5) as i64)
 }
 
+/// Tallest obstacle or highest sonar, m.
+const MAX_HEIGHT_M: f64 = 10.0;
+/// Steepest sonar cone edge, m per m.
+const MAX_CONE_SLOPE: f64 = 100.0;
+/// Fastest moving obstacle, m/s.
+const MAX_SPEED_MPS: f64 = 10.0;
+
+/// A real number from 0 to `max`, in millionths (µm for metres).
+fn up_to(field: Field, value: f64, max: f64) -> Result<i64, ScenarioError> {
+    if value < 0.0 {
+        return Err(invalid(field, Problem::Negative(value)));
+    }
+    if !value.is_finite() || value > max {
+        let problem = Problem::OutOfRange {
+            value,
+            min: 0.0,
+            max,
+        };
+        return Err(invalid(field, problem));
+    }
+    Ok((value * 1_000_000.0 + 0.5) as i64)
+}
+
 /// A number of seconds that is at least 1 ms.
 fn positive_seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
     let ms = seconds(field, value)?;
@@ -873,10 +965,13 @@ impl Scenario {
             noise_m: Some(0.0),
             dropout: Some(0.0),
             latency_ms: Some(0.0),
+            height_m: Some(0.0),
+            cone_slope: Some(0.5),
         }),
         bumper: Some(BumperFile {
             period_ms: Some(20.0),
             latency_ms: Some(0.0),
+            min_contact_ms: Some(0.0),
         }),
         smpa: Some(SmpaFile {
             sense_ms: Some(1000.0),
@@ -923,9 +1018,12 @@ impl Scenario {
                 noise_um: 0,
                 dropout: 0,
                 latency_ms: 0,
+                height_um: 0,
+                cone_slope_permille: 0,
             },
             bumper_period_ms: 0,
             bumper_latency_ms: 0,
+            bumper_min_contact_ms: 0,
             sense_ms: 0,
             act_ms: 0,
             door_locked: false,
@@ -1034,6 +1132,16 @@ impl Scenario {
                 Field::of("sonar", "latency_ms"),
                 pick(s.latency_ms, ds.latency_ms),
             )?,
+            height_um: up_to(
+                Field::of("sonar", "height_m"),
+                pick(s.height_m, ds.height_m),
+                MAX_HEIGHT_M,
+            )?,
+            cone_slope_permille: up_to(
+                Field::of("sonar", "cone_slope"),
+                pick(s.cone_slope, ds.cone_slope),
+                MAX_CONE_SLOPE,
+            )? / 1000,
         };
         if sonar.max_um <= sonar.min_um {
             return Err(invalid(
@@ -1058,6 +1166,10 @@ impl Scenario {
         let bumper_latency_ms = latency(
             Field::of("bumper", "latency_ms"),
             pick(b.latency_ms, db.latency_ms),
+        )?;
+        let bumper_min_contact_ms = latency(
+            Field::of("bumper", "min_contact_ms"),
+            pick(b.min_contact_ms, db.min_contact_ms),
         )?;
         let slow_um = metres(Field::of("robot", "slow_m"), pick(r.slow_m, dr.slow_m))?;
         let plan_us = {
@@ -1089,9 +1201,9 @@ impl Scenario {
                 name,
             };
             let kind = i.kind.unwrap_or(Kind::Box);
-            let default_ahead = match kind {
-                Kind::Box => 0.45,
-                Kind::Ball => 0.05,
+            let (default_ahead, default_height) = match kind {
+                Kind::Box => (0.45, 0.8),
+                Kind::Ball => (0.05, 0.1),
             };
             // Within range of 32 bits: times are at most a day, distances at most 1 km.
             let item = Interference {
@@ -1099,6 +1211,17 @@ impl Scenario {
                 at_ms: seconds(at("at_s"), i.at_s.unwrap_or(3.0))? as u32,
                 ahead_um: metres(at("ahead_m"), i.ahead_m.unwrap_or(default_ahead))? as i32,
                 hold_ms: seconds(at("hold_s"), i.hold_s.unwrap_or(4.0))? as u32,
+                // µm per ms is mm/s: up_to's µm / 1000.
+                speed_um_per_ms: (up_to(
+                    at("speed_mps"),
+                    i.speed_mps.unwrap_or(0.0),
+                    MAX_SPEED_MPS,
+                )? / 1000) as u16,
+                height_um: up_to(
+                    at("height_m"),
+                    i.height_m.unwrap_or(default_height),
+                    MAX_HEIGHT_M,
+                )? as u32,
             };
             // Cannot overflow: the file held at most MAX_INTERFERENCES.
             let _ = interferences.push(item);
@@ -1115,6 +1238,7 @@ impl Scenario {
             sonar,
             bumper_period_ms,
             bumper_latency_ms,
+            bumper_min_contact_ms,
             sense_ms,
             act_ms,
             door_locked,

@@ -38,7 +38,7 @@ use rand_pcg::Pcg32;
 
 use psmpa_core::TraceHash;
 
-use crate::scenario::{FaultKind, Kind, MAX_INTERFERENCES, Scenario, to_mm};
+use crate::scenario::{FaultKind, Interference, Kind, MAX_INTERFERENCES, Scenario, to_mm};
 
 /// The world's devices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -226,10 +226,6 @@ pub enum Fate {
 #[derive(Clone, Copy, Debug)]
 struct Obstacle {
     kind: Kind,
-    // 32 bits: a scenario spans at most a day, and puts obstacles at most 1 km ahead.
-    at_ms: u32,
-    ahead_um: i32,
-    hold_ms: u32,
     pos_um: i64,
     phase: Phase,
     fate: Fate,
@@ -239,6 +235,16 @@ struct Obstacle {
     certain_samples: u16,
     /// Some active sensor has registered it (also after a collision): a side step can aim at it.
     sensed: bool,
+    /// How fast it walks towards the robot until it touches it, µm per ms.
+    speed: u16,
+    /// From how far the sonar's cone takes it in, µm ([`Sonar::seen_from_um`]; `i32::MAX`:
+    /// never). 32 bits, as its when and where stay in the scenario: the world's state keeps
+    /// the size it had before the cone.
+    ///
+    /// [`Sonar::seen_from_um`]: crate::scenario::Sonar::seen_from_um
+    seen_from_um: i32,
+    /// Since when the robot has touched it.
+    touch_since: Option<u32>,
 }
 
 /// A box at `d` µm in range registers whatever the noise: both ends of the noise band do.
@@ -256,10 +262,21 @@ impl Obstacle {
         self.phase == Phase::Present
     }
 
-    fn removal_ms(&self) -> u64 {
-        u64::from(self.at_ms) + u64::from(self.hold_ms)
+    fn walks(&self) -> i64 {
+        i64::from(self.speed)
+    }
+
+    fn seen_from(&self) -> i64 {
+        i64::from(self.seen_from_um)
     }
 }
+
+/// When interference `i` is taken away, ms.
+fn removal_ms(i: &Interference) -> u64 {
+    u64::from(i.at_ms) + u64::from(i.hold_ms)
+}
+
+impl Obstacle {}
 
 /// What the robot's legs do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -343,6 +360,11 @@ struct State<L> {
     obstacles: Vec<Obstacle, MAX_INTERFERENCES>,
     /// The obstacles present, by index (kept by `set_phase`): the only ones the physics acts on.
     present: u32,
+    /// The obstacles that walk, by index.
+    walkers: u32,
+    /// When a contact becomes long enough for the bumper to feel (`u64::MAX`: none pending):
+    /// the certainty pass must run then, though nothing else changed.
+    recheck_ms: u64,
     /// The earliest appearance or removal due (`u64::MAX`: none), or 0 while unknown (`settle`
     /// then searches).
     due_ms: u64,
@@ -475,27 +497,33 @@ impl<L: WorldLog> State<L> {
         bits(self.present).filter_map(|i| self.obstacles.get(i).map(|o| (i, o)))
     }
 
-    fn touching(&self, o: &Obstacle) -> bool {
-        o.blocks() && o.pos_um <= self.pos_um
+    /// Whether a bumper sample now feels `o`: touched for at least the bumper's minimum
+    /// contact.
+    fn felt(&self, o: &Obstacle, sc: &Scenario) -> bool {
+        o.blocks()
+            && o.pos_um <= self.pos_um
+            && o.touch_since
+                .is_some_and(|t| self.now.saturating_sub(u64::from(t)) >= sc.bumper_min_contact_ms)
     }
 
-    /// Whether an active sensor's next sample registers a present obstacle of `kind` at
-    /// `pos_um` whatever the noise; `nearest` is [`nearest_box`](Self::nearest_box).
-    fn certain(&self, kind: Kind, pos_um: i64, sc: &Scenario, nearest: Option<i64>) -> bool {
-        let d = pos_um - self.pos_um;
-        let sonar = self.on[0]
-            && kind == Kind::Box
+    /// Whether an active sonar's next sample registers `o` whatever the noise; `nearest` is
+    /// [`nearest_box`](Self::nearest_box).
+    fn sonar_certain(&self, o: &Obstacle, sc: &Scenario, nearest: Option<i64>) -> bool {
+        let d = o.pos_um - self.pos_um;
+        self.on[0]
+            && o.kind == Kind::Box
             && nearest == Some(d)
+            && d >= o.seen_from()
             && (sc.sonar.min_um..=sc.sonar.max_um).contains(&d)
-            && certain_at(&sc.sonar, d);
-        let bumper = self.on[1] && pos_um <= self.pos_um;
-        sonar || bumper
+            && certain_at(&sc.sonar, d)
     }
 
+    /// The distance to the nearest box ahead that the sonar's cone takes in.
     fn nearest_box(&self) -> Option<i64> {
         self.present_obstacles()
-            .filter(|(_, o)| o.kind == Kind::Box && o.pos_um >= self.pos_um)
-            .map(|(_, o)| o.pos_um - self.pos_um)
+            .map(|(_, o)| (o, o.pos_um - self.pos_um))
+            .filter(|&(o, d)| o.kind == Kind::Box && d >= 0 && d >= o.seen_from())
+            .map(|(_, d)| d)
             .min()
     }
 
@@ -527,33 +555,42 @@ impl<L: WorldLog> State<L> {
         let due = if self.due_ms > now {
             self.due_ms
         } else {
-            self.first_due(now.saturating_add(1))
+            self.first_due(sc, now.saturating_add(1))
         };
         if due != u64::MAX {
             consider(due);
         }
         let speed = self.speed(sc);
-        if self.moving() && speed > 0 {
-            let limit = self.limit_um();
-            if limit > self.pos_um {
-                consider(now.saturating_add(div_ceil(limit - self.pos_um, speed)));
+        let walking = if self.moving() { speed.max(0) } else { 0 };
+        if walking > 0 && self.target_um > self.pos_um {
+            consider(now.saturating_add(div_ceil(self.target_um - self.pos_um, walking)));
+        }
+        // The reading rounds below the threshold once d < threshold_mm - 0.5 mm.
+        let below = sc.sonar.threshold_mm() * 1000 - 500;
+        for (_, o) in self.present_obstacles() {
+            let d = o.pos_um - self.pos_um;
+            // An obstacle stops walking once it touches the robot.
+            let closing = walking + if d > 0 { o.walks() } else { 0 };
+            if closing <= 0 {
+                continue;
             }
-            if self.on[0] {
-                // A box ahead enters the sonar threshold, then the blind zone below min_m.
-                // The reading rounds below the threshold once d < threshold_mm - 0.5 mm.
-                let below = sc.sonar.threshold_mm() * 1000 - 500;
-                for (_, o) in self.present_obstacles() {
-                    let d = o.pos_um - self.pos_um;
-                    if o.kind == Kind::Box && o.fate == Fate::Unmet {
-                        for edge in [below, sc.sonar.min_um] {
-                            if d >= edge {
-                                let dt = (d - edge) / speed + 1;
-                                consider(now.saturating_add(dt as u64));
-                            }
-                        }
+            // Contact.
+            consider(now.saturating_add(div_ceil(d, closing)));
+            if self.on[0] && o.kind == Kind::Box && o.fate == Fate::Unmet {
+                // A box ahead enters the sonar threshold, then the blind zone below min_m,
+                // and a low one leaves the cone.
+                let cone = if o.seen_from() > 0 { o.seen_from() } else { -1 };
+                for edge in [below, sc.sonar.min_um, cone] {
+                    if edge >= 0 && d >= edge {
+                        let dt = (d - edge) / closing + 1;
+                        consider(now.saturating_add(dt as u64));
                     }
                 }
             }
+        }
+        // A contact that becomes long enough for the bumper to feel.
+        if self.recheck_ms != u64::MAX {
+            consider(self.recheck_ms);
         }
         if let Motion::Avoiding { left_ms, .. } = self.motion {
             if !self.held {
@@ -576,6 +613,17 @@ impl<L: WorldLog> State<L> {
             let limit = self.limit_um();
             self.pos_um = self.pos_um.saturating_add(step).min(limit).max(self.pos_um);
         }
+        if self.walkers & self.present != 0 {
+            // Obstacles that walk towards the robot, up to it.
+            let pos = self.pos_um;
+            for i in bits(self.walkers & self.present) {
+                if let Some(o) = self.obstacles.get_mut(i) {
+                    let step = o.walks().saturating_mul(dt as i64);
+                    o.pos_um = o.pos_um.saturating_sub(step).max(pos);
+                }
+            }
+            self.looked_how = 0;
+        }
         if let Motion::Avoiding { left_ms, target } = self.motion {
             if !self.held {
                 self.motion = Motion::Avoiding {
@@ -593,6 +641,7 @@ impl<L: WorldLog> State<L> {
         // Most settles find nothing due and nothing moved: told here, without a call.
         if matches!(self.motion, Motion::Avoiding { left_ms: 0, .. })
             || self.due_ms <= self.now
+            || self.recheck_ms <= self.now
             || !self.looked()
         {
             self.apply(sc);
@@ -630,15 +679,23 @@ impl<L: WorldLog> State<L> {
             0
         };
         for i in 0..due {
-            let Some(o) = self.obstacles.get(i) else {
+            let (Some(o), Some(item)) = (self.obstacles.get(i), sc.interferences.get(i)) else {
                 continue;
             };
-            let (kind, ahead_um) = (o.kind, o.ahead_um);
+            let (kind, ahead_um) = (o.kind, item.ahead_um);
             let index = i as u8;
-            if o.phase == Phase::Present && o.removal_ms() <= now {
+            if o.phase == Phase::Present && removal_ms(item) <= now {
+                // Touched and gone before any sensor registered it: the robot never knew.
+                let unnoticed = o.fate == Fate::Unmet && o.touch_since.is_some();
+                if unnoticed {
+                    if let Some(o) = self.obstacles.get_mut(i) {
+                        o.fate = Fate::Collided;
+                    }
+                    self.emit(WorldEvent::Collided(index));
+                }
                 self.set_phase(i, Phase::Removed);
                 self.emit(WorldEvent::Removed(index));
-            } else if o.phase == Phase::Pending && u64::from(o.at_ms) <= now {
+            } else if o.phase == Phase::Pending && u64::from(item.at_ms) <= now {
                 if self.at_door_ms.is_some() {
                     self.set_phase(i, Phase::Skipped);
                     self.emit(WorldEvent::Skipped(index));
@@ -653,32 +710,43 @@ impl<L: WorldLog> State<L> {
             }
         }
         if due > 0 {
-            self.due_ms = self.first_due(0);
+            self.due_ms = self.first_due(sc, 0);
         }
         // The certainty pass depends on the position, `how` and the obstacles only, and a second
         // run on the same ones changes nothing (a fate changed elsewhere leaves `Unmet` for
         // good, out of its reach): then skip it.
-        if self.looked() {
+        if self.looked() && self.recheck_ms > now {
             return;
         }
         (self.looked_um, self.looked_how) = (self.pos_um, self.how());
+        self.recheck_ms = u64::MAX;
         // Obstacles not present are neither touched nor certain (`set_phase` ended their
         // certain interval).
         let nearest = self.nearest_box();
         for i in bits(self.present) {
-            let Some(&Obstacle {
-                kind,
-                pos_um,
-                fate: Fate::Unmet,
-                ..
-            }) = self.obstacles.get(i)
-            else {
+            let Some(o) = self.obstacles.get_mut(i) else {
+                continue;
+            };
+            // Contact lasts while it is there: the robot cannot walk through it.
+            let new_touch = o.pos_um <= self.pos_um && o.touch_since.is_none();
+            if new_touch {
+                o.touch_since = Some(ms32(now));
+            }
+            if let Some(t) = o.touch_since {
+                let felt_at = u64::from(t).saturating_add(sc.bumper_min_contact_ms);
+                if felt_at > now {
+                    self.recheck_ms = self.recheck_ms.min(felt_at);
+                }
+            }
+            let Some(o) = self.obstacles.get(i).filter(|o| o.fate == Fate::Unmet) else {
                 continue;
             };
             // Walking into an obstacle nothing registered, with the bumper off, is a
-            // collision; with the bumper on, the next bumper sample registers the touch.
-            let collided = pos_um <= self.pos_um && !self.on[1] && self.moving();
-            let certain = self.certain(kind, pos_um, sc, nearest);
+            // collision; with the bumper on, the next bumper sample registers the touch. One
+            // that walks into the robot unregistered hits it, whatever the bumper.
+            let collided = o.pos_um <= self.pos_um
+                && ((!self.on[1] && self.moving()) || (new_touch && o.speed > 0));
+            let certain = self.sonar_certain(o, sc, nearest) || (self.on[1] && self.felt(o, sc));
             let Some(o) = self.obstacles.get_mut(i) else {
                 continue;
             };
@@ -720,12 +788,12 @@ impl<L: WorldLog> State<L> {
     }
 
     /// The earliest appearance or removal due at `from` or later; `u64::MAX`: none.
-    fn first_due(&self, from: u64) -> u64 {
+    fn first_due(&self, sc: &Scenario, from: u64) -> u64 {
         let mut first = u64::MAX;
-        for o in &self.obstacles {
+        for (o, item) in self.obstacles.iter().zip(&sc.interferences) {
             let t = match o.phase {
-                Phase::Pending => u64::from(o.at_ms),
-                Phase::Present => o.removal_ms(),
+                Phase::Pending => u64::from(item.at_ms),
+                Phase::Present => removal_ms(item),
                 _ => continue,
             };
             if t >= from {
@@ -825,6 +893,8 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 gaps: [Gaps::default(); 4],
                 obstacles: Vec::new(),
                 present: 0,
+                walkers: 0,
+                recheck_ms: u64::MAX,
                 due_ms: 0,
                 looked_um: 0,
                 looked_how: 0,
@@ -840,14 +910,17 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
             })),
         };
         // Pushed in place: a collected vector would be one more copy of it in this frame.
-        let obstacles = &mut world.state.get_mut().get_mut().obstacles;
+        let state = world.state.get_mut().get_mut();
+        for (n, i) in scenario.interferences.iter().enumerate() {
+            if i.speed_um_per_ms > 0 {
+                state.walkers |= 1 << n;
+            }
+        }
+        let obstacles = &mut state.obstacles;
         for i in &scenario.interferences {
             // The same capacity as the scenario's: room for each.
             let _ = obstacles.push(Obstacle {
                 kind: i.kind,
-                at_ms: i.at_ms,
-                ahead_um: i.ahead_um,
-                hold_ms: i.hold_ms,
                 pos_um: 0,
                 phase: Phase::Pending,
                 fate: Fate::Unmet,
@@ -855,6 +928,10 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 reaction_ms: None,
                 certain_samples: 0,
                 sensed: false,
+                speed: i.speed_um_per_ms,
+                seen_from_um: i32::try_from(scenario.sonar.seen_from_um(i64::from(i.height_um)))
+                    .unwrap_or(i32::MAX),
+                touch_since: None,
             });
         }
         world
@@ -1102,7 +1179,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 let registered = sonar.registers(mm);
                 // Every box at that distance is what the echo came from.
                 for (i, o) in s.present_obstacles() {
-                    if o.kind == Kind::Box && o.pos_um - s.pos_um == d {
+                    if o.kind == Kind::Box && o.pos_um - s.pos_um == d && d >= o.seen_from() {
                         echo.certain |= u32::from(certain) << i;
                         echo.registers |= u32::from(registered) << i;
                     }
@@ -1148,12 +1225,12 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// Starts a bumper read: what the robot touches now.
     pub fn bumper_read(&self) -> Touch {
-        self.with(|s, _| {
+        self.with(|s, sc| {
             s.log.read_started(Device::Bumper);
             Touch {
                 touching: s
                     .present_obstacles()
-                    .filter(|(_, o)| s.touching(o))
+                    .filter(|(_, o)| s.felt(o, sc))
                     .fold(0, |acc, (i, _)| acc | 1 << i),
             }
         })

@@ -2,6 +2,10 @@
 //! cycle lengths, each cell run on the same random worlds (common random numbers), once with
 //! clean sensors and once with sensor faults and read latencies drawn at random.
 //!
+//! A third part runs the clean worlds again with the hazards under which P-SMPA can fail
+//! (README, "The harder world"): people who walk into the robot's path, boxes too low for the
+//! sonar's cone close by, and a bumper that feels a contact only after one of its periods.
+//!
 //! World `i` depends only on the seed and `i` (its own PCG stream), and the statistics are
 //! summed in world order, so the results do not depend on the number of threads.
 
@@ -17,7 +21,7 @@ use crate::cli::sweep::{self, obstacles, uniform};
 use crate::cli::table1::PAPER;
 use crate::robot::Arch;
 use crate::run::Summary;
-use crate::scenario::{Scenario, Sonar};
+use crate::scenario::{Kind, Scenario, Sonar};
 use crate::sim::{RunError, run_summary};
 use crate::world::Fate;
 
@@ -104,9 +108,12 @@ pub fn world(seed: u64, index: u64, faults: bool) -> Scenario {
             noise_um: if faults { noise_um } else { 0 },
             dropout: on(dropout),
             latency_ms: on(sonar_latency_ms),
+            height_um: 0,
+            cone_slope_permille: 500,
         },
         bumper_period_ms,
         bumper_latency_ms: on(bumper_latency_ms),
+        bumper_min_contact_ms: 0,
         sense_ms: 1_000,
         act_ms: 3_000,
         door_locked: false,
@@ -121,6 +128,51 @@ pub fn with_phases(sc: &Scenario, fraction_pct: u64, cycle_ms: u64) -> Scenario 
     let mut sc = sc.clone();
     sc.sense_ms = cycle_ms * fraction_pct / 100;
     sc.act_ms = cycle_ms - sc.sense_ms;
+    sc
+}
+
+/// The speeds at which the people of the harder world walk towards the robot, mm/s: standing
+/// boxes, a slow walk, a walk, a brisk walk, a run.
+pub const PERSON_SPEEDS_MM_S: [u16; 5] = [0, 500, 1_000, 1_500, 3_000];
+
+/// The harder world's sonar height, µm: a NAO's chest sonars sit about 0.35 m high.
+pub const HARDER_SONAR_HEIGHT_UM: i64 = 350_000;
+
+/// The harder world's cone: its lower edge drops 0.577 m a metre (a 60° cone on a level axis).
+pub const HARDER_CONE_SLOPE_PERMILLE: i64 = 577;
+
+/// The heights of the harder world's standing boxes, uniform, mm.
+pub const HARDER_BOX_HEIGHT_MM: (u64, u64) = (50, 800);
+
+/// The height of the harder world's people, µm: taller than the sonar, so in its cone at any
+/// distance.
+pub const PERSON_HEIGHT_UM: u32 = 1_700_000;
+
+/// World `index` of the study with the hazards, its people walking at `speed_mm_s`: the clean
+/// world ([`world`]) with the sonar [`HARDER_SONAR_HEIGHT_UM`] high under a cone that drops
+/// [`HARDER_CONE_SLOPE_PERMILLE`] and a bumper that feels a contact once it has lasted one
+/// bumper period. Each box is, with even odds, a person walking towards the robot or a
+/// standing box of a height drawn uniformly in [`HARDER_BOX_HEIGHT_MM`] (drawn from their own
+/// stream: the same at every speed). Balls lie still.
+pub fn harder_world(seed: u64, index: u64, speed_mm_s: u16) -> Scenario {
+    let mut sc = world(seed, index, false);
+    let mut rng = Pcg32::new(seed ^ 0x6861_7264_6572, index);
+    sc.sonar.height_um = HARDER_SONAR_HEIGHT_UM;
+    sc.sonar.cone_slope_permille = HARDER_CONE_SLOPE_PERMILLE;
+    sc.bumper_min_contact_ms = sc.bumper_period_ms;
+    for i in &mut sc.interferences {
+        let person = uniform(&mut rng, 0, 1) == 0;
+        let (lo, hi) = HARDER_BOX_HEIGHT_MM;
+        let height_um = uniform(&mut rng, lo, hi) * 1_000;
+        if i.kind == Kind::Box {
+            if person {
+                i.height_um = PERSON_HEIGHT_UM;
+                i.speed_um_per_ms = speed_mm_s;
+            } else {
+                i.height_um = height_um as u32;
+            }
+        }
+    }
     sc
 }
 
@@ -179,6 +231,21 @@ fn run_world(sc: &Scenario) -> Result<WorldVals, RunError> {
         psmpa: RunVals::new(&p, &detectable),
         smpa,
     })
+}
+
+/// One world of the harder part: per person speed, P-SMPA and SMPA at Table I's setting.
+fn run_harder(seed: u64, index: u64) -> Result<Vec<[RunVals; 2]>, RunError> {
+    PERSON_SPEEDS_MM_S
+        .iter()
+        .map(|&v| {
+            let sc = harder_world(seed, index, v);
+            let p = run_summary(&sc, Arch::PSmpa)?;
+            let detectable: Vec<bool> = p.obstacles.iter().map(|o| o.detectable).collect();
+            let table1 = with_phases(&sc, PAPER_FRACTION_PCT, TABLE1_CYCLE_MS);
+            let s = run_summary(&table1, Arch::Smpa)?;
+            Ok([RunVals::new(&p, &detectable), RunVals::new(&s, &detectable)])
+        })
+        .collect()
 }
 
 /// Running sums of one quantity, added in world order.
@@ -325,6 +392,34 @@ impl Pass {
     }
 }
 
+/// One person speed of the harder world.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct HarderRow {
+    /// How fast the boxes walk towards the robot, m/s.
+    pub person_speed_mps: f64,
+    /// P-SMPA.
+    pub psmpa: ArchCell,
+    /// SMPA at Table I's setting (sense 50 %, cycle 3 s).
+    pub smpa: ArchCell,
+}
+
+/// The harder world: the clean worlds with the hazards under which P-SMPA can fail.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Harder {
+    /// The sonar's height, m.
+    pub sonar_height_m: f64,
+    /// How far the sonar cone's lower edge drops per metre ahead.
+    pub cone_slope: f64,
+    /// The standing boxes' heights are uniform in this range, m.
+    pub box_height_m: [f64; 2],
+    /// The people's height, m.
+    pub person_height_m: f64,
+    /// How long a contact must last before the bumper feels it.
+    pub bumper_min_contact: &'static str,
+    /// One row per person speed.
+    pub rows: Vec<HarderRow>,
+}
+
 /// The grid.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Settings {
@@ -351,6 +446,8 @@ pub struct Study {
     pub clean: Pass,
     /// Sensor faults and read latencies drawn at random.
     pub faults: Pass,
+    /// The clean worlds with the hazards under which P-SMPA can fail.
+    pub harder: Harder,
 }
 
 #[derive(Clone)]
@@ -410,8 +507,9 @@ impl PassSums {
 /// when stderr is not a terminal).
 pub fn study(seed: u64, runs: u64, progress: bool) -> Result<Study, RunError> {
     let per_world = 1 + CELLS as u64;
+    let per_harder = 2 * PERSON_SPEEDS_MM_S.len() as u64;
     let bar = if progress {
-        sweep::progress_bar(2 * runs * per_world, "runs")
+        sweep::progress_bar(runs * (2 * per_world + per_harder), "runs")
     } else {
         ProgressBar::hidden()
     };
@@ -435,8 +533,30 @@ pub fn study(seed: u64, runs: u64, progress: bool) -> Result<Study, RunError> {
         }
         start = end;
     }
+    let mut harder = vec![[ArchSums::default(); 2]; PERSON_SPEEDS_MM_S.len()];
+    start = 0;
+    while start < runs {
+        let end = (start + CHUNK).min(runs);
+        let chunk: Vec<Vec<[RunVals; 2]>> = (start..end)
+            .into_par_iter()
+            .map(|i| {
+                let out = run_harder(seed, i);
+                bar.inc(per_harder);
+                out
+            })
+            .collect::<Result<_, _>>()?;
+        for rows in &chunk {
+            for (sums, vals) in harder.iter_mut().zip(rows) {
+                for (s, v) in sums.iter_mut().zip(vals) {
+                    s.add(v);
+                }
+            }
+        }
+        start = end;
+    }
     bar.finish_and_clear();
     let [clean, faults] = sums;
+    let (lo, hi) = HARDER_BOX_HEIGHT_MM;
     Ok(Study {
         settings: Settings {
             sense_fraction_pct: FRACTIONS_PCT.to_vec(),
@@ -448,6 +568,22 @@ pub fn study(seed: u64, runs: u64, progress: bool) -> Result<Study, RunError> {
         seed,
         clean: clean.pass("clean"),
         faults: faults.pass("faults"),
+        harder: Harder {
+            sonar_height_m: HARDER_SONAR_HEIGHT_UM as f64 / 1e6,
+            cone_slope: HARDER_CONE_SLOPE_PERMILLE as f64 / 1e3,
+            box_height_m: [lo as f64 / 1e3, hi as f64 / 1e3],
+            person_height_m: f64::from(PERSON_HEIGHT_UM) / 1e6,
+            bumper_min_contact: "one bumper period",
+            rows: PERSON_SPEEDS_MM_S
+                .iter()
+                .zip(&harder)
+                .map(|(&v, [p, s])| HarderRow {
+                    person_speed_mps: f64::from(v) / 1e3,
+                    psmpa: p.cell(),
+                    smpa: s.cell(),
+                })
+                .collect(),
+        },
     })
 }
 
@@ -583,6 +719,43 @@ fn render_pass(out: &mut String, pass: &Pass, heading: &str, full: bool) {
     }
 }
 
+fn render_harder(out: &mut String, h: &Harder) {
+    let _ = writeln!(
+        out,
+        "\n== the harder world: the clean worlds with a sonar {2} m high whose cone drops {3} m \
+         a metre, a bumper that feels a contact after one period, and each box either a \
+         standing box {0}-{1} m high or a person walking towards the robot ==",
+        h.box_height_m[0], h.box_height_m[1], h.sonar_height_m, h.cone_slope
+    );
+    let _ = writeln!(
+        out,
+        "{:>8}  {:>20} {:>20} {:>20}  {:>20} {:>20}",
+        "person",
+        "P-SMPA detection %",
+        "P-SMPA of met %",
+        "P-SMPA collisions",
+        "SMPA detection %",
+        "SMPA collisions"
+    );
+    for r in &h.rows {
+        let _ = writeln!(
+            out,
+            "{:>8}  {:>20} {:>20} {:>20}  {:>20} {:>20}",
+            format!("{} m/s", r.person_speed_mps),
+            pct(r.psmpa.detection_rate),
+            pct(r.psmpa.met_detection_rate),
+            num(r.psmpa.collisions),
+            pct(r.smpa.detection_rate),
+            num(r.smpa.collisions)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "(SMPA at the Table I setting, sense 50 %, cycle 3 s; detection: of the obstacles \
+         detectable in the world's P-SMPA run; of met: of those detected or collided with)"
+    );
+}
+
 /// The study as text.
 pub fn render(study: &Study) -> String {
     let mut out = String::new();
@@ -610,6 +783,7 @@ pub fn render(study: &Study) -> String {
          0-10 % each in half the worlds, sonar latency 0-40 ms, bumper 0-5 ms)",
         false,
     );
+    render_harder(&mut out, &study.harder);
     let [(_, sonar), (_, bumper)] = paper_detection();
     let _ = writeln!(
         out,

@@ -43,6 +43,11 @@ pub(crate) fn obstacles(
             at_ms: uniform(r, 0, walk_ms) as u32,
             ahead_um: ahead_um as i32,
             hold_ms: uniform(r, 500, 10_000) as u32,
+            speed_um_per_ms: 0,
+            height_um: match kind {
+                Kind::Box => 800_000,
+                Kind::Ball => 100_000,
+            },
         });
     }
     interferences
@@ -96,9 +101,12 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
             noise_um,
             dropout,
             latency_ms: sonar_latency_ms,
+            height_um: 0,
+            cone_slope_permille: 500,
         },
         bumper_period_ms,
         bumper_latency_ms,
+        bumper_min_contact_ms: 0,
         sense_ms,
         act_ms,
         door_locked: false,
