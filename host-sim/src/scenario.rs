@@ -500,27 +500,17 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
         s.avoid_ms = element(&mut seq, 5)?;
         s.slow_um = element(&mut seq, 6)?;
         s.plan_us = element(&mut seq, 7)?;
-        let (
-            period_ms,
-            min_um,
-            max_um,
-            threshold_um,
-            noise_um,
-            dropout,
-            latency_ms,
-            height_um,
-            cone_slope_permille,
-        ): SonarRow = element(&mut seq, 8)?;
+        let row: SonarRow = element(&mut seq, 8)?;
         s.sonar = Sonar {
-            period_ms,
-            min_um,
-            max_um,
-            threshold_um,
-            noise_um,
-            dropout,
-            latency_ms,
-            height_um,
-            cone_slope_permille,
+            period_ms: row.0,
+            min_um: row.1,
+            max_um: row.2,
+            threshold_um: row.3,
+            noise_um: row.4,
+            dropout: row.5,
+            latency_ms: row.6,
+            height_um: row.7,
+            cone_slope_permille: row.8,
         };
         s.bumper_period_ms = element(&mut seq, 9)?;
         s.bumper_latency_ms = element(&mut seq, 10)?;
