@@ -20,6 +20,7 @@ mod planning;
 mod size;
 mod stack;
 mod timing;
+mod trace;
 
 use std::process::ExitCode;
 
