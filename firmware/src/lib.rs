@@ -17,5 +17,7 @@ pub mod board;
 #[cfg(target_os = "none")]
 pub mod executor;
 #[cfg(target_os = "none")]
+mod logger;
+#[cfg(target_os = "none")]
 pub mod time_driver;
 pub mod world_trace;
