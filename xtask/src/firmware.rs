@@ -488,6 +488,7 @@ fn compare(
     log: &str,
     host: &Runs,
     allowances: &BTreeMap<String, Allowance>,
+    traces_dir: &Path,
 ) -> Vec<String> {
     let target = parse_results(log);
     let mut failures = Vec::new();
@@ -500,7 +501,7 @@ fn compare(
             machine.clock_hz
         )),
     }
-    let (traces, errors) = traces(machine, log, host, allowances);
+    let (traces, errors) = traces(machine, log, host, allowances, traces_dir);
     failures.extend(errors);
     println!(
         "{:<12} {:<6} {:>8} {:>10} {:<8} {:>10} {:>9}  {:<14} {:<14}",
@@ -621,17 +622,17 @@ type TraceResults = BTreeMap<(String, String), Result<trace::Stats, String>>;
 
 /// Compares the world trace of every run in `log` with its expected trace; returns each
 /// run's result and the log's other errors (a run's difference is among the results). The
-/// firmware's traces, in the expected traces' form, go to `target/qemu-traces/MACHINE/` for
-/// reading or diffing by hand.
+/// firmware's traces, in the expected traces' form, go to `dir` for reading or diffing by
+/// hand.
 fn traces(
     machine: Machine,
     log: &str,
     host: &Runs,
     allowances: &BTreeMap<String, Allowance>,
+    dir: &Path,
 ) -> (TraceResults, Vec<String>) {
     let (traces, mut errors) = trace::firmware_traces(log);
-    let dir = root().join("target/qemu-traces").join(machine.name);
-    let kept = std::fs::create_dir_all(&dir).and_then(|()| {
+    let kept = std::fs::create_dir_all(dir).and_then(|()| {
         traces.iter().try_for_each(|((name, arch), lines)| {
             std::fs::write(
                 dir.join(format!("{name}.{arch}.trace")),
@@ -682,10 +683,19 @@ pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
     let logs = run_all(&runs);
     let host = host_results()?;
     let allowances = allowances()?;
+    // The broken image's traces apart, so the good ones stay for reading.
+    let traces = root().join(if inject_fault {
+        "target/fault/qemu-traces"
+    } else {
+        "target/qemu-traces"
+    });
     let mut failures = Vec::new();
     for ((machine, _), log) in runs.iter().zip(logs) {
         match log {
-            Ok(log) => failures.extend(compare(*machine, &log, &host, &allowances)),
+            Ok(log) => {
+                let dir = traces.join(machine.name);
+                failures.extend(compare(*machine, &log, &host, &allowances, &dir));
+            }
             Err(e) => failures.push(e),
         }
     }

@@ -10,7 +10,7 @@
 //!   the host's, never lead it, by [`TICKS_PER_WALK`] ms for the start and for each walk
 //!   started so far, plus the scenario's planning time (`plan_us`) per walk: the robot starts
 //!   each walk that much later. Obstacles are put down, taken away and skipped at the scenario's
-//!   instants: no lag at all. Measured: at most 9 ms (16 allowed, `bumper-6`), and 362 ms in
+//!   instants: no lag at all. Measured: at most 8 ms (16 allowed, `bumper-6`), and 356 ms in
 //!   `replan` (366 allowed: 7 walks planning 50 ms each).
 //! * Quantities that derive from instants: where an obstacle is put down (ahead of the
 //!   robot, which lags) within the walking speed times the lag, and 1 mm of the text's
@@ -37,8 +37,10 @@ use similar::{Algorithm, DiffTag, capture_diff_slices};
 
 use crate::firmware::root;
 
-/// The lag a walk adds at most, ms: the target stops a tick after the host and resumes a tick
-/// after it (measured: 2 ms per walk with P-SMPA, 1 with SMPA, on both machines).
+/// The lag a walk adds at most, ms. Measured on both machines: one tick per walk and one at the
+/// start (the sensors come on a tick later); two per walk while a logged line cost 1,400
+/// cycles instead of 1,150. The second tick is that margin: a step that grows by a fifth may
+/// cross one more tick boundary per walk.
 pub const TICKS_PER_WALK: u64 = 2;
 
 /// How much longer a reaction may take on the target, ms: its stop comes in the poll after
