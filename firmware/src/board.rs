@@ -20,7 +20,6 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m_rt::{ExceptionFrame, exception};
 use cortex_m_semihosting::debug::{self, EXIT_FAILURE, EXIT_SUCCESS};
 use defmt::error;
-use defmt_semihosting as _;
 
 use crate::executor::{self, Irq};
 use crate::time_driver;

@@ -12,6 +12,7 @@
 //! Polls are timed in cycles of the clock, without the time of the handlers that preempted
 //! them: a deciding poll's cost is its own processor time. Critical sections entered below the
 //! sensing priority are timed too: they are the one way the deciding side can delay a sample.
+//! Neither counts the firmware's trace log ([`uncounted`]): a product would not carry it.
 
 use core::cell::{Cell, RefCell};
 use core::future::poll_fn;
@@ -128,6 +129,16 @@ pub fn note(steps: u32) {
 /// A handler that preempted whatever ran took `cycles` of its own.
 pub fn handler_ran(cycles: u32) {
     PREEMPTED.fetch_add(cycles, Ordering::Relaxed);
+}
+
+/// The firmware's own instrumentation (the trace log) took `cycles`: counted like a
+/// preempting handler's, and the critical section it ran in starts that much later, so that
+/// no poll or section includes them. Call it inside a critical section, so that no handler
+/// ran in those cycles.
+pub fn uncounted(cycles: u32) {
+    PREEMPTED.fetch_add(cycles, Ordering::Relaxed);
+    // The clock counts down: a later start is a smaller count.
+    SECTION_BEGIN.fetch_sub(cycles, Ordering::Relaxed);
 }
 
 /// The poll statistics since the last call, which starts them again.
@@ -279,7 +290,8 @@ pub fn run(slot: &'static mut Slot, init: impl FnOnce(Spawner, SendSpawner)) -> 
 struct Timed;
 critical_section::set_impl!(Timed);
 
-/// When the current outermost critical section began (TIMER0's count).
+/// When the current outermost critical section began (TIMER0's count), less [`uncounted`]
+/// time in it.
 static SECTION_BEGIN: AtomicU32 = AtomicU32::new(0);
 
 /// Whether the code running is below the sensing priority: thread mode or interrupt 15.

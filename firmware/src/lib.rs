@@ -7,6 +7,8 @@
 //! * `psmpa-product` (`src/bin/product.rs`): what a robot's firmware carries, the core, the
 //!   mission loader and a platform of stubs where the drivers go; `cargo xtask size` holds it
 //!   to its budget.
+//!
+//! [`world_trace`] is built on the host too: xtask reads the firmware's trace with it.
 #![cfg_attr(target_os = "none", no_std)]
 #![deny(missing_docs)]
 
@@ -15,4 +17,7 @@ pub mod board;
 #[cfg(target_os = "none")]
 pub mod executor;
 #[cfg(target_os = "none")]
+mod logger;
+#[cfg(target_os = "none")]
 pub mod time_driver;
+pub mod world_trace;

@@ -1,9 +1,9 @@
 //! psmpa on a Cortex-M4F (QEMU mps2-an386) or a Cortex-M33 (QEMU mps2-an505): the same core,
 //! the same Fetch Tea mission and the same simulated world as the host simulator. Every embedded scenario runs under both
-//! architectures, one run per boot, from tick 0 of a fresh clock; each run logs the summary
-//! fields of `psmpa-sim run --json`, which `cargo xtask qemu` compares with the host, and what
-//! it measured in cycles. The runtime's sensing side runs on an interrupt executor that
-//! preempts the deciding side.
+//! architectures, one run per boot, from tick 0 of a fresh clock; each run logs every world
+//! event and the summary fields of `psmpa-sim run --json`, which `cargo xtask qemu` compares
+//! with the host, and what it measured in cycles. The runtime's sensing side runs on an
+//! interrupt executor that preempts the deciding side.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -17,6 +17,7 @@ fn main() {
 #[cfg(target_os = "none")]
 mod firmware {
     use core::mem::MaybeUninit;
+    use core::sync::atomic::{AtomicU32, Ordering};
 
     use cortex_m_rt::entry;
     use defmt::{error, info};
@@ -28,7 +29,7 @@ mod firmware {
     use psmpa_sim::world::{Device, Fate, WorldEvent, WorldLog};
 
     use psmpa_firmware::board::{self, fail, stack_high_water};
-    use psmpa_firmware::{executor, time_driver};
+    use psmpa_firmware::{executor, time_driver, world_trace};
 
     include!(concat!(env!("OUT_DIR"), "/scenarios.rs"));
 
@@ -201,7 +202,8 @@ mod firmware {
     /// Measures reactions in cycles from the world's events: from the release of the sample
     /// that registers an obstacle while the robot walks to the stop that follows. A sample is
     /// released at the start of the tick its read starts in: reads start in the tick they are
-    /// due (the sample gaps equal the host's, which `cargo xtask qemu` checks).
+    /// due (the sample gaps equal the host's, which `cargo xtask qemu` checks). Logs every
+    /// event too ([`log_line`]), whose cycles the reactions leave out.
     #[derive(Default)]
     struct Reactions {
         /// The release of each device's latest read (sonar, bumper), cycles.
@@ -221,17 +223,58 @@ mod firmware {
         }
     }
 
+    /// Cycles the trace log took this boot (one run). Statics, not fields of [`Reactions`]:
+    /// the world's state, with its log, is moved on the stack, and each byte there counts.
+    static LOGGED: AtomicU32 = AtomicU32::new(0);
+    /// The tick of the latest line logged, and [`LOGGED`] when that tick began.
+    static LOGGED_TICK: AtomicU32 = AtomicU32::new(0);
+    static LOGGED_AT_TICK: AtomicU32 = AtomicU32::new(0);
+    /// [`LOGGED`] at the release of each device's latest read, and at the pending one's.
+    static RELEASE_LOGGED: [AtomicU32; 2] = [AtomicU32::new(0), AtomicU32::new(0)];
+    static PENDING_LOGGED: AtomicU32 = AtomicU32::new(0);
+
+    /// Logs a world event for `cargo xtask qemu`: `w MS KIND A B VALUE` ([`world_trace`]).
+    /// The world calls its log inside its critical section, so the line's cycles are its own:
+    /// they are left out of the polls and the critical sections ([`executor::uncounted`]) and
+    /// of the reactions ([`LOGGED`]).
+    fn log_line(at_ms: u64, event: &WorldEvent) {
+        let begin = time_driver::counter();
+        let tick = (time_driver::cycles() / time_driver::CYCLES_PER_TICK) as u32;
+        let logged = LOGGED.load(Ordering::Relaxed);
+        if tick != LOGGED_TICK.load(Ordering::Relaxed) {
+            LOGGED_TICK.store(tick, Ordering::Relaxed);
+            LOGGED_AT_TICK.store(logged, Ordering::Relaxed);
+        }
+        let f = world_trace::encode(event);
+        info!(
+            "w {=u64} {=u8} {=u8} {=u8} {=i64}",
+            at_ms, f.kind, f.a, f.b, f.value
+        );
+        let spent = begin.wrapping_sub(time_driver::counter());
+        LOGGED.store(logged.wrapping_add(spent), Ordering::Relaxed);
+        executor::uncounted(spent);
+    }
+
     impl WorldLog for Reactions {
-        fn log(&mut self, _at_ms: u64, _pos_um: i64, event: WorldEvent) {
+        fn log(&mut self, at_ms: u64, _pos_um: i64, event: WorldEvent) {
             match event {
                 WorldEvent::Walk | WorldEvent::AvoidDone(_) => self.walking = true,
                 WorldEvent::Detected(_, device) if self.walking && self.pending.is_none() => {
-                    self.pending = slot(device).and_then(|i| Some((i, *self.release.get(i)?)));
+                    self.pending = slot(device).and_then(|i| {
+                        let logged = RELEASE_LOGGED.get(i)?.load(Ordering::Relaxed);
+                        PENDING_LOGGED.store(logged, Ordering::Relaxed);
+                        Some((i, *self.release.get(i)?))
+                    });
                 }
                 WorldEvent::Stop | WorldEvent::AvoidStarted(_) | WorldEvent::Arrived(_) => {
                     self.walking = false;
                     if let Some((i, release)) = self.pending.take() {
-                        let cycles = time_driver::cycles().saturating_sub(release);
+                        let log = LOGGED
+                            .load(Ordering::Relaxed)
+                            .wrapping_sub(PENDING_LOGGED.load(Ordering::Relaxed));
+                        let cycles = time_driver::cycles()
+                            .saturating_sub(release)
+                            .saturating_sub(u64::from(log));
                         if let Some(worst) = self.worst.get_mut(i) {
                             *worst = (*worst).max(cycles);
                         }
@@ -239,12 +282,25 @@ mod firmware {
                 }
                 _ => {}
             }
+            // After the measurement: a stop is not charged for its own line.
+            log_line(at_ms, &event);
         }
 
         fn read_started(&mut self, device: Device) {
             let tick = time_driver::cycles() / time_driver::CYCLES_PER_TICK;
-            if let Some(r) = slot(device).and_then(|i| self.release.get_mut(i)) {
-                *r = tick * time_driver::CYCLES_PER_TICK;
+            // The release is the tick's start: what was logged since is not the reaction's.
+            let logged = if tick as u32 == LOGGED_TICK.load(Ordering::Relaxed) {
+                LOGGED_AT_TICK.load(Ordering::Relaxed)
+            } else {
+                LOGGED.load(Ordering::Relaxed)
+            };
+            if let Some(i) = slot(device) {
+                if let Some(r) = self.release.get_mut(i) {
+                    *r = tick * time_driver::CYCLES_PER_TICK;
+                }
+                if let Some(l) = RELEASE_LOGGED.get(i) {
+                    l.store(logged, Ordering::Relaxed);
+                }
             }
         }
     }
@@ -301,13 +357,14 @@ mod firmware {
             time_driver::take_isr_max_cycles()
         );
         info!(
-            "clock scenario={=str} arch={=str} ticks={=u64} reference_cycles={=u64} reaction_sonar_cycles={=u64} reaction_bumper_cycles={=u64}",
+            "clock scenario={=str} arch={=str} ticks={=u64} reference_cycles={=u64} reaction_sonar_cycles={=u64} reaction_bumper_cycles={=u64} trace_cycles={=u32}",
             name,
             arch.name(),
             ticks,
             reference,
             reactions.worst[0],
-            reactions.worst[1]
+            reactions.worst[1],
+            LOGGED.load(Ordering::Relaxed)
         );
         let t = s.tally;
         // One letter per interference: detected by the Sonar or the Bumper, Collided, or `-`.

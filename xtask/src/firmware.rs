@@ -9,6 +9,8 @@ use std::time::Instant;
 use psmpa_sim::robot::Arch;
 use psmpa_sim::sim::run_summary;
 
+use crate::trace::{self, Allowance};
+
 /// The workspace root.
 pub fn root() -> PathBuf {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -332,7 +334,8 @@ pub fn logged_clock_hz(log: &str) -> Option<u64> {
 /// What must be equal on both sides for one run: what the robot met and how, and how
 /// regularly it sampled. Real time on the target shifts instants by the computing it takes
 /// (the start of a run, planning, a side step), which virtual time does not count; so the
-/// trace hash and the time cost are compared, not required equal.
+/// time cost is compared, not required equal, and the world trace is compared within an
+/// allowed lag ([`trace`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 struct Outcome {
     interferences: String,
@@ -348,7 +351,6 @@ struct Outcome {
 #[derive(Debug, Clone, Default)]
 struct Timing {
     time_cost_ms: i64,
-    trace_hash: String,
 }
 
 /// The fields of every `TAG key=value ...` line of the firmware log: lines whose message (after
@@ -395,7 +397,6 @@ fn parse_results(log: &str) -> Runs {
                     },
                     Timing {
                         time_cost_ms: get("time_cost_ms").parse().unwrap_or(-1),
-                        trace_hash: get("trace_hash"),
                     },
                 ),
             )
@@ -446,7 +447,6 @@ fn host_results() -> Result<Runs, String> {
                     },
                     Timing {
                         time_cost_ms: i64::try_from(s.time_cost_ms).unwrap_or(i64::MAX),
-                        trace_hash: format!("{:016x}", s.trace_hash),
                     },
                 ),
             );
@@ -481,9 +481,15 @@ fn clock_errors(machine: Machine, log: &str) -> Vec<String> {
     errors
 }
 
-/// Compares one machine's log with the host's runs and prints the table; returns the
-/// differences.
-fn compare(machine: Machine, log: &str, host: &Runs) -> Vec<String> {
+/// Compares one machine's log with the host's runs: the outcome of each run, its clock and
+/// its world trace; prints the table and a summary; returns the differences.
+fn compare(
+    machine: Machine,
+    log: &str,
+    host: &Runs,
+    allowances: &BTreeMap<String, Allowance>,
+    traces_dir: &Path,
+) -> Vec<String> {
     let target = parse_results(log);
     let mut failures = Vec::new();
     println!("\n{} ({}, {}):", machine.name, machine.core, machine.target);
@@ -495,8 +501,10 @@ fn compare(machine: Machine, log: &str, host: &Runs) -> Vec<String> {
             machine.clock_hz
         )),
     }
+    let (traces, errors) = traces(machine, log, host, allowances, traces_dir);
+    failures.extend(errors);
     println!(
-        "{:<12} {:<6} {:>8} {:>10} {:<8} {:>10} {:>9}  {:<5} {:<14}",
+        "{:<12} {:<6} {:>8} {:>10} {:<8} {:>10} {:>9}  {:<14} {:<14}",
         "scenario",
         "arch",
         "detected",
@@ -504,26 +512,22 @@ fn compare(machine: Machine, log: &str, host: &Runs) -> Vec<String> {
         "fates",
         "time ms",
         "fw - host",
-        "trace",
+        "world lag ms",
         "outcome equal"
     );
-    let mut same_traces = 0;
     for (key, (expected, host_timing)) in host {
         let got = target.get(key);
         let same = got.is_some_and(|(o, _)| o == expected);
-        let (shift, trace) = match got {
-            Some((_, t)) => {
-                let equal = t.trace_hash == host_timing.trace_hash;
-                same_traces += usize::from(equal);
-                (
-                    format!("{:+}", t.time_cost_ms - host_timing.time_cost_ms),
-                    if equal { "same" } else { "moved" },
-                )
-            }
-            None => ("-".to_owned(), "-"),
+        let shift = got.map_or("-".to_owned(), |(_, t)| {
+            format!("{:+}", t.time_cost_ms - host_timing.time_cost_ms)
+        });
+        let lag = match traces.get(key) {
+            Some(Ok(s)) => format!("{} of {}", s.max_shift_ms, s.bound_ms),
+            Some(Err(_)) => "DIFFERS".to_owned(),
+            None => "-".to_owned(),
         };
         println!(
-            "{:<12} {:<6} {:>8} {:>10} {:<8} {:>10} {:>9}  {:<5} {}",
+            "{:<12} {:<6} {:>8} {:>10} {:<8} {:>10} {:>9}  {:<14} {}",
             key.0,
             key.1,
             expected.detected,
@@ -531,7 +535,7 @@ fn compare(machine: Machine, log: &str, host: &Runs) -> Vec<String> {
             expected.fates,
             host_timing.time_cost_ms,
             shift,
-            trace,
+            lag,
             if same { "yes" } else { "NO" }
         );
         if !same {
@@ -554,14 +558,45 @@ fn compare(machine: Machine, log: &str, host: &Runs) -> Vec<String> {
         failures.push(format!("{clock_lines} clock lines for {} runs", host.len()));
     }
     failures.extend(clock_errors(machine, log));
+    let mut sum = trace::Stats::default();
+    let mut largest = ("-", "-");
+    for (key, s) in traces
+        .iter()
+        .filter_map(|(k, r)| Some((k, r.as_ref().ok()?)))
+    {
+        if s.max_shift_ms >= sum.max_shift_ms {
+            (sum.max_shift_ms, sum.bound_ms) = (s.max_shift_ms, s.bound_ms);
+            largest = (key.0.as_str(), key.1.as_str());
+        }
+        sum.lines += s.lines;
+        sum.samples += s.samples;
+        sum.accepted += s.accepted;
+    }
+    let equal = traces.values().filter(|r| r.is_ok()).count();
+    let trace_cycles: u64 = tagged(log, "clock")
+        .iter()
+        .filter_map(|c| c.get("trace_cycles")?.parse::<u64>().ok())
+        .sum();
+    let logged = log
+        .lines()
+        .filter(|l| l.split_whitespace().nth(2) == Some("w"))
+        .count() as u64;
     println!(
-        "{}: traces equal to the host's: {same_traces} of {} (the others start or go on a few ms later: computing takes real time on the target, none in virtual time)",
+        "{}: world traces: {equal} of {} runs as scenarios/traces/ within the allowed lag; {} lines compared ({} samples; {} on one side only, accepted: xtask/src/trace.rs); largest lag {} ms ({} {}, allowed {} ms); a line took {} cycles to log, left out of every measured cost",
         machine.name,
-        host.len()
+        host.len(),
+        sum.lines,
+        sum.samples,
+        sum.accepted,
+        sum.max_shift_ms,
+        largest.0,
+        largest.1,
+        sum.bound_ms,
+        trace_cycles.checked_div(logged).unwrap_or(0)
     );
     if failures.is_empty() {
         println!(
-            "{}: all {} runs: the same outcome and sampling on the host and the firmware; every clock within a tick of the reference",
+            "{}: all {} runs: the same outcome, sampling and world trace on the host and the firmware; every clock within a tick of the reference",
             machine.name,
             host.len()
         );
@@ -570,6 +605,71 @@ fn compare(machine: Machine, log: &str, host: &Runs) -> Vec<String> {
         .into_iter()
         .map(|f| format!("{}: {f}", machine.name))
         .collect()
+}
+
+/// Each scenario's allowance for its firmware trace ([`trace`]), by name.
+fn allowances() -> Result<BTreeMap<String, Allowance>, String> {
+    scenario_files()?
+        .iter()
+        .map(|file| {
+            let sc = psmpa_sim::load::load(file).map_err(|e| e.to_string())?;
+            Ok((sc.name.as_str().to_owned(), Allowance::of(&sc)))
+        })
+        .collect()
+}
+
+type TraceResults = BTreeMap<(String, String), Result<trace::Stats, String>>;
+
+/// Compares the world trace of every run in `log` with its expected trace; returns each
+/// run's result and the log's other errors (a run's difference is among the results). The
+/// firmware's traces, in the expected traces' form, go to `dir` for reading or diffing by
+/// hand.
+fn traces(
+    machine: Machine,
+    log: &str,
+    host: &Runs,
+    allowances: &BTreeMap<String, Allowance>,
+    dir: &Path,
+) -> (TraceResults, Vec<String>) {
+    let (traces, mut errors) = trace::firmware_traces(log);
+    let kept = std::fs::create_dir_all(dir).and_then(|()| {
+        traces.iter().try_for_each(|((name, arch), lines)| {
+            std::fs::write(
+                dir.join(format!("{name}.{arch}.trace")),
+                trace::as_text(lines),
+            )
+        })
+    });
+    if let Err(e) = kept {
+        // Only a copy for reading: the comparison goes on.
+        eprintln!(
+            "{}: cannot keep the traces in {}: {e}",
+            machine.name,
+            dir.display()
+        );
+    }
+    let mut results = BTreeMap::new();
+    for key @ (name, arch) in host.keys() {
+        let path = trace::expected_path(name, arch);
+        let ours = dir.join(format!("{name}.{arch}.trace"));
+        let relative = |p: &Path| p.strip_prefix(root()).unwrap_or(p).display().to_string();
+        let names = (relative(&path), relative(&ours));
+        let result = match (traces.get(key), allowances.get(name)) {
+            (None, _) => Err("no world trace in the log".to_owned()),
+            (_, None) => Err("no such scenario file".to_owned()),
+            (Some(got), Some(allow)) => std::fs::read_to_string(&path)
+                .map_err(|e| format!("{}: {e}", path.display()))
+                .and_then(|text| {
+                    let want = trace::world_lines(&text);
+                    trace::compare(&want, got, allow, (&names.0, &names.1))
+                }),
+        };
+        if let Err(e) = &result {
+            errors.push(format!("{name} {arch}: world trace: {e}"));
+        }
+        results.insert(key.clone(), result);
+    }
+    (results, errors)
 }
 
 /// Builds and runs the firmware on every machine and compares it with the host. `Ok` only if,
@@ -582,10 +682,20 @@ pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
     let runs: Vec<(Machine, PathBuf)> = machines.iter().copied().zip(elfs).collect();
     let logs = run_all(&runs);
     let host = host_results()?;
+    let allowances = allowances()?;
+    // The broken image's traces apart, so the good ones stay for reading.
+    let traces = root().join(if inject_fault {
+        "target/fault/qemu-traces"
+    } else {
+        "target/qemu-traces"
+    });
     let mut failures = Vec::new();
     for ((machine, _), log) in runs.iter().zip(logs) {
         match log {
-            Ok(log) => failures.extend(compare(*machine, &log, &host)),
+            Ok(log) => {
+                let dir = traces.join(machine.name);
+                failures.extend(compare(*machine, &log, &host, &allowances, &dir));
+            }
             Err(e) => failures.push(e),
         }
     }

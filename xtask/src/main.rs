@@ -2,7 +2,10 @@
 //!
 //! * `qemu`: build the firmware for both QEMU machines (mps2-an386's Cortex-M4F, mps2-an505's
 //!   Cortex-M33), run it (`-icount`: deterministic), decode its defmt log and check that every
-//!   embedded scenario, under both architectures, gives the same result as the host simulator.
+//!   embedded scenario, under both architectures, gives the same result as the host simulator,
+//!   and that its world trace matches the expected one in `scenarios/traces/`. Instants may
+//!   come a little later on the target, by a stated lag (`trace.rs`); a difference fails with
+//!   a diff that names the event.
 //! * `size`: flash and static RAM of the firmware and its stack high-water mark in QEMU,
 //!   checked against the budget and the committed snapshot `firmware/size.json`.
 //! * `stack`: a static bound on the firmware's stack from its call graph and frame sizes,
@@ -20,6 +23,7 @@ mod planning;
 mod size;
 mod stack;
 mod timing;
+mod trace;
 
 use std::process::ExitCode;
 
@@ -35,7 +39,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Task {
     /// Runs the firmware in QEMU on mps2-an386 and mps2-an505 and checks every scenario
-    /// against the host simulator.
+    /// against the host simulator, and its world trace against scenarios/traces/.
     Qemu {
         /// Build with the `inject-fault` feature: one scenario is broken on purpose, and the
         /// check must fail (on mps2-an386 only).

@@ -40,8 +40,9 @@ pub fn describe(mission: &FetchTea<'_>, e: &TraceEvent) -> String {
     }
 }
 
-/// A world event in words, as the trace CSV shows it.
-pub(crate) fn world_text(e: &WorldEvent) -> String {
+/// A world event in words, as the trace CSV and the expected traces (`scenarios/traces/`)
+/// show it; `cargo xtask qemu` rebuilds the firmware's trace with it.
+pub fn world_text(e: &WorldEvent) -> String {
     match *e {
         WorldEvent::Appeared { index, kind, at_um } => format!(
             "#{} {} put down at {:.3} m",
