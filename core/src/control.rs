@@ -143,7 +143,7 @@ impl<
     /// plan applies, every applicable plan failed, or the failure or plan limit of the
     /// [`Config`](crate::exec::Config) is reached.
     pub async fn run(&self) -> Result<Report<W>, ControlError<W>> {
-        self.control::<1>(None).await
+        self.control(NoPlanner).await
     }
 
     /// Algorithm 1 where `generatePlans` falls back on `planner` when no library plan applies,
@@ -157,7 +157,7 @@ impl<
         planner: &Planner<N, W>,
         space: &mut Search<N, W>,
     ) -> Result<Report<W>, ControlError<W>> {
-        self.control(Some((planner, space))).await
+        self.control((planner, space)).await
     }
 
     /// The actions with the preconditions the planner must satisfy from the beliefs: facts
@@ -234,18 +234,17 @@ impl<
 
     /// `generatePlans: M -> P` by the planner, from `beliefs` to the task's goal, one slice of
     /// the search per poll.
-    async fn generate<const N: usize>(
+    async fn generate<G: Fallback<W>>(
         &self,
-        planner: &Planner<N, W>,
-        search: &mut Search<N, W>,
+        planner: &mut G,
         beliefs: FactSetOf<W>,
     ) -> Result<Vec<ActionId, L>, ControlError<W>> {
         let goal = self.mission.task.goal;
         let actions = self.planning_actions();
-        search.start(planner, &actions, beliefs, goal);
+        planner.start(&actions, beliefs, goal);
         let slice = u32::from(self.config.plan_slice.max(1));
         let found: Found<L> = loop {
-            if let Some(result) = search.step(&actions, slice) {
+            if let Some(result) = planner.step(&actions, slice) {
                 break result.map_err(|error| ControlError::Planning { error })?;
             }
             // Let sensing, and everything else ready, run between two slices.
@@ -259,10 +258,9 @@ impl<
         Ok(found.body)
     }
 
-    async fn control<const N: usize>(
-        &self,
-        mut planner: Option<(&Planner<N, W>, &mut Search<N, W>)>,
-    ) -> Result<Report<W>, ControlError<W>> {
+    /// `planner` is a type, not an `Option`: a run without one then links no search (an
+    /// option lives in the future's state, where the compiler cannot see that it stays `None`).
+    async fn control<G: Fallback<W>>(&self, mut planner: G) -> Result<Report<W>, ControlError<W>> {
         let task = self.mission.task;
         self.establish_initial_model().await?;
         let mut memory = FailureMemory::new();
@@ -284,13 +282,11 @@ impl<
             let (plan, body) = match self.select(&memory, beliefs) {
                 Ok(selected) => selected,
                 // The same search from the same beliefs would give the plan that just failed.
-                Err(no_plan) => match planner.as_mut() {
-                    Some((planner, space)) if generated_failed != Some(beliefs) => {
-                        let body = self.generate(planner, space, beliefs).await?;
-                        (PlanId::GENERATED, body)
-                    }
-                    _ => return Err(no_plan),
-                },
+                Err(_) if G::PLANS && generated_failed != Some(beliefs) => {
+                    let body = self.generate(&mut planner, beliefs).await?;
+                    (PlanId::GENERATED, body)
+                }
+                Err(no_plan) => return Err(no_plan),
             };
             let named = Plan {
                 name: self
@@ -331,5 +327,51 @@ impl<
                 }
             }
         }
+    }
+}
+
+/// What `generatePlans` falls back on when no library plan applies: a planner and its search
+/// space, or [`NoPlanner`]. A type, not an `Option`: a run without a planner then links no
+/// search (an option lives in the future's state, where the compiler cannot see that it stays
+/// `None`).
+pub(crate) trait Fallback<const W: usize> {
+    /// Whether there is a planner.
+    const PLANS: bool;
+    /// Sets a search up from `init` to `goal`.
+    fn start(&mut self, actions: &[ActuatorAction<'_, W>], init: FactSetOf<W>, goal: FactSetOf<W>);
+    /// Runs `slice` nodes of it: the result once it ended.
+    fn step<const L: usize>(
+        &mut self,
+        actions: &[ActuatorAction<'_, W>],
+        slice: u32,
+    ) -> Option<Result<Found<L>, PlanningError>>;
+}
+
+/// The library's plans only.
+pub(crate) struct NoPlanner;
+
+impl<const W: usize> Fallback<W> for NoPlanner {
+    const PLANS: bool = false;
+    fn start(&mut self, _: &[ActuatorAction<'_, W>], _: FactSetOf<W>, _: FactSetOf<W>) {}
+    fn step<const L: usize>(
+        &mut self,
+        _: &[ActuatorAction<'_, W>],
+        _: u32,
+    ) -> Option<Result<Found<L>, PlanningError>> {
+        Some(Err(PlanningError::Unsolvable { expanded: 0 }))
+    }
+}
+
+impl<const N: usize, const W: usize> Fallback<W> for (&Planner<N, W>, &mut Search<N, W>) {
+    const PLANS: bool = true;
+    fn start(&mut self, actions: &[ActuatorAction<'_, W>], init: FactSetOf<W>, goal: FactSetOf<W>) {
+        self.1.start(self.0, actions, init, goal);
+    }
+    fn step<const L: usize>(
+        &mut self,
+        actions: &[ActuatorAction<'_, W>],
+        slice: u32,
+    ) -> Option<Result<Found<L>, PlanningError>> {
+        self.1.step(actions, slice)
     }
 }

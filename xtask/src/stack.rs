@@ -100,13 +100,14 @@ const ONLY_FROM: &[OnlyFrom] = &[
 #[derive(Debug, Clone, Copy)]
 struct Task {
     name: &'static str,
-    calls: &'static str,
+    /// Any of these, called directly: LLVM inlines a task's body into its poll function or not.
+    calls: &'static [&'static str],
 }
 
 /// No task.
 const NO_TASK: Task = Task {
     name: "",
-    calls: "",
+    calls: &[],
 };
 
 /// A level of preemption: its entry symbol, a task it never polls (and why), and whether the
@@ -129,7 +130,7 @@ const LEVELS: &[Level] = &[
         entry: "Reset",
         excluded: Task {
             name: "TaskStorage<psmpa_firmware::executor::__trampoline_task",
-            calls: "",
+            calls: &[],
         },
         why: "the trampoline is spawned on the sensing executor, which interrupt 14 polls",
         show_path: true,
@@ -146,7 +147,7 @@ const LEVELS: &[Level] = &[
         entry: "psmpa_firmware::executor::sensing_interrupt",
         excluded: Task {
             name: "TaskStorage<psmpa_firmware::firmware::__one_run_task",
-            calls: "",
+            calls: &[],
         },
         why: "the run task is spawned on the deciding executor, which thread mode polls",
         show_path: true,
@@ -201,13 +202,17 @@ const PICO2_ONLY_FROM: &[OnlyFrom] = &[
 /// The task `main` runs (`#[embassy_executor::main]`): its poll function polls main's body.
 const PICO2_MAIN_TASK: Task = Task {
     name: "embassy_executor::raw::TaskStorage<",
-    calls: "psmpa_pico2::____embassy_main_task",
+    // Main's body, or, inlined into the poll, the mission it loads.
+    calls: &[
+        "psmpa_pico2::____embassy_main_task",
+        "psmpa_core::mission::",
+    ],
 };
 
 /// The task `psmpa_pico2::sensing`: its poll function runs the runtime's sensing side.
 const PICO2_SENSING_TASK: Task = Task {
     name: "embassy_executor::raw::TaskStorage<",
-    calls: ">>::sensing",
+    calls: &[">>::sensing"],
 };
 
 /// The Pico 2 board's levels of preemption, least urgent first. On the Cortex-M33 a lower
@@ -301,7 +306,7 @@ const FIRMWARE: Image = Image {
         "run task (one deciding poll)",
         Task {
             name: "TaskStorage<psmpa_firmware::firmware::__one_run_task",
-            calls: "",
+            calls: &[],
         },
     ),
     levels: LEVELS,
@@ -1146,7 +1151,10 @@ impl Analysis<'_> {
         };
         !task.name.is_empty()
             && f.name.contains(task.name)
-            && (task.calls.is_empty() || f.calls.iter().any(|c| self.name(*c).contains(task.calls)))
+            && (task.calls.is_empty()
+                || f.calls
+                    .iter()
+                    .any(|c| task.calls.iter().any(|n| self.name(*c).contains(n))))
     }
 
     fn name(&self, addr: u64) -> &str {
@@ -1440,6 +1448,7 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
         if calls.is_empty() {
             println!("{label} never calls `{name}`: {why}");
         } else {
+            let calls = calls.join("` or `");
             println!("{label} never calls the `{name}` that calls `{calls}`: {why}");
         }
     }

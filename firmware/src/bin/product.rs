@@ -6,9 +6,9 @@
 //! critical section and its stack, and leaves QEMU. `cargo xtask size` holds it to 8 KiB of RAM
 //! with the stack and reports its flash against the 32 KiB target.
 //!
-//! It runs the mission's library plan (`Engine::run`): re-planning with the planner would add
-//! about 0.4 KB of flash and its 1 KiB search space (`Engine::run_planning`), past the RAM
-//! budget.
+//! It runs the mission's library plan (`Engine::run`, which links no search): re-planning with
+//! the planner (`Engine::run_planning`) would add the search's code and its 1 KiB search
+//! space, past the RAM budget.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
