@@ -63,38 +63,22 @@ fn put(buf: &mut [u8; BUFFER], len: &mut usize, out: &mut Option<HostStream>, by
 }
 
 impl State {
+    // Closures borrow `buf`, `len` and `out` apart from `encoder` (disjoint captures).
     fn start_frame(&mut self) {
-        let State {
-            encoder,
-            buf,
-            len,
-            out,
-            ..
-        } = self;
-        encoder.start_frame(|b| put(buf, len, out, b));
+        self.encoder
+            .start_frame(|b| put(&mut self.buf, &mut self.len, &mut self.out, b));
     }
 
     fn write(&mut self, bytes: &[u8]) {
-        let State {
-            encoder,
-            buf,
-            len,
-            out,
-            ..
-        } = self;
-        encoder.write(bytes, |b| put(buf, len, out, b));
+        self.encoder.write(bytes, |b| {
+            put(&mut self.buf, &mut self.len, &mut self.out, b)
+        });
     }
 
     fn end_frame(&mut self) {
-        let State {
-            encoder,
-            buf,
-            len,
-            out,
-            ..
-        } = self;
-        encoder.end_frame(|b| put(buf, len, out, b));
-        flush(buf, len, out);
+        self.encoder
+            .end_frame(|b| put(&mut self.buf, &mut self.len, &mut self.out, b));
+        flush(&self.buf, &mut self.len, &mut self.out);
     }
 }
 
