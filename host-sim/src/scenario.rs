@@ -380,6 +380,15 @@ type SonarRow = (u64, i64, i64, i64, i64, u64, u64, i64, i64);
 type InterferenceRow = (u8, u32, i32, u32, u16, u32);
 
 impl Kind {
+    /// The height an interference of this kind has unless its file says otherwise, µm: 0.8 m
+    /// for a box, 0.1 m for a ball.
+    pub const fn default_height_um(self) -> u32 {
+        match self {
+            Self::Box => 800_000,
+            Self::Ball => 100_000,
+        }
+    }
+
     const fn code(self) -> u8 {
         match self {
             Self::Box => 0,
@@ -1191,9 +1200,9 @@ impl Scenario {
                 name,
             };
             let kind = i.kind.unwrap_or(Kind::Box);
-            let (default_ahead, default_height) = match kind {
-                Kind::Box => (0.45, 0.8),
-                Kind::Ball => (0.05, 0.1),
+            let default_ahead = match kind {
+                Kind::Box => 0.45,
+                Kind::Ball => 0.05,
             };
             // Within range of 32 bits: times are at most a day, distances at most 1 km.
             let item = Interference {
@@ -1209,7 +1218,8 @@ impl Scenario {
                 )? / 1000) as u16,
                 height_um: up_to(
                     at("height_m"),
-                    i.height_m.unwrap_or(default_height),
+                    i.height_m
+                        .unwrap_or(f64::from(kind.default_height_um()) / 1e6),
                     MAX_HEIGHT_M,
                 )? as u32,
             };

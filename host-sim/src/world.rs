@@ -567,7 +567,9 @@ impl<L: WorldLog> State<L> {
         }
         // The reading rounds below the threshold once d < threshold_mm - 0.5 mm.
         let below = sc.sonar.threshold_mm() * 1000 - 500;
-        for (_, o) in self.present_obstacles() {
+        // Nothing closes in while the robot stands and no obstacle walks.
+        let closing_any = walking > 0 || self.walkers & self.present != 0;
+        for (_, o) in self.present_obstacles().filter(|_| closing_any) {
             let d = o.pos_um - self.pos_um;
             // An obstacle stops walking once it touches the robot.
             let closing = walking + if d > 0 { o.walks() } else { 0 };
@@ -613,16 +615,15 @@ impl<L: WorldLog> State<L> {
             let limit = self.limit_um();
             self.pos_um = self.pos_um.saturating_add(step).min(limit).max(self.pos_um);
         }
-        if self.walkers & self.present != 0 {
-            // Obstacles that walk towards the robot, up to it.
-            let pos = self.pos_um;
-            for i in bits(self.walkers & self.present) {
-                if let Some(o) = self.obstacles.get_mut(i) {
-                    let step = o.walks().saturating_mul(dt as i64);
-                    o.pos_um = o.pos_um.saturating_sub(step).max(pos);
-                }
+        // Obstacles that walk towards the robot, up to it; one against it stands.
+        let pos = self.pos_um;
+        for i in bits(self.walkers & self.present) {
+            if let Some(o) = self.obstacles.get_mut(i).filter(|o| o.pos_um > pos) {
+                let step = o.walks().saturating_mul(dt as i64);
+                o.pos_um = o.pos_um.saturating_sub(step).max(pos);
+                // It moved: the certainty pass must look again.
+                self.looked_how = 0;
             }
-            self.looked_how = 0;
         }
         if let Motion::Avoiding { left_ms, target } = self.motion {
             if !self.held {

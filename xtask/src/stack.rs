@@ -419,25 +419,18 @@ fn build() -> Result<PathBuf, String> {
         "-Clink-arg=--emit-relocs",
     ]
     .join("\x1f");
-    let status = firmware::cargo()
-        .args([
-            "build",
-            "--quiet",
-            "-p",
-            "psmpa-firmware",
-            "--bin",
-            "psmpa-firmware",
-        ])
-        .arg("--target")
-        .args([firmware::TARGET, "--profile", firmware::PROFILE])
-        .env("CARGO_ENCODED_RUSTFLAGS", flags)
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .env("RUSTC_BOOTSTRAP", "1")
-        .status()
-        .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !status.success() {
-        return Err("the firmware does not build with -Z emit-stack-sizes".to_owned());
-    }
+    let mut cmd = firmware::cargo();
+    cmd.args([
+        "build",
+        "--quiet",
+        "-p",
+        "psmpa-firmware",
+        "--bin",
+        "psmpa-firmware",
+    ])
+    .arg("--target")
+    .args([firmware::TARGET, "--profile", firmware::PROFILE]);
+    build_with(cmd, &flags, &target_dir, "the firmware")?;
     Ok(target_dir
         .join(firmware::TARGET)
         .join(firmware::PROFILE)
@@ -460,18 +453,32 @@ fn build_board() -> Result<PathBuf, String> {
         "-Csymbol-mangling-version=legacy",
     ]
     .join("\x1f");
-    let status = firmware::cargo()
-        .current_dir(&dir)
-        .args(["build", "--quiet", "--release"])
+    let mut cmd = firmware::cargo();
+    cmd.current_dir(&dir)
+        .args(["build", "--quiet", "--release"]);
+    build_with(cmd, &flags, &target_dir, "the Pico 2 board")?;
+    Ok(target_dir.join("thumbv8m.main-none-eabihf/release/psmpa-pico2"))
+}
+
+/// Runs the cargo build `cmd` with `flags` (unit-separated) into `target_dir`, the `-Z` flags
+/// unlocked on the stable compiler; `what` names the image in the error.
+fn build_with(
+    mut cmd: std::process::Command,
+    flags: &str,
+    target_dir: &std::path::Path,
+    what: &str,
+) -> Result<(), String> {
+    let status = cmd
         .env("CARGO_ENCODED_RUSTFLAGS", flags)
-        .env("CARGO_TARGET_DIR", &target_dir)
+        .env("CARGO_TARGET_DIR", target_dir)
         .env("RUSTC_BOOTSTRAP", "1")
         .status()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !status.success() {
-        return Err("the Pico 2 board does not build with -Z emit-stack-sizes".to_owned());
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{what} does not build with -Z emit-stack-sizes"))
     }
-    Ok(target_dir.join("thumbv8m.main-none-eabihf/release/psmpa-pico2"))
 }
 
 /// LLVM's frame sizes by function address: `(u32 address, ULEB128 size)` records.

@@ -302,7 +302,7 @@ fn draw(
                 .light_line_style(WHITE)
                 .draw()
                 .map_err(|e| e.to_string())?;
-            let legend = i == 0;
+            let with_legend = i == 0;
             let mut first = [true; 2];
             for &(t, _, e) in &rec.world.0 {
                 let (color, y, k, label) = match e {
@@ -320,7 +320,7 @@ fn draw(
                         color.stroke_width(1),
                     ))
                     .map_err(|e| e.to_string())?;
-                if legend && std::mem::take(&mut first[k]) {
+                if with_legend && std::mem::take(&mut first[k]) {
                     series.label(label).legend(move |(x, y)| {
                         PathElement::new([(x, y), (x + 16, y)], color.stroke_width(2))
                     });
@@ -332,7 +332,7 @@ fn draw(
                     BLACK.stroke_width(1),
                 ))
                 .map_err(|e| e.to_string())?;
-            if legend {
+            if with_legend {
                 series
                     .label("reading (0 while the sensor is off)")
                     .legend(|(x, y)| {
@@ -346,7 +346,7 @@ fn draw(
                         RED.mix(0.6).stroke_width(1),
                     ))
                     .map_err(|e| e.to_string())?;
-                if legend {
+                if with_legend {
                     series.label("detection threshold").legend(|(x, y)| {
                         PathElement::new([(x, y), (x + 16, y)], RED.mix(0.6).stroke_width(2))
                     });
@@ -360,7 +360,7 @@ fn draw(
             chart
                 .draw_series(marks.map(|(t, style)| Circle::new((t, y_max * 0.93), 4, style)))
                 .map_err(|e| e.to_string())?;
-            if legend {
+            if with_legend {
                 chart
                     .draw_series(std::iter::once(Circle::new(
                         (-1.0, -1.0),
@@ -375,18 +375,26 @@ fn draw(
                     .map_err(|e| e.to_string())?
                     .label("collision")
                     .legend(|(x, y)| Circle::new((x + 8, y), 4, RED.filled()));
-                chart
-                    .configure_series_labels()
-                    .position(SeriesLabelPosition::UpperRight)
-                    .background_style(WHITE.mix(0.9))
-                    .border_style(BLACK.mix(0.3))
-                    .label_font(("sans-serif", 12))
-                    .draw()
-                    .map_err(|e| e.to_string())?;
+                legend(&mut chart, SeriesLabelPosition::UpperRight)?;
             }
         }
     }
     root.present().map_err(|e| e.to_string())
+}
+
+/// Draws a chart's legend at `position`, in the style of every plot here.
+pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 12))
+        .draw()
+        .map_err(|e| e.to_string())
 }
 
 /// Tracks of the timeline, by thread id from 1.

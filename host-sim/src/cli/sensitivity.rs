@@ -17,11 +17,12 @@ use rand_pcg::Pcg32;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::cli::outputs::legend;
 use crate::cli::sweep::{self, obstacles, uniform};
 use crate::cli::table1::PAPER;
 use crate::robot::Arch;
 use crate::run::Summary;
-use crate::scenario::{Kind, Scenario, Sonar};
+use crate::scenario::{Kind, Scenario};
 use crate::sim::{RunError, run_summary};
 use crate::world::Fate;
 
@@ -68,18 +69,8 @@ pub fn world(seed: u64, index: u64, faults: bool) -> Scenario {
     // At least one: a world without obstacles says nothing about detection.
     let n = uniform(r, 1, 8);
     let interferences = obstacles(r, n, walk_ms);
-    // The sweep's faults: noise up to 30 mm and dropout up to 10 %, each in half the worlds;
-    // a sonar echo of up to 40 ms and a bumper debounce of up to 5 ms.
-    let noise_um = if uniform(r, 0, 1) == 0 {
-        0
-    } else {
-        uniform(r, 0, 30) as i64 * 1_000
-    };
-    let dropout = if uniform(r, 0, 1) == 0 {
-        0
-    } else {
-        (uniform(r, 0, 100) << 32) / 1000
-    };
+    // The sweep's faults; a sonar echo of up to 40 ms and a bumper debounce of up to 5 ms.
+    let (noise_um, dropout) = sweep::sonar_faults(r);
     let sonar_latency_ms = uniform(r, 0, 40);
     let bumper_latency_ms = uniform(r, 0, 5);
     let mut name = heapless::String::new();
@@ -100,17 +91,12 @@ pub fn world(seed: u64, index: u64, faults: bool) -> Scenario {
         avoid_ms,
         slow_um: 0,
         plan_us: 0,
-        sonar: Sonar {
-            period_ms: sonar_period_ms,
-            min_um: 250_000,
-            max_um: 2_550_000,
-            threshold_um: 500_000,
-            noise_um: if faults { noise_um } else { 0 },
-            dropout: on(dropout),
-            latency_ms: on(sonar_latency_ms),
-            height_um: 0,
-            cone_slope_permille: 500,
-        },
+        sonar: sweep::sonar(
+            sonar_period_ms,
+            if faults { noise_um } else { 0 },
+            on(dropout),
+            on(sonar_latency_ms),
+        ),
         bumper_period_ms,
         bumper_latency_ms: on(bumper_latency_ms),
         bumper_min_contact_ms: 0,
@@ -939,14 +925,7 @@ pub fn plot(study: &Study) -> Result<String, String> {
                 },
             ))
             .map_err(|e| e.to_string())?;
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK.mix(0.3))
-            .label_font(("sans-serif", 12))
-            .draw()
-            .map_err(|e| e.to_string())?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
 
         let ratios = [&study.clean, &study.faults]
             .iter()
@@ -978,14 +957,7 @@ pub fn plot(study: &Study) -> Result<String, String> {
             .map_err(|e| e.to_string())?
             .label(PAPER_LABEL)
             .legend(|(x, y)| Cross::new((x + 8, y), 5, BLACK.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK.mix(0.3))
-            .label_font(("sans-serif", 12))
-            .draw()
-            .map_err(|e| e.to_string())?;
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)

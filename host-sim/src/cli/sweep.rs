@@ -19,6 +19,38 @@ pub(crate) fn uniform(rng: &mut Pcg32, lo: u64, hi: u64) -> u64 {
     lo + u64::from(rng.next_u32()) % (hi - lo + 1)
 }
 
+/// The sweep's sonar faults: noise up to 30 mm and dropout up to 10 % (a threshold on a `u32`
+/// draw: probability v / 1000), each in half the worlds. Returns `(noise_um, dropout)`.
+pub(crate) fn sonar_faults(r: &mut Pcg32) -> (i64, u64) {
+    let noise_um = if uniform(r, 0, 1) == 0 {
+        0
+    } else {
+        uniform(r, 0, 30) as i64 * 1_000
+    };
+    let dropout = if uniform(r, 0, 1) == 0 {
+        0
+    } else {
+        (uniform(r, 0, 100) << 32) / 1000
+    };
+    (noise_um, dropout)
+}
+
+/// The NAO's sonar (0.25 to 2.55 m, a 0.5 m threshold, a cone that sees every box) with the
+/// drawn period, noise (µm), dropout and read latency (ms).
+pub(crate) fn sonar(period_ms: u64, noise_um: i64, dropout: u64, latency_ms: u64) -> Sonar {
+    Sonar {
+        period_ms,
+        min_um: 250_000,
+        max_um: 2_550_000,
+        threshold_um: 500_000,
+        noise_um,
+        dropout,
+        latency_ms,
+        height_um: 0,
+        cone_slope_permille: 500,
+    }
+}
+
 /// `n` interferences put down uniformly over a walk of `walk_ms`: a box 0.15 to 1 m ahead or
 /// a ball 0 to 0.3 m ahead, held 0.5 to 10 s (the sweep's and the sensitivity study's draws).
 pub(crate) fn obstacles(
@@ -44,10 +76,7 @@ pub(crate) fn obstacles(
             ahead_um: ahead_um as i32,
             hold_ms: uniform(r, 500, 10_000) as u32,
             speed_um_per_ms: 0,
-            height_um: match kind {
-                Kind::Box => 800_000,
-                Kind::Ball => 100_000,
-            },
+            height_um: kind.default_height_um(),
         });
     }
     interferences
@@ -60,17 +89,7 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
     let speed_um_per_ms = uniform(r, 50, 200) as i64;
     let door_um = uniform(r, 1_000, 3_000) as i64 * 1_000;
     let walk_ms = (door_um / speed_um_per_ms) as u64;
-    let noise_um = if uniform(r, 0, 1) == 0 {
-        0
-    } else {
-        uniform(r, 0, 30) as i64 * 1_000
-    };
-    // Probability v / 1000, at most 0.1, as a threshold on a u32 draw.
-    let dropout = if uniform(r, 0, 1) == 0 {
-        0
-    } else {
-        (uniform(r, 0, 100) << 32) / 1000
-    };
+    let (noise_um, dropout) = sonar_faults(r);
     let n = uniform(r, 0, 8);
     let interferences = obstacles(r, n, walk_ms);
     let mut name = heapless::String::new();
@@ -93,17 +112,7 @@ pub fn scenario(seed: u64, index: u64) -> Scenario {
         avoid_ms,
         slow_um: 0,
         plan_us: 0,
-        sonar: Sonar {
-            period_ms: sonar_period_ms,
-            min_um: 250_000,
-            max_um: 2_550_000,
-            threshold_um: 500_000,
-            noise_um,
-            dropout,
-            latency_ms: sonar_latency_ms,
-            height_um: 0,
-            cone_slope_permille: 500,
-        },
+        sonar: sonar(sonar_period_ms, noise_um, dropout, sonar_latency_ms),
         bumper_period_ms,
         bumper_latency_ms,
         bumper_min_contact_ms: 0,
