@@ -27,7 +27,7 @@
 //! on the sensing side is in [`crate::sense`].
 
 use core::cell::{Cell, RefCell};
-use core::future::poll_fn;
+use core::future::{Future, poll_fn};
 use core::pin::{Pin, pin};
 use core::task::{Context, Poll};
 
@@ -235,8 +235,13 @@ impl<const W: usize> ActionIo<'_, W> {
 
     /// Waits until [`version`](Self::version) differs from `since` and returns the new value.
     /// Returns at once if it already differs.
-    pub async fn changed(&self, since: u32) -> u32 {
-        poll_fn(|cx| self.monitor.poll_changed(cx, since)).await
+    pub fn changed(&self, since: u32) -> Changed<'_, W> {
+        // A future of its own, not an `async fn` around a `poll_fn`: a behaviour awaits it at
+        // every step, and the wrapper's state machine cost a step about 25 instructions.
+        Changed {
+            monitor: self.monitor,
+            since,
+        }
     }
 
     /// Waits until [`version`](Self::version) differs from `since` or the instant `at` comes,
@@ -270,6 +275,21 @@ impl<const W: usize> ActionIo<'_, W> {
     /// Records an application-defined trace event.
     pub fn trace(&self, code: u16, value: i32) {
         self.monitor.user(code, value);
+    }
+}
+
+/// The future of [`ActionIo::changed`]: the next [`version`](ActionIo::version) after `since`.
+#[must_use = "futures do nothing unless polled"]
+pub struct Changed<'io, const W: usize> {
+    monitor: &'io dyn Monitor<W>,
+    since: u32,
+}
+
+impl<const W: usize> Future for Changed<'_, W> {
+    type Output = u32;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<u32> {
+        self.monitor.poll_changed(cx, self.since)
     }
 }
 

@@ -246,10 +246,14 @@ impl<
                 }
                 due = match (spec.mode, mode, due) {
                     (SensorMode::Cyclic { .. }, Mode::Once, _) => None,
-                    // An early sample (`wake`) that ended before its instant keeps it.
-                    (SensorMode::Cyclic { .. }, _, Some(due)) if Instant::now() < due => Some(due),
                     (SensorMode::Cyclic { period }, _, Some(due)) => {
-                        Some(next_due(due, period.as_ticks(), Instant::now()))
+                        let now = Instant::now();
+                        // An early sample (`wake`) that ended before its instant keeps it.
+                        Some(if now < due {
+                            due
+                        } else {
+                            next_due(due, period.as_ticks(), now)
+                        })
                     }
                     _ => None,
                 };
@@ -534,12 +538,28 @@ type Change<const W: usize> = (ActionId, Option<Violation<W>>, Option<Violation<
 
 /// Compares the watched action's `pre(a)` with the beliefs and updates the violation, in the
 /// caller's lock. `None` when nothing is watched or nothing changed. O(NS).
+#[inline]
 fn check<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
     s: &Shared<NS, W>,
     domain: &Domain<'_, NS, NA, W, NF>,
 ) -> Option<Change<W>> {
     let (action, pre) = s.command.get().watch?;
     let missing = pre.difference(s.beliefs.get());
+    // Nearly every sample: the precondition holds and held. Decided here, in the caller.
+    if missing.is_empty() && s.violation.get().is_none() {
+        return None;
+    }
+    check_changed(s, domain, action, missing)
+}
+
+/// [`check`] when the precondition is false or was.
+#[inline(never)]
+fn check_changed<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
+    s: &Shared<NS, W>,
+    domain: &Domain<'_, NS, NA, W, NF>,
+    action: ActionId,
+    missing: FactSetOf<W>,
+) -> Option<Change<W>> {
     let before = s.violation.get();
     let after = match (missing.is_empty(), before) {
         (true, None) => return None,
