@@ -483,7 +483,8 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
         };
         plan();
         loop {
-            let motion = world.motion();
+            // One look at the world for the loop's questions.
+            let (motion, arrived, speed_now) = world.legs(place);
             if !matches!(motion, Motion::Avoiding { .. }) {
                 if stepping {
                     // The side step ended: samples from now on count; plan the way on.
@@ -492,13 +493,14 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
                     io.trace(codes::RESUME, 0);
                     plan();
                 }
-                if world.at(place) {
+                if arrived {
                     world.stop();
                     world.arrived(place);
                     return Outcome::Success;
                 }
                 let fresh = |e: &Entry| e.at >= handled;
-                let sonar = self.sonar.and_then(|s| io.sample(s)).filter(fresh);
+                let latest = self.sonar.and_then(|s| io.sample(s));
+                let sonar = latest.filter(fresh);
                 let bumper = self.bumper.and_then(|s| io.sample(s)).filter(fresh);
                 let seen = sonar.filter(|e| self.shows_obstacle(self.sonar, *e));
                 let felt = bumper.filter(|e| self.shows_obstacle(self.bumper, *e));
@@ -516,8 +518,8 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
                     io.trace(codes::AVOID, mm);
                     continue;
                 }
-                let speed = self.speed_for(self.sonar.and_then(|s| io.sample(s)));
-                if speed != world.speed_permille() {
+                let speed = self.speed_for(latest);
+                if speed != speed_now {
                     world.set_speed(speed);
                     io.trace(codes::SPEED, i32::from(speed));
                 }
@@ -588,11 +590,10 @@ impl<L: WorldLog, M: RawMutex> Sensor for Nao<'_, '_, L, M> {
         let sc = self.world.scenario();
         Ok(match self.device(sensor).ok_or(SensorFault::Device(1))? {
             Device::Sonar => {
-                if self.world.sonar_fault() == Some(crate::scenario::FaultKind::Silent) {
-                    // The echo never comes: the runtime's sample timeout notices.
-                    core::future::pending::<()>().await;
-                }
-                let echo = self.world.sonar_read();
+                let Some(echo) = self.world.sonar_start() else {
+                    // Silent: the echo never comes, and the runtime's sample timeout notices.
+                    return core::future::pending().await;
+                };
                 // The ping's round trip: only this sensor waits.
                 read_latency(read_time(sc.sonar.latency_ms, self.timeouts[0])).await;
                 let Some(mm) = self.world.sonar_deliver(echo) else {

@@ -452,6 +452,74 @@ fn div_ceil(a: i64, b: i64) -> u64 {
 }
 
 impl<L: WorldLog> State<L> {
+    /// The sonar's fault now, if it has one.
+    fn fault(&self, sc: &Scenario) -> Option<FaultKind> {
+        sc.fault
+            .filter(|(_, at)| self.now >= u64::from(*at))
+            .map(|(kind, _)| kind)
+    }
+
+    /// [`World::sonar_read`] on the state, with the sonar's `fault`.
+    fn sonar_read(&mut self, sc: &Scenario, fault: Option<FaultKind>) -> Echo {
+        let s = self;
+        s.log.read_started(Device::Sonar);
+        let sonar = sc.sonar;
+        let mut echo = Echo {
+            mm: None,
+            registers: 0,
+            certain: 0,
+            sticks: false,
+            pos_um: s.pos_um,
+        };
+        match fault {
+            Some(FaultKind::OutOfRange) => {
+                let mm = u32::try_from(to_mm(sonar.max_um) + 1_500).unwrap_or(u32::MAX);
+                echo.mm = Some(mm);
+                return echo;
+            }
+            Some(FaultKind::Stuck) if s.stuck_mm.is_some() => {
+                echo.mm = s.stuck_mm;
+                return echo;
+            }
+            _ => {}
+        }
+        if sonar.dropout > 0 && u64::from(s.rng.next_u32()) < sonar.dropout {
+            return echo;
+        }
+        // The nearest box ahead, if it lies within the sonar's range.
+        let seen = s
+            .nearest_box()
+            .filter(|d| (sonar.min_um..=sonar.max_um).contains(d));
+        let reading_um = match seen {
+            Some(d) => {
+                let noise = if sonar.noise_um > 0 {
+                    let span = 2 * sonar.noise_um as u64 + 1;
+                    (u64::from(s.rng.next_u32()) % span) as i64 - sonar.noise_um
+                } else {
+                    0
+                };
+                (d + noise).max(sonar.min_um).min(sonar.max_um)
+            }
+            None => sonar.max_um,
+        };
+        let mm = to_mm(reading_um);
+        if let Some(d) = seen {
+            let certain = certain_at(&sonar, d);
+            let registered = sonar.registers(mm);
+            // Every box at that distance is what the echo came from.
+            for (i, o) in s.present_obstacles() {
+                if o.kind == Kind::Box && o.pos_um - s.pos_um == d && d >= o.seen_from() {
+                    echo.certain |= u32::from(certain) << i;
+                    echo.registers |= u32::from(registered) << i;
+                }
+            }
+        }
+        echo.mm = Some(u32::try_from(mm).unwrap_or(u32::MAX));
+        // The first reading after the fault is the one it sticks at.
+        echo.sticks = fault == Some(FaultKind::Stuck);
+        echo
+    }
+
     fn moving(&self) -> bool {
         self.motion == Motion::Walking && !self.held
     }
@@ -956,6 +1024,18 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         })
     }
 
+    /// [`with`](Self::with) for calls that change only what the physics never reads (the log,
+    /// the noise generator, the sample gaps): the next call at this instant need not settle
+    /// again, and the next event stays as worked out.
+    fn quiet<R>(&self, f: impl FnOnce(&mut State<L>, &Scenario) -> R) -> R {
+        let now = Instant::now().as_millis();
+        self.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            s.advance_to(now, self.scenario);
+            f(&mut s, self.scenario)
+        })
+    }
+
     /// [`with`](Self::with) for queries that change nothing.
     fn view<R>(&self, f: impl FnOnce(&State<L>, &Scenario) -> R) -> R {
         let now = Instant::now().as_millis();
@@ -979,6 +1059,12 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// What the legs do.
     pub fn motion(&self) -> Motion {
         self.view(|s, _| s.motion)
+    }
+
+    /// What the legs do, whether the robot stands at `place`, and the walking speed: a walk's
+    /// questions in one look.
+    pub fn legs(&self, place: Place) -> (Motion, bool, u16) {
+        self.view(|s, sc| (s.motion, s.pos_um == place.at_um(sc), s.speed_permille))
     }
 
     /// Whether the robot stands at `place`.
@@ -1119,11 +1205,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// The sonar's fault, once it has started.
     pub fn sonar_fault(&self) -> Option<FaultKind> {
-        self.view(|s, sc| {
-            sc.fault
-                .filter(|(_, at)| s.now >= u64::from(*at))
-                .map(|(kind, _)| kind)
-        })
+        self.view(|s, sc| s.fault(sc))
     }
 
     /// Starts a sonar read: what the echo will say describes the world now (the nearest box
@@ -1133,63 +1215,15 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// beyond its range, or the same reading again and again.
     pub fn sonar_read(&self) -> Echo {
         let fault = self.sonar_fault();
-        self.with(|s, sc| {
-            s.log.read_started(Device::Sonar);
-            let sonar = sc.sonar;
-            let mut echo = Echo {
-                mm: None,
-                registers: 0,
-                certain: 0,
-                sticks: false,
-                pos_um: s.pos_um,
-            };
-            match fault {
-                Some(FaultKind::OutOfRange) => {
-                    let mm = u32::try_from(to_mm(sonar.max_um) + 1_500).unwrap_or(u32::MAX);
-                    echo.mm = Some(mm);
-                    return echo;
-                }
-                Some(FaultKind::Stuck) if s.stuck_mm.is_some() => {
-                    echo.mm = s.stuck_mm;
-                    return echo;
-                }
-                _ => {}
-            }
-            if sonar.dropout > 0 && u64::from(s.rng.next_u32()) < sonar.dropout {
-                return echo;
-            }
-            // The nearest box ahead, if it lies within the sonar's range.
-            let seen = s
-                .nearest_box()
-                .filter(|d| (sonar.min_um..=sonar.max_um).contains(d));
-            let reading_um = match seen {
-                Some(d) => {
-                    let noise = if sonar.noise_um > 0 {
-                        let span = 2 * sonar.noise_um as u64 + 1;
-                        (u64::from(s.rng.next_u32()) % span) as i64 - sonar.noise_um
-                    } else {
-                        0
-                    };
-                    (d + noise).max(sonar.min_um).min(sonar.max_um)
-                }
-                None => sonar.max_um,
-            };
-            let mm = to_mm(reading_um);
-            if let Some(d) = seen {
-                let certain = certain_at(&sonar, d);
-                let registered = sonar.registers(mm);
-                // Every box at that distance is what the echo came from.
-                for (i, o) in s.present_obstacles() {
-                    if o.kind == Kind::Box && o.pos_um - s.pos_um == d && d >= o.seen_from() {
-                        echo.certain |= u32::from(certain) << i;
-                        echo.registers |= u32::from(registered) << i;
-                    }
-                }
-            }
-            echo.mm = Some(u32::try_from(mm).unwrap_or(u32::MAX));
-            // The first reading after the fault is the one it sticks at.
-            echo.sticks = fault == Some(FaultKind::Stuck);
-            echo
+        self.quiet(|s, sc| s.sonar_read(sc, fault))
+    }
+
+    /// [`sonar_read`](Self::sonar_read) unless the sonar has fallen silent (`None`: its echo
+    /// never comes, and no read starts): one look at the world for both.
+    pub fn sonar_start(&self) -> Option<Echo> {
+        self.quiet(|s, sc| {
+            let fault = s.fault(sc);
+            (fault != Some(FaultKind::Silent)).then(|| s.sonar_read(sc, fault))
         })
     }
 
@@ -1226,7 +1260,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// Starts a bumper read: what the robot touches now.
     pub fn bumper_read(&self) -> Touch {
-        self.with(|s, sc| {
+        self.quiet(|s, sc| {
             s.log.read_started(Device::Bumper);
             Touch {
                 touching: s
@@ -1259,7 +1293,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// counted for the largest gap between samples. The camera and the handle count theirs
     /// themselves.
     pub fn sample_delivered(&self, device: Device) {
-        self.with(|s, _| s.delivered(device));
+        self.quiet(|s, _| s.delivered(device));
     }
 
     /// A sonar read that starts and completes now, accepted.
@@ -1291,7 +1325,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// One camera image: whether the door handle is in view (the robot is at the door).
     pub fn camera(&self) -> bool {
-        self.with(|s, sc| {
+        self.quiet(|s, sc| {
             let seen = s.pos_um == sc.door_um;
             s.emit(WorldEvent::Sample(Device::Camera, u32::from(seen)));
             s.delivered(Device::Camera);
