@@ -71,7 +71,11 @@ const HOST_STEPS: &[(&str, &str)] = &[
         "sensing side: one poll (samples)",
         "psmpa_testkit::beside::poll_erased",
     ),
-    ("precondition check", "psmpa_core::sense::check"),
+    // The common case (holds, held) is decided inline in the sensing poll; this is a change.
+    (
+        "precondition check, a change",
+        "psmpa_core::sense::check_changed",
+    ),
     (
         "behaviour step (one poll)",
         "as psmpa_core::platform::Actuator>::run::{{closure}}",
