@@ -1,8 +1,9 @@
 //! One run of a scenario under one architecture: the Fetch Tea mission on the simulated world
 //! until the goal holds, the control loop gives up, or `max_s` passes.
 //!
-//! `no_std`: the firmware awaits [`run`] inside an embassy task, the host inside
-//! [`backend::simulate`](crate::backend::simulate). Each places the runtime's sensing side
+//! `no_std`: the firmware awaits [`run_robot`] inside an embassy task, the host inside
+//! [`backend::simulate`](crate::backend::simulate) (through `sim`, with the mission loaded once
+//! per thread). Each places the runtime's sensing side
 //! through [`Sides`]: the host at its poll loop's higher priority, the firmware on its own
 //! interrupt executor.
 
@@ -16,7 +17,7 @@ use psmpa_core::{ControlError, Report, TraceSink};
 
 pub use psmpa_testkit::beside::{Beside, Erased, HighSlot, PreemptingSlot};
 
-use crate::robot::{self, Arch, MissionError, Nao, Robot};
+use crate::robot::{self, Arch, Nao, Robot};
 use crate::scenario::Scenario;
 use crate::world::{ObstacleReport, Tally, World, WorldLog};
 
@@ -80,26 +81,6 @@ pub trait Sides {
     fn compute(us: u32) {
         let _ = us;
     }
-}
-
-/// Runs `scenario` under `arch`, logging the world into `log` and tracing the runtime into
-/// `sink`; returns the summary and gives the log and the sink back.
-///
-/// # Safety
-///
-/// As [`Sides::beside`]: the future must not be leaked, and must be dropped where it was
-/// polled. [`crate::sim`] runs it safely.
-pub async unsafe fn run<P: Sides, L: WorldLog, T: TraceSink>(
-    sides: &P,
-    scenario: &Scenario,
-    arch: Arch,
-    log: L,
-    sink: T,
-) -> Result<(Summary, L, T), MissionError> {
-    let robot = robot::fetch_tea(scenario)?;
-    let mut space = robot::PlannerSpace::new();
-    // SAFETY: this future is not leaked and stays where it is polled: the caller's contract.
-    Ok(unsafe { run_robot(sides, &robot, scenario, arch, &mut space, log, sink) }.await)
 }
 
 /// Runs a mission already loaded for `scenario` ([`robot::fetch_tea`]), planning in `space`

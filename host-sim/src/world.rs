@@ -461,15 +461,14 @@ impl<L: WorldLog> State<L> {
 
     /// [`World::sonar_read`] on the state, with the sonar's `fault`.
     fn sonar_read(&mut self, sc: &Scenario, fault: Option<FaultKind>) -> Echo {
-        let s = self;
-        s.log.read_started(Device::Sonar);
+        self.log.read_started(Device::Sonar);
         let sonar = sc.sonar;
         let mut echo = Echo {
             mm: None,
             registers: 0,
             certain: 0,
             sticks: false,
-            pos_um: s.pos_um,
+            pos_um: self.pos_um,
         };
         match fault {
             Some(FaultKind::OutOfRange) => {
@@ -477,24 +476,24 @@ impl<L: WorldLog> State<L> {
                 echo.mm = Some(mm);
                 return echo;
             }
-            Some(FaultKind::Stuck) if s.stuck_mm.is_some() => {
-                echo.mm = s.stuck_mm;
+            Some(FaultKind::Stuck) if self.stuck_mm.is_some() => {
+                echo.mm = self.stuck_mm;
                 return echo;
             }
             _ => {}
         }
-        if sonar.dropout > 0 && u64::from(s.rng.next_u32()) < sonar.dropout {
+        if sonar.dropout > 0 && u64::from(self.rng.next_u32()) < sonar.dropout {
             return echo;
         }
         // The nearest box ahead, if it lies within the sonar's range.
-        let seen = s
+        let seen = self
             .nearest_box()
             .filter(|d| (sonar.min_um..=sonar.max_um).contains(d));
         let reading_um = match seen {
             Some(d) => {
                 let noise = if sonar.noise_um > 0 {
                     let span = 2 * sonar.noise_um as u64 + 1;
-                    (u64::from(s.rng.next_u32()) % span) as i64 - sonar.noise_um
+                    (u64::from(self.rng.next_u32()) % span) as i64 - sonar.noise_um
                 } else {
                     0
                 };
@@ -507,8 +506,8 @@ impl<L: WorldLog> State<L> {
             let certain = certain_at(&sonar, d);
             let registered = sonar.registers(mm);
             // Every box at that distance is what the echo came from.
-            for (i, o) in s.present_obstacles() {
-                if o.kind == Kind::Box && o.pos_um - s.pos_um == d && d >= o.seen_from() {
+            for (i, o) in self.present_obstacles() {
+                if o.kind == Kind::Box && o.pos_um - self.pos_um == d && d >= o.seen_from() {
                     echo.certain |= u32::from(certain) << i;
                     echo.registers |= u32::from(registered) << i;
                 }
@@ -1038,12 +1037,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// [`with`](Self::with) for queries that change nothing.
     fn view<R>(&self, f: impl FnOnce(&State<L>, &Scenario) -> R) -> R {
-        let now = Instant::now().as_millis();
-        self.state.lock(|cell| {
-            let mut s = cell.borrow_mut();
-            s.advance_to(now, self.scenario);
-            f(&s, self.scenario)
-        })
+        self.quiet(|s, sc| f(s, sc))
     }
 
     /// The robot's position, µm.
@@ -1051,25 +1045,10 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         self.view(|s, _| s.pos_um)
     }
 
-    /// The walking speed, thousandths of the scenario's `speed_mps`.
-    pub fn speed_permille(&self) -> u16 {
-        self.view(|s, _| s.speed_permille)
-    }
-
-    /// What the legs do.
-    pub fn motion(&self) -> Motion {
-        self.view(|s, _| s.motion)
-    }
-
     /// What the legs do, whether the robot stands at `place`, and the walking speed: a walk's
     /// questions in one look.
     pub fn legs(&self, place: Place) -> (Motion, bool, u16) {
         self.view(|s, sc| (s.motion, s.pos_um == place.at_um(sc), s.speed_permille))
-    }
-
-    /// Whether the robot stands at `place`.
-    pub fn at(&self, place: Place) -> bool {
-        self.view(|s, sc| s.pos_um == place.at_um(sc))
     }
 
     /// When the world next changes by itself.
@@ -1214,8 +1193,10 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// faulty sonar (see [`sonar_fault`](Self::sonar_fault)) registers nothing: it reports
     /// beyond its range, or the same reading again and again.
     pub fn sonar_read(&self) -> Echo {
-        let fault = self.sonar_fault();
-        self.quiet(|s, sc| s.sonar_read(sc, fault))
+        self.quiet(|s, sc| {
+            let fault = s.fault(sc);
+            s.sonar_read(sc, fault)
+        })
     }
 
     /// [`sonar_read`](Self::sonar_read) unless the sonar has fallen silent (`None`: its echo
