@@ -29,12 +29,11 @@
 use core::cell::{Cell, RefCell};
 use core::future::{Future, poll_fn};
 use core::pin::{Pin, pin};
-use core::task::{Context, Poll};
+use core::task::{Context, Poll, Waker};
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
-use embassy_sync::waitqueue::WakerRegistration;
 use embassy_time::{Duration, Instant, Timer};
 
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorSet};
@@ -339,6 +338,8 @@ pub(crate) struct Shared<const NS: usize, const W: usize> {
     /// Sensors that failed: out of service until [`Engine::clear_faults`].
     pub(crate) faulty: Cell<SensorSet>,
     pub(crate) violation: Cell<Option<Violation<W>>>,
+    /// Neither a failure nor a violation is pending: the watch's common case, one load.
+    pub(crate) calm: Cell<bool>,
     pub(crate) requests: Cell<SensorSet>,
     pub(crate) version: Cell<u32>,
     pub(crate) command: Cell<Command<W>>,
@@ -352,18 +353,30 @@ pub(crate) struct Shared<const NS: usize, const W: usize> {
     pub(crate) failure: Cell<Option<(u32, Failure<W>)>>,
     /// The deciding side's task (behaviours, the precondition watch and the control loop).
     /// One task per side: a registration of another waker wakes the one it replaces.
-    pub(crate) deciding: RefCell<WakerRegistration>,
+    pub(crate) deciding: Waiter,
     /// The sensing side's task (the samplers).
-    pub(crate) sensing: RefCell<WakerRegistration>,
+    pub(crate) sensing: Waiter,
 }
 
 impl<const NS: usize, const W: usize> Shared<NS, W> {
     /// Something the deciding side may wait for changed: bump the version and wake it.
     pub(crate) fn notify(&self) {
         self.version.set(self.version.get().wrapping_add(1));
-        if let Ok(mut w) = self.deciding.try_borrow_mut() {
-            w.wake();
-        }
+        self.deciding.wake();
+    }
+
+    /// Sets the failure of the current command (`None`: no failure).
+    pub(crate) fn set_failure(&self, failure: Option<(u32, Failure<W>)>) {
+        self.failure.set(failure);
+        self.calm
+            .set(failure.is_none() && self.violation.get().is_none());
+    }
+
+    /// Sets the watched action's violation (`None`: its precondition holds).
+    pub(crate) fn set_violation(&self, violation: Option<Violation<W>>) {
+        self.violation.set(violation);
+        self.calm
+            .set(violation.is_none() && self.failure.get().is_none());
     }
 
     /// A read of `sensor` started at `at`.
@@ -374,24 +387,111 @@ impl<const NS: usize, const W: usize> Shared<NS, W> {
     }
 }
 
+/// The waker of one side's task. Unlike embassy-sync's `WakerRegistration` it keeps the waker
+/// when it wakes it: a side registers again at nearly every poll, and a kept waker makes that a
+/// comparison instead of a clone. A later wake of a task that waits for something else is a
+/// spurious wake, which futures allow.
+pub(crate) struct Waiter(RefCell<Option<Waker>>);
+
+impl Waiter {
+    const fn new() -> Self {
+        Self(RefCell::new(None))
+    }
+
+    /// Makes `waker` the one woken. One task per side: a different waker replaces the one
+    /// registered, which is woken so that it can register again.
+    pub(crate) fn register(&self, waker: &Waker) {
+        let replaced = match self.0.try_borrow_mut() {
+            Ok(mut slot) => match &*slot {
+                Some(kept) if kept.will_wake(waker) => None,
+                _ => slot.replace(waker.clone()),
+            },
+            Err(_) => None,
+        };
+        if let Some(replaced) = replaced {
+            replaced.wake();
+        }
+    }
+
+    /// Wakes the registered task, if any.
+    pub(crate) fn wake(&self) {
+        if let Ok(slot) = self.0.try_borrow() {
+            if let Some(waker) = &*slot {
+                waker.wake_by_ref();
+            }
+        }
+    }
+}
+
 /// A wait on the shared state `shared`: `done` decides, and when it says not yet the waker is
 /// registered with the side's wakers (`wakers`), in the same lock, so that a side that preempts
 /// in between cannot wake nobody.
 pub(crate) fn poll_shared<M: RawMutex, const NS: usize, const W: usize, R>(
     shared: &Mutex<M, Shared<NS, W>>,
     cx: &Context<'_>,
-    wakers: impl FnOnce(&Shared<NS, W>) -> &RefCell<WakerRegistration>,
+    wakers: impl FnOnce(&Shared<NS, W>) -> &Waiter,
     done: impl FnOnce(&Shared<NS, W>) -> Option<R>,
 ) -> Poll<R> {
     shared.lock(|s| match done(s) {
         Some(r) => Poll::Ready(r),
         None => {
-            if let Ok(mut w) = wakers(s).try_borrow_mut() {
-                w.register(cx.waker());
-            }
+            wakers(s).register(cx.waker());
             Poll::Pending
         }
     })
+}
+
+/// The future of [`Engine::watch`]: polled before the behaviour at every step of it, so a
+/// future of its own with the common case (nothing pending) first.
+struct Watch<'s, M: RawMutex, const NS: usize, const W: usize> {
+    shared: &'s Mutex<M, Shared<NS, W>>,
+    epoch: u32,
+    action: ActionId,
+    max: Duration,
+    /// The timer of the current violation's deadline.
+    alarm: Option<(Instant, Timer)>,
+}
+
+impl<M: RawMutex, const NS: usize, const W: usize> Future for Watch<'_, M, NS, W> {
+    type Output = Failure<W>;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Failure<W>> {
+        let this = self.get_mut();
+        let epoch = this.epoch;
+        // Registered in the same lock as the check: a delivery in between cannot be missed.
+        let seen = this.shared.lock(|s| {
+            s.deciding.register(cx.waker());
+            if s.calm.get() {
+                return Ok(None);
+            }
+            match s.failure.get() {
+                Some((e, failure)) if e == epoch => Err(failure),
+                _ => Ok(s.violation.get()),
+            }
+        });
+        let violation = match seen {
+            Err(failure) => return Poll::Ready(failure),
+            Ok(None) => {
+                this.alarm = None;
+                return Poll::Pending;
+            }
+            Ok(Some(v)) => v,
+        };
+        let deadline = violation.since.saturating_add(this.max);
+        if Instant::now() >= deadline {
+            return Poll::Ready(Failure::PreconditionViolated {
+                action: this.action,
+                missing: violation.missing,
+            });
+        }
+        let timer = match &mut this.alarm {
+            Some((at, timer)) if *at == deadline => timer,
+            slot => &mut slot.insert((deadline, Timer::at(deadline))).1,
+        };
+        // Pending: the timer wakes this task at the deadline.
+        let _ = Pin::new(timer).poll(cx);
+        Poll::Pending
+    }
 }
 
 fn outcome_result<const W: usize>(action: ActionId, outcome: Outcome) -> Result<(), Failure<W>> {
@@ -471,6 +571,7 @@ impl<
                 sensed: Cell::new(FactSetOf::EMPTY),
                 faulty: Cell::new(SensorSet::EMPTY),
                 violation: Cell::new(None),
+                calm: Cell::new(true),
                 requests: Cell::new(SensorSet::EMPTY),
                 version: Cell::new(0),
                 command: Cell::new(Command {
@@ -484,8 +585,8 @@ impl<
                 active: Cell::new(SensorSet::EMPTY),
                 failure: Cell::new(None),
                 epoch: Cell::new(0),
-                deciding: RefCell::new(WakerRegistration::new()),
-                sensing: RefCell::new(WakerRegistration::new()),
+                deciding: Waiter::new(),
+                sensing: Waiter::new(),
             }),
             tracer: Mutex::new(RefCell::new(Tracer::new(sink))),
             trace_lost: Mutex::new(Cell::new(0)),
@@ -582,9 +683,7 @@ impl<
     /// Something a sampler may wait for changed (a command, a request): wake the sensing side.
     pub(crate) fn wake_sensing(&self) {
         self.shared.lock(|s| {
-            if let Ok(mut w) = s.sensing.try_borrow_mut() {
-                w.wake();
-            }
+            s.sensing.wake();
         });
     }
 
@@ -641,7 +740,7 @@ impl<
             });
             s.epoch.set(epoch);
             s.ready.set(SensorSet::EMPTY);
-            s.failure.set(None);
+            s.set_failure(None);
             epoch
         });
         self.wake_sensing();
@@ -699,51 +798,22 @@ impl<
 
     /// Watches the running action under command `epoch`: returns the first failure the
     /// sensing side reports, or the violation of `pre(a)` once it has lasted the action's
-    /// `max_violation` (or [`Config::max_violation`]). Never returns while all is well. One lock a poll; woken by
-    /// every delivery, and by a timer at the deadline of a violation.
-    async fn watch(&self, epoch: u32, action: ActionId) -> Failure<W> {
+    /// `max_violation` (or [`Config::max_violation`]). Never returns while all is well. One lock
+    /// a poll; woken by every delivery, and by a timer at the deadline of a violation.
+    fn watch(&self, epoch: u32, action: ActionId) -> Watch<'_, P::Mutex, NS, W> {
         let max = self
             .mission
             .domain
             .action(action)
             .and_then(|a| a.max_violation)
             .unwrap_or(self.config.max_violation);
-        let mut alarm: Option<(Instant, Timer)> = None;
-        poll_fn(|cx| {
-            // Registered in the same lock as the check: a delivery in between cannot be missed.
-            let seen = self.shared.lock(|s| match s.failure.get() {
-                Some((e, failure)) if e == epoch => Err(failure),
-                _ => {
-                    if let Ok(mut w) = s.deciding.try_borrow_mut() {
-                        w.register(cx.waker());
-                    }
-                    Ok(s.violation.get())
-                }
-            });
-            let violation = match seen {
-                Err(failure) => return Poll::Ready(failure),
-                Ok(None) => {
-                    alarm = None;
-                    return Poll::Pending;
-                }
-                Ok(Some(v)) => v,
-            };
-            let deadline = violation.since.saturating_add(max);
-            if Instant::now() >= deadline {
-                return Poll::Ready(Failure::PreconditionViolated {
-                    action,
-                    missing: violation.missing,
-                });
-            }
-            let timer = match &mut alarm {
-                Some((at, timer)) if *at == deadline => timer,
-                slot => &mut slot.insert((deadline, Timer::at(deadline))).1,
-            };
-            // Pending: the timer wakes this task at the deadline.
-            let _ = Pin::new(timer).poll(cx);
-            Poll::Pending
-        })
-        .await
+        Watch {
+            shared: &self.shared,
+            epoch,
+            action,
+            max,
+            alarm: None,
+        }
     }
 
     /// P-SMPA: `δ'_i = δ_i ∥ {s_k}`; the sensors end when the action ends.
@@ -851,7 +921,7 @@ impl<
         });
         let result = self.run_action(action, sensors).await;
         self.shared.lock(|s| {
-            s.violation.set(None);
+            s.set_violation(None);
             s.requests.set(SensorSet::EMPTY);
         });
         let (outcome, result) = match result {

@@ -453,7 +453,7 @@ impl<
     fn report(&self, failure: Failure<W>, epoch: u32) {
         self.shared.lock(|s| {
             if s.command.get().epoch == epoch && s.failure.get().is_none() {
-                s.failure.set(Some((epoch, failure)));
+                s.set_failure(Some((epoch, failure)));
             }
         });
         self.notify();
@@ -480,21 +480,21 @@ impl<const NS: usize, const W: usize, M: RawMutex, F: Future> Future
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
         let this = self.project();
         let epoch = *this.epoch;
-        let ended = poll_shared(
-            this.shared,
-            cx,
-            |s| &s.sensing,
-            |s| (s.epoch.get() != epoch).then_some(()),
-        );
-        if ended.is_ready() {
+        let ended = |s: &Shared<NS, W>| s.epoch.get() != epoch;
+        if this.shared.lock(ended) {
             return Poll::Ready(Bound::Ended);
         }
         if let Poll::Ready(out) = this.inner.poll(cx) {
             return Poll::Ready(Bound::Done(out));
         }
-        match this.timer.as_mut().map(|t| Pin::new(t).poll(cx)) {
-            Some(Poll::Ready(())) => Poll::Ready(Bound::TimedOut),
-            _ => Poll::Pending,
+        if let Some(Poll::Ready(())) = this.timer.as_mut().map(|t| Pin::new(t).poll(cx)) {
+            return Poll::Ready(Bound::TimedOut);
+        }
+        // Waiting: registered in the same lock as a last look at the command, so that a
+        // deciding side that ends it in between wakes this one.
+        match poll_shared(this.shared, cx, |s| &s.sensing, |s| ended(s).then_some(())) {
+            Poll::Ready(()) => Poll::Ready(Bound::Ended),
+            Poll::Pending => Poll::Pending,
         }
     }
 }
@@ -578,7 +578,7 @@ fn check_changed<const NS: usize, const NA: usize, const W: usize, const NF: usi
             ..v
         }),
     };
-    s.violation.set(after);
+    s.set_violation(after);
     Some((action, before, after))
 }
 

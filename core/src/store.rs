@@ -138,7 +138,18 @@ impl<M: RawMutex, const K: usize> DataStore<M, K> {
     /// and does not hold `key`.
     fn find(slots: &Slots<K>, key: Key) -> Option<(usize, bool)> {
         let start = usize::from(key.0).checked_rem(K)?;
-        for probe in 0..K {
+        // Keys below `K` sit in their own slot: one look.
+        match slots.slots.get(start)?.get() {
+            Some((k, _)) if k == key => Some((start, true)),
+            None => Some((start, false)),
+            Some(_) => Self::probe(slots, key, start),
+        }
+    }
+
+    /// [`find`](Self::find) past a collision: linear probing. O(K).
+    #[inline(never)]
+    fn probe(slots: &Slots<K>, key: Key, start: usize) -> Option<(usize, bool)> {
+        for probe in 1..K {
             let index = start.wrapping_add(probe).checked_rem(K)?;
             match slots.slots.get(index).map(Cell::get) {
                 Some(Some((k, _))) if k == key => return Some((index, true)),
@@ -159,14 +170,14 @@ impl<M: RawMutex, const K: usize> StoreAccess for DataStore<M, K> {
     }
 
     fn put(&self, key: Key, value: Value, at: Instant) -> Result<(), StoreFull> {
-        let full = StoreFull {
+        let full = || StoreFull {
             key,
             value,
             capacity: K,
         };
         self.inner.lock(|s| {
-            let (index, existed) = Self::find(s, key).ok_or(full)?;
-            let slot = s.slots.get(index).ok_or(full)?;
+            let (index, existed) = Self::find(s, key).ok_or_else(full)?;
+            let slot = s.slots.get(index).ok_or_else(full)?;
             slot.set(Some((key, Entry { value, at })));
             if !existed {
                 s.len.set(s.len.get().saturating_add(1));
@@ -193,11 +204,20 @@ impl<M: RawMutex, const K: usize> StoreAccess for DataStore<M, K> {
 pub trait SensorStores {
     /// The store of sensor `sensor`.
     fn store(&self, sensor: SensorId) -> Option<&dyn StoreAccess>;
+
+    /// `get(key)` on the store of sensor `sensor`: one call where a behaviour reads a sample.
+    fn get(&self, sensor: SensorId, key: Key) -> Option<Entry> {
+        self.store(sensor)?.get(key)
+    }
 }
 
 impl<M: RawMutex, const K: usize, const N: usize> SensorStores for [DataStore<M, K>; N] {
     fn store(&self, sensor: SensorId) -> Option<&dyn StoreAccess> {
-        self.get(sensor.index()).map(|s| s as &dyn StoreAccess)
+        <[_]>::get(self, sensor.index()).map(|s| s as &dyn StoreAccess)
+    }
+
+    fn get(&self, sensor: SensorId, key: Key) -> Option<Entry> {
+        <[_]>::get(self, sensor.index())?.get(key)
     }
 }
 
@@ -238,7 +258,7 @@ impl<'s> MutualStore<'s> {
         if !self.linked.contains(sensor) {
             return None;
         }
-        self.sensors.store(sensor)?.get(key)
+        self.sensors.get(sensor, key)
     }
 
     /// The latest sample of a linked sensor: its value under [`SAMPLE_KEY`].
