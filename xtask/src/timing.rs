@@ -80,7 +80,10 @@ const HOST_STEPS: &[(&str, &str)] = &[
         "behaviour step (one poll)",
         "as psmpa_core::platform::Actuator>::run::{{closure}}",
     ),
-    ("store read", "as psmpa_core::store::StoreAccess>::get"),
+    (
+        "store read, a sample",
+        "as psmpa_core::store::SensorStores>::get",
+    ),
     ("trace event (hash)", "psmpa_core::trace::TraceHash::add"),
     (
         "Algorithm 2: compile a plan",
