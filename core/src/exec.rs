@@ -237,7 +237,7 @@ impl<const W: usize> ActionIo<'_, W> {
     pub fn changed(&self, since: u32) -> Changed<'_, W> {
         // A future of its own, not an `async fn` around a `poll_fn`: a behaviour awaits it at
         // every step, and the wrapper's state machine showed in `profile_plan`'s callgrind
-        // profile at about 27 instructions a step.
+        // profile.
         Changed {
             monitor: self.monitor,
             since,
@@ -338,8 +338,6 @@ pub(crate) struct Shared<const NS: usize, const W: usize> {
     /// Sensors that failed: out of service until [`Engine::clear_faults`].
     pub(crate) faulty: Cell<SensorSet>,
     pub(crate) violation: Cell<Option<Violation<W>>>,
-    /// Neither a failure nor a violation is pending: the watch's common case, one load.
-    pub(crate) calm: Cell<bool>,
     pub(crate) requests: Cell<SensorSet>,
     pub(crate) version: Cell<u32>,
     pub(crate) command: Cell<Command<W>>,
@@ -363,20 +361,6 @@ impl<const NS: usize, const W: usize> Shared<NS, W> {
     pub(crate) fn notify(&self) {
         self.version.set(self.version.get().wrapping_add(1));
         self.deciding.wake();
-    }
-
-    /// Sets the failure of the current command (`None`: no failure).
-    pub(crate) fn set_failure(&self, failure: Option<(u32, Failure<W>)>) {
-        self.failure.set(failure);
-        self.calm
-            .set(failure.is_none() && self.violation.get().is_none());
-    }
-
-    /// Sets the watched action's violation (`None`: its precondition holds).
-    pub(crate) fn set_violation(&self, violation: Option<Violation<W>>) {
-        self.violation.set(violation);
-        self.calm
-            .set(violation.is_none() && self.failure.get().is_none());
     }
 
     /// A read of `sensor` started at `at`.
@@ -442,7 +426,7 @@ pub(crate) fn poll_shared<M: RawMutex, const NS: usize, const W: usize, R>(
 }
 
 /// The future of [`Engine::watch`]: polled before the behaviour at every step of it, so a
-/// future of its own with the common case (nothing pending) first.
+/// future of its own rather than an `async fn` around a `poll_fn`.
 struct Watch<'s, M: RawMutex, const NS: usize, const W: usize> {
     shared: &'s Mutex<M, Shared<NS, W>>,
     epoch: u32,
@@ -461,9 +445,6 @@ impl<M: RawMutex, const NS: usize, const W: usize> Future for Watch<'_, M, NS, W
         // Registered in the same lock as the check: a delivery in between cannot be missed.
         let seen = this.shared.lock(|s| {
             s.deciding.register(cx.waker());
-            if s.calm.get() {
-                return Ok(None);
-            }
             match s.failure.get() {
                 Some((e, failure)) if e == epoch => Err(failure),
                 _ => Ok(s.violation.get()),
@@ -571,7 +552,6 @@ impl<
                 sensed: Cell::new(FactSetOf::EMPTY),
                 faulty: Cell::new(SensorSet::EMPTY),
                 violation: Cell::new(None),
-                calm: Cell::new(true),
                 requests: Cell::new(SensorSet::EMPTY),
                 version: Cell::new(0),
                 command: Cell::new(Command {
@@ -740,7 +720,7 @@ impl<
             });
             s.epoch.set(epoch);
             s.ready.set(SensorSet::EMPTY);
-            s.set_failure(None);
+            s.failure.set(None);
             epoch
         });
         self.wake_sensing();
@@ -921,7 +901,7 @@ impl<
         });
         let result = self.run_action(action, sensors).await;
         self.shared.lock(|s| {
-            s.set_violation(None);
+            s.violation.set(None);
             s.requests.set(SensorSet::EMPTY);
         });
         let (outcome, result) = match result {

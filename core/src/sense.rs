@@ -453,7 +453,7 @@ impl<
     fn report(&self, failure: Failure<W>, epoch: u32) {
         self.shared.lock(|s| {
             if s.command.get().epoch == epoch && s.failure.get().is_none() {
-                s.set_failure(Some((epoch, failure)));
+                s.failure.set(Some((epoch, failure)));
             }
         });
         self.notify();
@@ -578,7 +578,7 @@ fn check_changed<const NS: usize, const NA: usize, const W: usize, const NF: usi
             ..v
         }),
     };
-    s.set_violation(after);
+    s.violation.set(after);
     Some((action, before, after))
 }
 

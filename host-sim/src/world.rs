@@ -1182,15 +1182,10 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         });
     }
 
-    /// The sonar's fault, once it has started.
-    pub fn sonar_fault(&self) -> Option<FaultKind> {
-        self.view(|s, sc| s.fault(sc))
-    }
-
     /// Starts a sonar read: what the echo will say describes the world now (the nearest box
     /// ahead within range, with noise; or nothing in range, `max_m`; or lost to dropout), and
     /// is delivered by [`sonar_deliver`](Self::sonar_deliver) when the read completes. A
-    /// faulty sonar (see [`sonar_fault`](Self::sonar_fault)) registers nothing: it reports
+    /// faulty sonar (the scenario's `fault`, once it has started) registers nothing: it reports
     /// beyond its range, or the same reading again and again.
     pub fn sonar_read(&self) -> Echo {
         self.quiet(|s, sc| {
