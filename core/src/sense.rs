@@ -55,7 +55,12 @@ use crate::trace::{TraceEvent, TraceSink};
 pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
     let period = period.max(1);
     let late = now.as_ticks().saturating_sub(due.as_ticks());
-    let periods = late.div_ceil(period).max(1);
+    // Nearly always: the read ended within its period. No division then.
+    let periods = if late <= period {
+        1
+    } else {
+        late.div_ceil(period)
+    };
     Instant::from_ticks(
         due.as_ticks()
             .saturating_add(periods.saturating_mul(period)),
@@ -225,15 +230,21 @@ impl<
                     });
                     self.trace_change(change);
                 } else {
-                    let limit = started.saturating_add(spec.timeout);
-                    let read = match self
-                        .bounded(epoch, Some(limit), self.platform.sample(sensor))
-                        .await
-                    {
-                        Bound::Done(read) => Ok(read),
-                        Bound::TimedOut => Err(TimeoutError),
-                        // Cancelled: no read of this instant was taken.
-                        Bound::Ended => break,
+                    let mut sample = pin!(self.platform.sample(sensor));
+                    // Most reads answer at once (a buffered value, a register): polled once
+                    // here, in the poll that found the command still on, they need no bound.
+                    let first = poll_fn(|cx| Poll::Ready(sample.as_mut().poll(cx))).await;
+                    let read = match first {
+                        Poll::Ready(read) => Ok(read),
+                        Poll::Pending => {
+                            let limit = started.saturating_add(spec.timeout);
+                            match self.bounded(epoch, Some(limit), sample).await {
+                                Bound::Done(read) => Ok(read),
+                                Bound::TimedOut => Err(TimeoutError),
+                                // Cancelled: no read of this instant was taken.
+                                Bound::Ended => break,
+                            }
+                        }
                     };
                     last = Some(started);
                     if self.take(sensor, spec, read, started, epoch).is_err() {
