@@ -6,9 +6,10 @@
 //! `target/criterion`, writes `bench/RESULTS.md`, and puts the same table into `README.md`
 //! between its `bench:start` and `bench:end` markers.
 //!
-//! Beside the times, one count that does not depend on the machine's load: the instructions
-//! psmpa's plan workload takes per action step, counted by callgrind in `profile_plan`
-//! (`bench/examples`). `cargo xtask bench --instructions` counts only that, in seconds.
+//! Beside the times, counts that do not depend on the machine's load: the instructions psmpa's
+//! plan workload takes per action step, counted by callgrind in `profile_plan`
+//! (`bench/examples`), and the floor under it: the same work with no runtime around it
+//! (`profile_floor`). `cargo xtask bench --instructions` counts only those, in seconds.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -175,51 +176,40 @@ struct Extra {
     /// Absent from results written before it was measured.
     #[serde(default)]
     instructions_per_step: Option<f64>,
+    /// `profile_floor`'s count; absent from results written before it was measured.
+    #[serde(default)]
+    floor_per_step: Option<f64>,
 }
 
-/// Plans per callgrind run of `profile_plan`: the difference of two runs leaves out the
+/// Plans per callgrind run of a plan profile: the difference of two runs leaves out the
 /// program's start and exit.
 const CALLGRIND_PLANS: [u32; 2] = [200, 400];
 
-/// One callgrind run of `profile_plan`.
+/// psmpa's plan workload, for callgrind (`bench/examples`).
+const PROFILE_PLAN: &str = "profile_plan";
+
+/// The same work with no runtime around it: the floor under psmpa's step on this backend.
+const PROFILE_FLOOR: &str = "profile_floor";
+
+/// One callgrind run of a plan profile.
 struct Count {
     plans: u64,
     steps: u64,
     instructions: u64,
 }
 
-/// Builds `profile_plan` with the `bench` profile, so it shares every compiled crate with
+/// Builds the example `name` with the `bench` profile, so it shares every compiled crate with
 /// `cargo bench` (and with `--release`: the two profiles are the same); returns its path.
-fn build_profile_plan() -> Result<PathBuf, String> {
-    let out = firmware::cargo()
-        .args([
-            "build",
-            "--profile",
-            "bench",
-            "-p",
-            "psmpa-bench",
-            "--example",
-            "profile_plan",
-            "--message-format=json-render-diagnostics",
-        ])
-        .stderr(Stdio::inherit())
-        .output()
-        .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !out.status.success() {
-        return Err("the profile_plan example does not build".to_owned());
-    }
-    // The executable's path from cargo's own report: right whatever the target directory.
-    String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .filter(|m| m["reason"] == "compiler-artifact" && m["target"]["name"] == "profile_plan")
-        .find_map(|m| m["executable"].as_str().map(PathBuf::from))
-        .ok_or_else(|| "cargo reported no profile_plan executable".to_owned())
+fn build_profile(name: &str) -> Result<PathBuf, String> {
+    firmware::build_executable(
+        &["--profile", "bench", "-p", "psmpa-bench", "--example", name],
+        name,
+    )
 }
 
-/// Runs `exe` (`profile_plan`) for `plans` plans under callgrind.
-fn callgrind(root: &Path, exe: &Path, plans: u32) -> Result<Count, String> {
-    let out_file = root.join(format!("target/callgrind.profile_plan.{plans}.out"));
+/// Runs `exe` (the example `name`) for `plans` plans under callgrind.
+fn callgrind(root: &Path, exe: &Path, name: &str, plans: u32) -> Result<Count, String> {
+    let out_file = root.join(format!("target/callgrind.{name}.{plans}.out"));
     let stdout = callgrind::run(root, &out_file, &[], exe, &[&plans.to_string()])?;
     // "N action steps in M plans"
     let (steps, ran) = stdout
@@ -229,9 +219,7 @@ fn callgrind(root: &Path, exe: &Path, plans: u32) -> Result<Count, String> {
             let ran = rest.strip_suffix(" plans")?;
             Some((steps.trim().parse().ok()?, ran.trim().parse().ok()?))
         })
-        .ok_or_else(|| {
-            format!("profile_plan printed no \"N action steps in M plans\": {stdout}")
-        })?;
+        .ok_or_else(|| format!("{name} printed no \"N action steps in M plans\": {stdout}"))?;
     // The file's `summary:` line: the whole run's instructions (its only event).
     let text =
         std::fs::read_to_string(&out_file).map_err(|e| format!("{}: {e}", out_file.display()))?;
@@ -267,25 +255,32 @@ fn isa() -> &'static str {
     }
 }
 
-/// The sentence the table and the quick mode print.
-fn instructions_line(per_step: f64) -> String {
+/// The sentence the table and the quick mode print: psmpa's count and, when measured, the
+/// floor's.
+fn instructions_line(per_step: f64, floor: Option<f64>) -> String {
+    let floor = floor.map_or(String::new(), |f| {
+        format!(
+            "; the same work with no runtime around it (`{PROFILE_FLOOR}`): {}",
+            fmt_count(f)
+        )
+    });
     format!(
-        "psmpa: {} {} instructions per action step (callgrind, deterministic)",
+        "psmpa: {} {} instructions per action step{floor} (callgrind, deterministic)",
         fmt_count(per_step),
         isa()
     )
 }
 
-/// psmpa's plan workload in instructions per action step: two callgrind runs of
-/// `profile_plan`, the difference of their counts over the difference of their steps.
-fn instructions_per_step(root: &Path) -> Result<f64, String> {
+/// The example `name`'s plan workload in instructions per action step: two callgrind runs,
+/// the difference of their counts over the difference of their steps.
+fn instructions_per_step(root: &Path, name: &str) -> Result<f64, String> {
     callgrind::check()?;
-    let exe = build_profile_plan()?;
+    let exe = build_profile(name)?;
     let mut counts = Vec::new();
     for plans in CALLGRIND_PLANS {
-        let c = callgrind(root, &exe, plans)?;
+        let c = callgrind(root, &exe, name, plans)?;
         println!(
-            "profile_plan: {} action steps in {} plans: {} instructions",
+            "{name}: {} action steps in {} plans: {} instructions",
             c.steps,
             c.plans,
             fmt_count(c.instructions as f64)
@@ -295,17 +290,25 @@ fn instructions_per_step(root: &Path) -> Result<f64, String> {
     let (a, b) = (&counts[0], &counts[1]);
     if b.steps <= a.steps || b.instructions < a.instructions {
         return Err(format!(
-            "profile_plan ran {} then {} action steps: no difference to divide by",
+            "{name} ran {} then {} action steps: no difference to divide by",
             a.steps, b.steps
         ));
     }
     Ok((b.instructions - a.instructions) as f64 / (b.steps - a.steps) as f64)
 }
 
-/// `cargo xtask bench --instructions`: only the instruction count, printed; writes nothing.
+/// psmpa's count and the floor's.
+fn instruction_counts(root: &Path) -> Result<(f64, f64), String> {
+    Ok((
+        instructions_per_step(root, PROFILE_PLAN)?,
+        instructions_per_step(root, PROFILE_FLOOR)?,
+    ))
+}
+
+/// `cargo xtask bench --instructions`: only the instruction counts, printed; writes nothing.
 pub fn instructions() -> Result<(), String> {
-    let per_step = instructions_per_step(&firmware::root())?;
-    println!("{}", instructions_line(per_step));
+    let (per_step, floor) = instruction_counts(&firmware::root())?;
+    println!("{}", instructions_line(per_step, Some(floor)));
     Ok(())
 }
 
@@ -354,12 +357,13 @@ fn measure(root: &Path) -> Result<Extra, String> {
     ])?;
     allocs.extend(allocations(&bt_text));
     let sweep_s = sweep_seconds()?;
-    let per_step = instructions_per_step(root)?;
-    println!("{}", instructions_line(per_step));
+    let (per_step, floor) = instruction_counts(root)?;
+    println!("{}", instructions_line(per_step, Some(floor)));
     Ok(Extra {
         allocations: allocs,
         sweep_s,
         instructions_per_step: Some(per_step),
+        floor_per_step: Some(floor),
     })
 }
 
@@ -408,8 +412,8 @@ fn report(root: &Path, extra: &Extra) -> Result<(), String> {
     }
     match extra.instructions_per_step {
         Some(per_step) => md.push_str(&format!(
-            "\n{}. `cargo xtask bench --instructions` counts it alone: `bench/examples/profile_plan.rs` under callgrind for {} and {} plans, the difference in instructions over the difference in action steps.\n",
-            instructions_line(per_step),
+            "\n{}. `cargo xtask bench --instructions` counts them alone: `bench/examples/profile_plan.rs` and `profile_floor.rs` under callgrind for {} and {} plans, the difference in instructions over the difference in action steps. The floor does the step's work (a timer wakes a sensing future that samples, stores, fuses, checks and hashes one trace event, then signals a deciding future that reads and writes a store) with no FSM, control loop or sensor switching.\n",
+            instructions_line(per_step, extra.floor_per_step),
             CALLGRIND_PLANS[0],
             CALLGRIND_PLANS[1]
         )),

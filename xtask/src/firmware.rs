@@ -26,14 +26,31 @@ pub fn cargo() -> Command {
 
 /// Builds the simulator's command line in release mode and returns its path.
 pub fn build_host_sim() -> Result<PathBuf, String> {
-    let status = cargo()
-        .args(["build", "--quiet", "--release", "-p", "psmpa-sim"])
-        .status()
+    build_executable(
+        &["--release", "-p", "psmpa-sim", "--bin", "psmpa-sim"],
+        "psmpa-sim",
+    )
+}
+
+/// Runs `cargo build` with `args` and returns the path of the executable `name` it built, from
+/// cargo's own report: right whatever the target directory (`CARGO_TARGET_DIR`).
+pub fn build_executable(args: &[&str], name: &str) -> Result<PathBuf, String> {
+    let out = cargo()
+        .arg("build")
+        .args(args)
+        .arg("--message-format=json-render-diagnostics")
+        .stderr(Stdio::inherit())
+        .output()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !status.success() {
-        return Err("psmpa-sim does not build".to_owned());
+    if !out.status.success() {
+        return Err(format!("{name} does not build"));
     }
-    Ok(root().join("target/release/psmpa-sim"))
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|m| m["reason"] == "compiler-artifact" && m["target"]["name"] == name)
+        .find_map(|m| m["executable"].as_str().map(PathBuf::from))
+        .ok_or_else(|| format!("cargo reported no {name} executable"))
 }
 
 /// A QEMU machine the firmware runs on, and the target it is built for to run there
