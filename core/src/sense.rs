@@ -230,21 +230,15 @@ impl<
                     });
                     self.trace_change(change);
                 } else {
-                    let mut sample = pin!(self.platform.sample(sensor));
-                    // Most reads answer at once (a buffered value, a register): polled once
-                    // here, in the poll that found the command still on, they need no bound.
-                    let first = poll_fn(|cx| Poll::Ready(sample.as_mut().poll(cx))).await;
-                    let read = match first {
-                        Poll::Ready(read) => Ok(read),
-                        Poll::Pending => {
-                            let limit = started.saturating_add(spec.timeout);
-                            match self.bounded(epoch, Some(limit), sample).await {
-                                Bound::Done(read) => Ok(read),
-                                Bound::TimedOut => Err(TimeoutError),
-                                // Cancelled: no read of this instant was taken.
-                                Bound::Ended => break,
-                            }
-                        }
+                    let limit = started.saturating_add(spec.timeout);
+                    let read = match self
+                        .bounded(epoch, Some(limit), self.platform.sample(sensor))
+                        .await
+                    {
+                        Bound::Done(read) => Ok(read),
+                        Bound::TimedOut => Err(TimeoutError),
+                        // Cancelled: no read of this instant was taken.
+                        Bound::Ended => break,
                     };
                     last = Some(started);
                     if self.take(sensor, spec, read, started, epoch).is_err() {
