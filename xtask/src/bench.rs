@@ -90,10 +90,12 @@ fn read_criterion(dir: &Path) -> Result<BTreeMap<(String, String), Measured>, St
     Ok(out)
 }
 
-/// Runs `cargo bench` with `args`, echoing its output; returns its stdout.
-fn cargo_bench(args: &[&str]) -> Result<String, String> {
+/// Runs `cargo bench` with `args`, building into `target_dir` (criterion writes its results
+/// there), echoing its output; returns its stdout.
+fn cargo_bench(args: &[&str], target_dir: &Path) -> Result<String, String> {
     let mut cmd = firmware::cargo();
-    cmd.arg("bench")
+    cmd.env("CARGO_TARGET_DIR", target_dir)
+        .arg("bench")
         .args(args)
         .arg("--")
         .args(CRITERION)
@@ -337,24 +339,31 @@ pub fn run(no_run: bool) -> Result<(), String> {
 fn measure(root: &Path) -> Result<Extra, String> {
     // Before minutes of benches: a missing valgrind fails at once.
     callgrind::check()?;
-    let text = cargo_bench(&[
-        "-p",
-        "psmpa-bench",
-        "--bench",
-        "plan",
-        "--bench",
-        "store",
-        "--bench",
-        "simulator",
-    ])?;
+    let text = cargo_bench(
+        &[
+            "-p",
+            "psmpa-bench",
+            "--bench",
+            "plan",
+            "--bench",
+            "store",
+            "--bench",
+            "simulator",
+        ],
+        &root.join("target"),
+    )?;
     let mut allocs = allocations(&text);
-    let bt_manifest = root.join("bench/behaviortree/Cargo.toml");
-    let bt_text = cargo_bench(&[
-        "--manifest-path",
-        &bt_manifest.to_string_lossy(),
-        "--bench",
-        "steps",
-    ])?;
+    // Its own package, at its own tick rate: its own target directory.
+    let bt = root.join("bench/behaviortree");
+    let bt_text = cargo_bench(
+        &[
+            "--manifest-path",
+            &bt.join("Cargo.toml").to_string_lossy(),
+            "--bench",
+            "steps",
+        ],
+        &bt.join("target"),
+    )?;
     allocs.extend(allocations(&bt_text));
     let sweep_s = sweep_seconds()?;
     let (per_step, floor) = instruction_counts(root)?;

@@ -17,10 +17,13 @@ pub fn root() -> PathBuf {
     root.canonicalize().unwrap_or(root)
 }
 
-/// `cargo` as this task was started with (`$CARGO`), run from the workspace root.
+/// `cargo` as this task was started with (`$CARGO`), run from the workspace root, building
+/// into the workspace's `target/` whatever `CARGO_TARGET_DIR` says: the tasks read what they
+/// build there (criterion's results, the profiles' callgrind files, the firmware's ELFs).
 pub fn cargo() -> Command {
     let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    cmd.current_dir(root());
+    cmd.current_dir(root())
+        .env("CARGO_TARGET_DIR", root().join("target"));
     cmd
 }
 
@@ -33,7 +36,7 @@ pub fn build_host_sim() -> Result<PathBuf, String> {
 }
 
 /// Runs `cargo build` with `args` and returns the path of the executable `name` it built, from
-/// cargo's own report: right whatever the target directory (`CARGO_TARGET_DIR`).
+/// cargo's own report.
 pub fn build_executable(args: &[&str], name: &str) -> Result<PathBuf, String> {
     let out = cargo()
         .arg("build")
