@@ -173,8 +173,11 @@ fn stack_overflow_faults(machine: Machine, elf: &Path) -> Result<bool, String> {
 /// the image a user flashes, so no flags of this task's.
 pub fn build_board() -> Result<PathBuf, String> {
     let dir = root().join("boards/pico2");
+    // The board is a package of its own: its build is `cargo build --release` there, into its
+    // own `target/` (not the workspace's, which `cargo()` names).
     let status = cargo()
         .current_dir(&dir)
+        .env("CARGO_TARGET_DIR", dir.join("target"))
         .args(["build", "--quiet", "--release"])
         .status()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
