@@ -51,20 +51,29 @@ use crate::trace::{TraceEvent, TraceSink};
 /// The instant after `due` at which a cyclic sensor of period `period` (in ticks, at least 1)
 /// is next due, once its sample has finished at `now`: `due + k·period` for the least `k ≥ 1`
 /// that is not before `now`. A sample that took longer than a period skips the instants it
-/// overran. O(1).
+/// overran; one 2³² ticks late (or of a period that long) restarts the phase at `now`. O(1),
+/// and no 64-bit division.
 pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
     let period = period.max(1);
     let late = now.as_ticks().saturating_sub(due.as_ticks());
     // Nearly always: the read ended within its period. No division then.
-    let periods = if late <= period {
-        1
-    } else {
-        late.div_ceil(period)
-    };
-    Instant::from_ticks(
-        due.as_ticks()
-            .saturating_add(periods.saturating_mul(period)),
-    )
+    if late <= period {
+        return Instant::from_ticks(due.as_ticks().saturating_add(period));
+    }
+    // In 32 bits: a 64-bit division is a library routine on a Cortex-M (about 0.9 KB of flash
+    // that nothing else of a firmware needs, and a hundred cycles).
+    match (u32::try_from(late), u32::try_from(period)) {
+        (Ok(late), Ok(period)) => {
+            let periods = late.div_ceil(period);
+            Instant::from_ticks(
+                due.as_ticks()
+                    .saturating_add(u64::from(periods).saturating_mul(u64::from(period))),
+            )
+        }
+        // A read 2³² ticks late (49 days at 1 kHz: a timeout that long), or as long a period:
+        // the phase restarts.
+        _ => now,
+    }
 }
 
 pin_project! {
@@ -629,5 +638,14 @@ mod tests {
         assert_eq!(next_due(at(100), 15, at(140)), at(145));
         // A period of 0 ticks counts as 1: never twice at one instant.
         assert_eq!(next_due(at(7), 0, at(7)), at(8));
+        // Late by most of 2³² ticks: still the phase.
+        let late = u64::from(u32::MAX) - 5;
+        assert_eq!(
+            next_due(at(3), 1000, at(3 + late)),
+            at(3 + late.div_ceil(1000) * 1000)
+        );
+        // Late by 2³² ticks or more: the phase restarts at the end of the read.
+        let late = 1 << 40;
+        assert_eq!(next_due(at(3), 1000, at(3 + late)), at(3 + late));
     }
 }

@@ -14,6 +14,7 @@
 
 #[cfg(target_os = "none")]
 pub mod board;
+pub mod clock;
 #[cfg(target_os = "none")]
 pub mod executor;
 #[cfg(target_os = "none")]

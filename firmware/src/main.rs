@@ -239,7 +239,7 @@ mod firmware {
     /// of the reactions ([`LOGGED`]).
     fn log_line(at_ms: u64, event: &WorldEvent) {
         let begin = time_driver::counter();
-        let tick = (time_driver::cycles() / time_driver::CYCLES_PER_TICK) as u32;
+        let tick = time_driver::ticks() as u32;
         let logged = LOGGED.load(Ordering::Relaxed);
         if tick != LOGGED_TICK.load(Ordering::Relaxed) {
             LOGGED_TICK.store(tick, Ordering::Relaxed);
@@ -287,7 +287,7 @@ mod firmware {
         }
 
         fn read_started(&mut self, device: Device) {
-            let tick = time_driver::cycles() / time_driver::CYCLES_PER_TICK;
+            let tick = time_driver::ticks();
             // The release is the tick's start: what was logged since is not the reaction's.
             let logged = if tick as u32 == LOGGED_TICK.load(Ordering::Relaxed) {
                 LOGGED_AT_TICK.load(Ordering::Relaxed)

@@ -2,11 +2,12 @@
 //!
 //! * Clock: the CMSDK APB TIMER0 of the board ([`crate::board`]) counts down at the core clock,
 //!   reloading 2³² − 1 when it reaches 0, and nothing writes it after [`start`]: no cycle is
-//!   ever lost. [`cycles`] extends it to 64 bits from the value read last (under a critical
-//!   section); the alarm fires at least every 0.84 s and reads it, far more often than it wraps
-//!   (171.8 s at 25 MHz, 214.7 s at 20 MHz). `now() = cycles / CYCLES_PER_TICK` (25,000 on
-//!   mps2-an386, 20,000 on mps2-an505): 1 kHz ticks, the host's rate, so `Duration` rounding
-//!   agrees.
+//!   ever lost. Each read adds the cycles since the value read last (under a critical
+//!   section) to a count of whole ticks and the cycles into the current one
+//!   ([`crate::clock`]: no 64-bit division); the alarm fires at least every 0.84 s and reads
+//!   it, far more often than it wraps (171.8 s at 25 MHz, 214.7 s at 20 MHz). `now()` is the
+//!   whole ticks: `CYCLES_PER_TICK` is 25,000 on mps2-an386, 20,000 on mps2-an505, so 1 kHz
+//!   ticks, the host's rate, and `Duration` rounding agrees.
 //!   Monotonic by construction.
 //! * Alarm: TIMER1 is loaded with the exact number of cycles left to the earliest deadline
 //!   (at most 2²⁴: 0.67 s at 25 MHz, 0.84 s at 20 MHz) and interrupts when it reaches 0; the handler wakes what is due and
@@ -68,30 +69,30 @@ pub fn counter() -> u32 {
     read(TIMER0 + 4)
 }
 
+/// The clock's arithmetic, at this board's rate.
+type Clock = crate::clock::Clock<{ CYCLES_PER_TICK as u32 }>;
+
 struct TimerDriver {
-    /// TIMER0's value when last read, and the cycles counted up to then.
-    clock: Mutex<Cell<(u32, u64)>>,
+    clock: Mutex<Cell<Clock>>,
     /// The tick the alarm is set for; 0 when none.
     alarm: Mutex<Cell<u64>>,
     queue: Mutex<RefCell<Queue>>,
 }
 
 impl TimerDriver {
-    fn cycles_in(&self, cs: CriticalSection<'_>) -> u64 {
+    /// Reads the clock.
+    fn clock_in(&self, cs: CriticalSection<'_>) -> Clock {
         let cell = self.clock.borrow(cs);
-        let (last, total) = cell.get();
-        let value = counter();
-        // A down-counter with a period of 2³²: the wrapping difference is the cycles elapsed.
-        let total = total + u64::from(last.wrapping_sub(value));
-        cell.set((value, total));
-        total
+        let clock = cell.get().advance(counter());
+        cell.set(clock);
+        clock
     }
 
     /// Sets the alarm to interrupt at tick `at` (or within 0.67 s, whichever is first); pends
     /// it at once when `at` has come.
     fn arm(&self, cs: CriticalSection<'_>, at: u64) {
         self.alarm.borrow(cs).set(at);
-        let now = self.cycles_in(cs);
+        let now = self.clock_in(cs).cycles();
         let target = at.saturating_mul(CYCLES_PER_TICK);
         if target <= now {
             NVIC::pend(Irq::Alarm);
@@ -109,7 +110,7 @@ impl TimerDriver {
 
 impl Driver for TimerDriver {
     fn now(&self) -> u64 {
-        cycles() / CYCLES_PER_TICK
+        ticks()
     }
 
     fn schedule_wake(&self, at: u64, waker: &Waker) {
@@ -125,7 +126,7 @@ impl Driver for TimerDriver {
 }
 
 embassy_time_driver::time_driver_impl!(static DRIVER: TimerDriver = TimerDriver {
-    clock: Mutex::new(Cell::new((0, 0))),
+    clock: Mutex::new(Cell::new(Clock::start(FIRST_VALUE))),
     alarm: Mutex::new(Cell::new(0)),
     queue: Mutex::new(RefCell::new(Queue::new())),
 });
@@ -139,7 +140,7 @@ pub unsafe extern "C" fn alarm_interrupt() {
     let begin = counter();
     write(TIMER1 + 0xC, 1);
     critical_section::with(|cs| {
-        let now = DRIVER.cycles_in(cs) / CYCLES_PER_TICK;
+        let now = DRIVER.clock_in(cs).ticks();
         let next = DRIVER.queue.borrow_ref_mut(cs).next_expiration(now);
         // Nothing to wake: come back anyway, to keep reading the clock.
         let keep_reading = now + MAX_ALARM / CYCLES_PER_TICK;
@@ -170,7 +171,7 @@ pub fn start() {
     // QEMU's CMSDK timer takes a RELOAD write as a VALUE write too: RELOAD first.
     write(TIMER0 + 8, u32::MAX);
     write(TIMER0 + 4, FIRST_VALUE);
-    critical_section::with(|cs| DRIVER.clock.borrow(cs).set((FIRST_VALUE, 0)));
+    critical_section::with(|cs| DRIVER.clock.borrow(cs).set(Clock::start(FIRST_VALUE)));
     write(TIMER0, 1);
     // The alarm: enabled with its interrupt, reloading 2³² − 1 after it fires (the handler
     // loads the next value long before that comes).
@@ -187,7 +188,12 @@ pub fn start() {
 
 /// Core cycles since [`start`]: the clock's count, for measuring how long code runs.
 pub fn cycles() -> u64 {
-    critical_section::with(|cs| DRIVER.cycles_in(cs))
+    critical_section::with(|cs| DRIVER.clock_in(cs).cycles())
+}
+
+/// Whole ticks since [`start`]: `embassy_time`'s `now()`.
+pub fn ticks() -> u64 {
+    critical_section::with(|cs| DRIVER.clock_in(cs).ticks())
 }
 
 /// Core cycles since [`start`] by the reference timer, to within its prescaler (256 cycles).

@@ -4,7 +4,7 @@
 //! time); the sensing side runs on the interrupt executor above the deciding side, as on the
 //! simulator-carrying firmware. It runs the task once, logs the outcome, its longest poll and
 //! critical section and its stack, and leaves QEMU. `cargo xtask size` holds it to 8 KiB of RAM
-//! with the stack and reports its flash against the 32 KiB target.
+//! with the stack and to 32 KiB of flash.
 //!
 //! It runs the mission's library plan (`Engine::run`, which links no search): re-planning with
 //! the planner (`Engine::run_planning`) would add the search's code and its 1 KiB search
