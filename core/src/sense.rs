@@ -60,8 +60,8 @@ pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
     if late <= period {
         return Instant::from_ticks(due.as_ticks().saturating_add(period));
     }
-    // In 32 bits: a 64-bit division is a library routine on a Cortex-M (about 0.9 KB of flash
-    // that nothing else of a firmware needs, and a hundred cycles).
+    // In 32 bits: a 64-bit division is a library routine on a Cortex-M, 0.9 KB of flash that
+    // nothing else of a firmware may need.
     match (u32::try_from(late), u32::try_from(period)) {
         (Ok(late), Ok(period)) => {
             let periods = late.div_ceil(period);

@@ -1,7 +1,8 @@
-//! The arithmetic of the firmware's clock ([`time_driver`](crate)), apart so that it is tested
-//! on the host: a free-running 32-bit down-counter extended to whole ticks and the cycles into
-//! the current tick, with no 64-bit division (a library routine on a Cortex-M, 0.9 KB of flash
-//! and about a hundred cycles, and `now()` is read several times a sample).
+//! The arithmetic of the firmware's clock (`time_driver`, built for the target only), apart
+//! so that it is tested on the host: a free-running 32-bit down-counter extended to whole
+//! ticks and the cycles into the current tick, with no 64-bit division: on a Cortex-M that is
+//! a library routine of 0.9 KB, and a sample step, which reads `now()` several times, took
+//! 392 cycles more with it (8,977 against 8,585 on mps2-an386, `cargo xtask timing`).
 
 /// The time counted from a 32-bit down-counter of period 2³² at `CYCLES_PER_TICK` cycles a
 /// tick (at least 1, at most 2³¹).
@@ -86,7 +87,10 @@ mod tests {
 
     proptest! {
         #[test]
-        fn agrees_with_64_bit_division(first: u32, steps in prop::collection::vec(any::<u32>(), 0..64)) {
+        fn agrees_with_64_bit_division(
+            first: u32,
+            steps in prop::collection::vec(any::<u32>(), 0..64),
+        ) {
             agrees::<25_000>(first, &steps);
             agrees::<20_000>(first, &steps);
             agrees::<7>(first, &steps);
