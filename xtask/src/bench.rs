@@ -90,12 +90,11 @@ fn read_criterion(dir: &Path) -> Result<BTreeMap<(String, String), Measured>, St
     Ok(out)
 }
 
-/// Runs `cargo bench` with `args`, building into `target_dir` (criterion writes its results
-/// there), echoing its output; returns its stdout.
-fn cargo_bench(args: &[&str], target_dir: &Path) -> Result<String, String> {
-    let mut cmd = firmware::cargo();
-    cmd.env("CARGO_TARGET_DIR", target_dir)
-        .arg("bench")
+/// Runs `cargo bench` with `args` in the package or workspace at `dir`, building into its
+/// `target/` (criterion writes its results there), echoing its output; returns its stdout.
+fn cargo_bench(args: &[&str], dir: &Path) -> Result<String, String> {
+    let mut cmd = firmware::cargo_in(dir);
+    cmd.arg("bench")
         .args(args)
         .arg("--")
         .args(CRITERION)
@@ -350,10 +349,10 @@ fn measure(root: &Path) -> Result<Extra, String> {
             "--bench",
             "simulator",
         ],
-        &root.join("target"),
+        root,
     )?;
     let mut allocs = allocations(&text);
-    // Its own package, at its own tick rate: its own target directory.
+    // Its own package, at its own tick rate.
     let bt = root.join("bench/behaviortree");
     let bt_text = cargo_bench(
         &[
@@ -362,7 +361,7 @@ fn measure(root: &Path) -> Result<Extra, String> {
             "--bench",
             "steps",
         ],
-        &bt.join("target"),
+        &bt,
     )?;
     allocs.extend(allocations(&bt_text));
     let sweep_s = sweep_seconds()?;

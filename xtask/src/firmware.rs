@@ -21,9 +21,14 @@ pub fn root() -> PathBuf {
 /// into the workspace's `target/` whatever `CARGO_TARGET_DIR` says: the tasks read what they
 /// build there (criterion's results, the profiles' callgrind files, the firmware's ELFs).
 pub fn cargo() -> Command {
+    cargo_in(&root())
+}
+
+/// `cargo` run from the package or workspace at `dir`, building into its own `target/`.
+pub fn cargo_in(dir: &Path) -> Command {
     let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    cmd.current_dir(root())
-        .env("CARGO_TARGET_DIR", root().join("target"));
+    cmd.current_dir(dir)
+        .env("CARGO_TARGET_DIR", dir.join("target"));
     cmd
 }
 
@@ -173,11 +178,8 @@ fn stack_overflow_faults(machine: Machine, elf: &Path) -> Result<bool, String> {
 /// the image a user flashes, so no flags of this task's.
 pub fn build_board() -> Result<PathBuf, String> {
     let dir = root().join("boards/pico2");
-    // The board is a package of its own: its build is `cargo build --release` there, into its
-    // own `target/` (not the workspace's, which `cargo()` names).
-    let status = cargo()
-        .current_dir(&dir)
-        .env("CARGO_TARGET_DIR", dir.join("target"))
+    // A package of its own: `cargo build --release` there, into its own `target/`.
+    let status = cargo_in(&dir)
         .args(["build", "--quiet", "--release"])
         .status()
         .map_err(|e| format!("cannot run cargo: {e}"))?;

@@ -453,9 +453,8 @@ fn build_board() -> Result<PathBuf, String> {
         "-Csymbol-mangling-version=legacy",
     ]
     .join("\x1f");
-    let mut cmd = firmware::cargo();
-    cmd.current_dir(&dir)
-        .args(["build", "--quiet", "--release"]);
+    let mut cmd = firmware::cargo_in(&dir);
+    cmd.args(["build", "--quiet", "--release"]);
     build_with(cmd, &flags, &target_dir, "the Pico 2 board")?;
     Ok(target_dir.join("thumbv8m.main-none-eabihf/release/psmpa-pico2"))
 }
