@@ -227,6 +227,8 @@ pub struct ActuatorAction<'a, const W: usize = 1> {
     /// How long `pre(a)` may stay false while the action runs before the runtime stops it;
     /// `None`: the runtime's [`Config::max_violation`](crate::exec::Config::max_violation).
     /// A robot at a cliff's edge stops at once (zero); one before a box may wait for it.
+    /// A tolerance of its own above zero also lets the action *start* while a fact of
+    /// `pre(a)` is known false ([`may_start_violated`](Self::may_start_violated)).
     pub max_violation: Option<Duration>,
 }
 
@@ -252,5 +254,17 @@ impl<'a, const W: usize> ActuatorAction<'a, W> {
     pub const fn with_max_violation(mut self, max_violation: Duration) -> Self {
         self.max_violation = Some(max_violation);
         self
+    }
+
+    /// Whether the action may start while a fact of `pre(a)` is known false: only if it sets
+    /// its own `max_violation` above zero. It then rides the violation out from its start as
+    /// it would one that arises while it runs (a walk that side-steps a box already in front
+    /// of it). An action that relies on the runtime's default is not started on a
+    /// precondition known false: selection passes over its plan.
+    pub const fn may_start_violated(&self) -> bool {
+        match self.max_violation {
+            Some(max) => max.as_ticks() > 0,
+            None => false,
+        }
     }
 }

@@ -48,7 +48,8 @@ pub enum ControlError<const W: usize = 1> {
         beliefs: FactSetOf<W>,
     },
     /// Every plan applicable to the event starts with an action whose precondition a percept
-    /// has already shown false: none was started.
+    /// has already shown false, and that has no tolerance of its own to wait with
+    /// ([`ActuatorAction::may_start_violated`]): none was started.
     Inapplicable {
         /// The event.
         event: EventId,
@@ -162,8 +163,9 @@ impl<
 
     /// The actions with the preconditions the planner must satisfy from the beliefs: facts
     /// that a sensor running beside the action perceives are checked by that sensor when the
-    /// action runs, so they are assumed to hold unless a sample already showed them false. An
-    /// action beside a sensor that failed cannot be monitored: it never applies.
+    /// action runs, so they are assumed to hold unless a sample already showed them false (and
+    /// even then for an action that [may start violated](ActuatorAction::may_start_violated)).
+    /// An action beside a sensor that failed cannot be monitored: it never applies.
     fn planning_actions(&self) -> Vec<ActuatorAction<'r, W>, NA> {
         let domain = &self.mission.domain;
         let known_false = self.known_false();
@@ -176,6 +178,8 @@ impl<
                 let checked = domain.perception_of(serving);
                 let pre = if serving.bits() & faulty.bits() != 0 {
                     FactSetOf::ALL
+                } else if a.may_start_violated() {
+                    a.pre.difference(checked)
                 } else {
                     a.pre.difference(checked.difference(known_false))
                 };
@@ -186,7 +190,9 @@ impl<
 
     /// `generatePlans: M -> P` from the library: the first applicable plan whose first action
     /// could start, else why none applies. A plan whose first action needs a fact a percept
-    /// has shown false is passed over: started, it would only wait for that fact. O(NP).
+    /// has shown false is passed over: started, it would only wait for that fact. Unless that
+    /// action has a tolerance of its own ([`ActuatorAction::may_start_violated`]): it was
+    /// written to ride such a violation out. O(NP).
     fn select(
         &self,
         memory: &FailureMemory<W>,
@@ -202,7 +208,7 @@ impl<
             let blocked = body
                 .first()
                 .and_then(|a| self.mission.domain.action(*a))
-                .is_some_and(|a| a.pre.intersects(known_false));
+                .is_some_and(|a| a.pre.intersects(known_false) && !a.may_start_violated());
             if !blocked {
                 // Copied once, for the plan that runs.
                 return Ok((plan, body.iter().copied().collect()));

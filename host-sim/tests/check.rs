@@ -35,8 +35,12 @@ fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
         "{text}"
     );
     assert!(text.contains("δ2  = enter kitchen"), "{text}");
-    // Per-action tolerances and negative contexts are shown where a mission sets them.
-    assert!(!text.contains("max_violation"), "{text}");
+    // Per-action tolerances are shown where a mission sets them: the walks wait a minute.
+    assert!(
+        text.contains("failure → failed, max_violation 60000 ms"),
+        "{text}"
+    );
+    assert!(!text.contains("context_not"), "{text}");
     assert!(
         text.contains("go to door → open door → enter kitchen (3 actions"),
         "{text}"
@@ -126,16 +130,16 @@ fn bad_missions_are_rejected_with_one_clear_line() {
             ],
         ),
         (
-            r#""add": ["at_door"],"#,
-            r#""add": ["at_door"], "max_violation_ms": 5000000000,"#,
+            r#""max_violation_ms": 60000"#,
+            r#""max_violation_ms": 5000000000"#,
             &[
                 "actions[0].max_violation_ms",
                 "more than 4294967295 milliseconds",
             ],
         ),
         (
-            r#""add": ["at_door"],"#,
-            r#""add": ["at_door"], "max_violation_ms": "soon","#,
+            r#""max_violation_ms": 60000"#,
+            r#""max_violation_ms": "soon""#,
             &["actions[0].max_violation_ms", "wrong type"],
         ),
     ];
@@ -224,8 +228,8 @@ fn an_unreachable_goal_and_an_unbound_behaviour_name_their_cause() {
 fn per_action_tolerance_and_negative_context_are_shown() {
     let mission = fetch_tea()
         .replacen(
-            r#""add": ["at_door"],"#,
-            r#""add": ["at_door"], "max_violation_ms": 0,"#,
+            r#""max_violation_ms": 60000"#,
+            r#""max_violation_ms": 0"#,
             1,
         )
         .replacen(

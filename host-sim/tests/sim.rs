@@ -692,6 +692,24 @@ fn a_ball_lying_at_the_door_is_no_collision_for_psmpa() {
     assert_eq!(s.tally.collisions, 0);
 }
 
+/// A box already in front at the start: the initial model shows the path blocked, and "go to
+/// door", which may wait a minute for its path (its own `max_violation_ms`), still starts,
+/// sees the box at once and side-steps it. Without that tolerance of its own, selection would
+/// pass over the plan and the robot would give up at 0 s.
+#[test]
+fn a_box_already_there_at_the_start_is_avoided_and_the_door_reached() {
+    let sc = inline(r#"{"name":"start","interferences":[{"kind":"box","at_s":0,"hold_s":0.5}]}"#);
+    for arch in Arch::ALL {
+        let s = run_summary(&sc, arch).unwrap();
+        assert!(s.tally.reached_door, "{arch:?}: {:?}", s.ending);
+        assert_eq!((s.tally.detected, s.tally.collisions), (1, 0), "{arch:?}");
+    }
+    // P-SMPA: a quiet walk's 22 s and the side step's 2 s. SMPA first walks at 1 s, after its
+    // sense phase, when the box has been gone for 0.5 s: its quiet 34 s.
+    let time = |arch| run_summary(&sc, arch).unwrap().time_cost_ms;
+    assert_eq!((time(Arch::PSmpa), time(Arch::Smpa)), (24_000, 34_000));
+}
+
 #[test]
 fn interferences_count_the_scenario_list_even_when_not_all_are_put_down() {
     // The second is due long after the robot reached the door.

@@ -732,3 +732,40 @@ fn a_plan_known_to_be_inapplicable_is_skipped() {
     let r = run_mission(&mission, ids, &[(0, 60_000)]);
     assert_eq!(selected_plans(&r.trace).first(), Some(&2));
 }
+
+/// An action with a tolerance of its own was written to ride a violation out: it is started
+/// on a precondition a sample has already shown false, and waits as it would had the
+/// violation arisen while it ran. The same box at the start stops the same mission whose walk
+/// relies on the runtime's default (the test above).
+#[test]
+fn an_action_with_a_tolerance_of_its_own_starts_on_a_blocked_path_and_waits() {
+    let (mut mission, ids) = tiny::mission(true);
+    for walk in [ids.stumble, ids.walk] {
+        mission
+            .domain
+            .set_max_violation(walk, Some(Duration::from_secs(30)))
+            .unwrap();
+    }
+    // The box stands in front from the start until 2 s.
+    let r = run_mission(&mission, ids, &[(0, 2_000)]);
+    let report = r.result.unwrap();
+    // "stumble-first" starts at once (it fails, as it always does), then "get-in" waits.
+    assert_eq!(selected_plans(&r.trace), [0, 1]);
+    assert_eq!(report.plans_failed, 1);
+    assert!(
+        matches!(
+            plan_failures(&r.trace).as_slice(),
+            [(_, Failure::ActionFailed { action })] if *action == ids.stumble
+        ),
+        "{:?}",
+        plan_failures(&r.trace)
+    );
+    // 2 m at 0.2 m/s from the box's removal at 2 s (the next 100 ms sample), then 0.5 s for the
+    // door: more than the 10.5 s of a clear path, by the wait.
+    assert!(
+        r.elapsed >= Duration::from_millis(12_500),
+        "{:?}",
+        r.elapsed
+    );
+    assert!(r.elapsed < Duration::from_millis(13_000), "{:?}", r.elapsed);
+}
