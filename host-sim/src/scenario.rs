@@ -680,6 +680,13 @@ pub enum Problem {
         /// Largest allowed.
         max: f64,
     },
+    /// Above `max` (the least value has a message of its own: not negative, or above 0).
+    AboveMax {
+        /// The value.
+        value: f64,
+        /// Largest allowed.
+        max: f64,
+    },
     /// The name is empty or only spaces.
     Empty,
     /// Must be a whole number of microseconds from 0 to `max`.
@@ -730,6 +737,9 @@ impl fmt::Display for Problem {
             ),
             Self::OutOfRange { value, min, max } => {
                 write!(f, "must lie between {min} and {max}, got {}", Shown(value))
+            }
+            Self::AboveMax { value, max } => {
+                write!(f, "must be at most {max}, got {}", Shown(value))
             }
             Self::Empty => f.write_str("must not be empty"),
             Self::NotWholeMicros { value, max } => write!(
@@ -794,9 +804,8 @@ fn seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
     if ms > MAX_MS {
         return Err(invalid(
             field,
-            Problem::OutOfRange {
+            Problem::AboveMax {
                 value,
-                min: 0.0,
                 max: MAX_MS / 1000.0,
             },
         ));
@@ -875,14 +884,7 @@ fn metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
         return Err(invalid(field, Problem::Negative(value)));
     }
     if value > MAX_M {
-        return Err(invalid(
-            field,
-            Problem::OutOfRange {
-                value,
-                min: 0.0,
-                max: MAX_M,
-            },
-        ));
+        return Err(invalid(field, Problem::AboveMax { value, max: MAX_M }));
     }
     Ok((value * 1_000_000.0 + 0.5) as i64)
 }
@@ -1336,6 +1338,11 @@ mod tests {
         );
         let e = err(r#"{"name":"x","robot":{"speed_mps":0},"interferences":[]}"#);
         assert!(e.to_string().starts_with("robot.speed_mps:"));
+        // A field above 0 says so on its own; past its largest, only the largest is named.
+        let e = err(r#"{"name":"x","door_m":1000.001,"interferences":[]}"#);
+        assert_eq!(e.to_string(), "door_m: must be at most 1000, got 1000.001");
+        let e = err(r#"{"name":"x","door_m":0,"interferences":[]}"#);
+        assert_eq!(e.to_string(), "door_m: must be greater than 0, got 0");
         for (latency, problem) in [
             ("-1", "must not be negative, got -1"),
             (
