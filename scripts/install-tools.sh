@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
 # Installs the tools a clean machine lacks, and only those that are missing:
 #
+#   bash scripts/install-tools.sh board      # build the Pico 2 board's image (boards/pico2)
 #   bash scripts/install-tools.sh firmware   # build the firmware and run it in QEMU
 #   bash scripts/install-tools.sh            # everything scripts/test.sh (CI) runs
+#
+# board: the thumbv8m.main-none-eabihf target (rustup) and flip-link (cargo install), what
+# `cargo build --release` in boards/pico2 needs.
 #
 # firmware: the thumbv7em-none-eabihf and thumbv8m.main-none-eabihf targets (rustup; QEMU's
 # mps2-an386 and mps2-an505; the Pico 2 board), qemu-system-arm (apt), defmt-print and flip-link (cargo install,
@@ -18,16 +22,20 @@ set -euo pipefail
 
 what="${1:-all}"
 case "$what" in
-  firmware | all) ;;
+  board | firmware | all) ;;
   *)
-    echo "usage: bash scripts/install-tools.sh [firmware|all]" >&2
+    echo "usage: bash scripts/install-tools.sh [board|firmware|all]" >&2
     exit 2
     ;;
 esac
 
-targets=(thumbv7em-none-eabihf thumbv8m.main-none-eabihf)
+targets=(thumbv8m.main-none-eabihf)
 components=()
-packages=(qemu-system-arm:qemu-system-arm)
+packages=()
+if [ "$what" != board ]; then
+  targets+=(thumbv7em-none-eabihf)
+  packages+=(qemu-system-arm:qemu-system-arm)
+fi
 if [ "$what" = all ]; then
   targets+=(thumbv6m-none-eabi riscv32imac-unknown-none-elf)
   components+=(clippy rustfmt)
@@ -58,5 +66,5 @@ if ((${#missing[@]})); then
     apt-get install -y -q --no-install-recommends "${missing[@]}"
 fi
 
-command -v defmt-print >/dev/null || cargo install defmt-print --locked
+[ "$what" = board ] || command -v defmt-print >/dev/null || cargo install defmt-print --locked
 command -v flip-link >/dev/null || cargo install flip-link --locked

@@ -71,7 +71,8 @@ enum Task {
         #[arg(long, conflicts_with = "no_run")]
         instructions: bool,
         /// Only the planning benchmark: psmpa's planner beside pyperplan (when installed) on
-        /// generated gripper and blocks problems; writes bench/PLANNING.md.
+        /// generated gripper and blocks problems; writes bench/PLANNING.md and README's table
+        /// (without pyperplan it only prints psmpa's figures).
         #[arg(long, conflicts_with_all = ["no_run", "instructions"])]
         planning: bool,
     },

@@ -322,7 +322,7 @@ pub fn run(bless: bool) -> Result<(), String> {
 
     println!("{:<44} {:>10}  {:>8}  budget", "", "measured", "vs snap");
     let mut failures = report(
-        "psmpa-firmware (core, simulated world, 15 scenarios)",
+        "psmpa-firmware (core, simulated world, the scenarios)",
         now.firmware,
         snapshot.map(|s| s.firmware),
         &FIRMWARE,
