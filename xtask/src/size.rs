@@ -31,6 +31,7 @@ const FIRMWARE: Budget = Budget {
 
 /// The product-shaped image. Its flash was a target it missed, reported but not enforced,
 /// until its clock stopped dividing 64 bits: the library division's 0.9 KB brought it within.
+/// Measured, like every budget here, on the Cortex-M4F's build (the M33's is a little larger).
 const PRODUCT: Budget = Budget {
     flash: 32 * 1024,
     ram_with_stack: 8 * 1024,
