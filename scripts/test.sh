@@ -42,7 +42,7 @@ step "the Pico 2 board: formatted, clippy-clean and built as its README says (ca
 (cd boards/pico2 && cargo fmt --check && cargo clippy --release -- -D warnings && cargo build --release)
 
 step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
-cargo test --manifest-path examples/outside/Cargo.toml --target-dir target/outside
+cargo test --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 
 step "firmware: clippy for both targets (mps2-an386's Cortex-M4F, mps2-an505's Cortex-M33)"
 for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do

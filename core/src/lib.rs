@@ -65,6 +65,12 @@ pub mod text;
 pub mod timing;
 pub mod trace;
 
+// The embassy crates the API is built on, at the versions this crate uses: a robot's code can
+// name them through here rather than match their versions by hand.
+pub use embassy_futures;
+pub use embassy_sync;
+pub use embassy_time;
+
 pub use action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, SensorSet};
 pub use control::{ControlError, Report};
 pub use domain::{Domain, DomainError, EventId};
