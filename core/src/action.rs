@@ -101,6 +101,23 @@ impl SensorSet {
         Self(self.0 & !(1u32 << sensor.0))
     }
 
+    /// The sensors in either set.
+    #[must_use]
+    pub const fn union(self, other: Self) -> Self {
+        Self(self.0 | other.0)
+    }
+
+    /// The sensors in both sets.
+    #[must_use]
+    pub const fn intersection(self, other: Self) -> Self {
+        Self(self.0 & other.0)
+    }
+
+    /// Whether the two sets share a sensor.
+    pub const fn intersects(self, other: Self) -> bool {
+        self.0 & other.0 != 0
+    }
+
     /// The sensors in increasing id order.
     pub fn iter(self) -> impl ExactSizeIterator<Item = SensorId> + Clone {
         SensorIter(self.0)

@@ -47,16 +47,22 @@ pub enum ControlError<const W: usize = 1> {
         /// The beliefs.
         beliefs: FactSetOf<W>,
     },
-    /// Every plan applicable to the event starts with an action whose precondition a percept
-    /// has already shown false, and that has no tolerance of its own to wait with
-    /// ([`ActuatorAction::may_start_violated`]): none was started.
+    /// Every plan applicable to the event was passed over, and none was started: its first
+    /// action needs a fact a percept has already shown false and has no tolerance of its own
+    /// to wait with ([`ActuatorAction::may_start_violated`]), or its `context_not` needs a
+    /// fact false that no sample has shown yet, or one of its actions needs a sensor out of
+    /// service ([`Engine::faulty_sensors`]).
     Inapplicable {
         /// The event.
         event: EventId,
         /// The plans passed over.
         skipped: PlanSet,
-        /// The facts percepts showed false.
+        /// The facts percepts showed false that a passed-over plan's first action needs.
         known_false: FactSetOf<W>,
+        /// The facts a passed-over plan's `context_not` needs false that no sample has shown.
+        unknown: FactSetOf<W>,
+        /// The sensors out of service that a passed-over plan's actions need.
+        faulty: SensorSet,
     },
     /// Every applicable plan already failed under the current beliefs.
     Exhausted {
@@ -176,7 +182,7 @@ impl<
             .map(|a| {
                 let serving = domain.sensors_serving(a.pre);
                 let checked = domain.perception_of(serving);
-                let pre = if serving.bits() & faulty.bits() != 0 {
+                let pre = if serving.intersects(faulty) {
                     FactSetOf::ALL
                 } else if a.may_start_violated() {
                     a.pre.difference(checked)
@@ -188,11 +194,19 @@ impl<
             .collect()
     }
 
-    /// `generatePlans: M -> P` from the library: the first applicable plan whose first action
-    /// could start, else why none applies. A plan whose first action needs a fact a percept
-    /// has shown false is passed over: started, it would only wait for that fact. Unless that
-    /// action has a tolerance of its own ([`ActuatorAction::may_start_violated`]): it was
-    /// written to ride such a violation out. O(NP).
+    /// `generatePlans: M -> P` from the library: the first applicable plan that could run,
+    /// else why none applies. A plan is passed over when
+    /// * its first action needs a fact a percept has shown false: started, it would only wait
+    ///   for that fact. Unless that action has a tolerance of its own
+    ///   ([`ActuatorAction::may_start_violated`]): it was written to ride such a violation out;
+    /// * its `context_not` needs a fact false that a sensor perceives but no sample has shown
+    ///   (never sensed is unknown, not false: "express only when not loaded" does not run on
+    ///   a load cell that never answered);
+    /// * one of its actions needs a sensor out of service: it could not be monitored (the
+    ///   planner's view of the actions leaves those out too).
+    ///
+    /// O(NP · L · NS).
+    #[inline(never)]
     fn select(
         &self,
         memory: &FailureMemory<W>,
@@ -200,29 +214,56 @@ impl<
     ) -> Result<(PlanId, Vec<ActionId, L>), ControlError<W>> {
         let task = self.mission.task;
         let library = &self.mission.library;
+        let domain = &self.mission.domain;
         let excluded = memory.excluded(task.event, beliefs);
         let known_false = self.known_false();
+        let unknown = self.unknown_facts();
+        let out_of_service = self.faulty_sensors();
         let mut skipped = PlanSet::EMPTY;
-        while let Some(plan) = library.select(task.event, beliefs, excluded.union(skipped)) {
-            let body = library.get(plan).map_or(&[][..], |p| &p.body);
-            let blocked = body
+        let mut why = (FactSetOf::EMPTY, FactSetOf::EMPTY, SensorSet::EMPTY);
+        while let Some(id) = library.select(task.event, beliefs, excluded.union(skipped)) {
+            let Some(plan) = library.get(id) else {
+                break; // An id the library gave: never the case.
+            };
+            let first_false = plan
+                .body
                 .first()
-                .and_then(|a| self.mission.domain.action(*a))
-                .is_some_and(|a| a.pre.intersects(known_false) && !a.may_start_violated());
-            if !blocked {
+                .and_then(|a| domain.action(*a))
+                .filter(|a| !a.may_start_violated())
+                .map_or(FactSetOf::EMPTY, |a| a.pre.intersection(known_false));
+            let unsure = plan.context_not.intersection(unknown);
+            let faulty = if out_of_service.is_empty() {
+                SensorSet::EMPTY
+            } else {
+                plan.body
+                    .iter()
+                    .filter_map(|a| domain.action(*a))
+                    .fold(SensorSet::EMPTY, |acc, a| {
+                        acc.union(domain.sensors_serving(a.pre))
+                    })
+                    .intersection(out_of_service)
+            };
+            if first_false.is_empty() && unsure.is_empty() && faulty.is_empty() {
                 // Copied once, for the plan that runs.
-                return Ok((plan, body.iter().copied().collect()));
+                return Ok((id, plan.body.clone()));
             }
-            if skipped.contains(plan) {
+            if skipped.contains(id) {
                 break; // An id without a bit: never the case in a library.
             }
-            skipped = skipped.with(plan);
+            skipped = skipped.with(id);
+            why = (
+                why.0.union(first_false),
+                why.1.union(unsure),
+                why.2.union(faulty),
+            );
         }
         Err(if !skipped.is_empty() {
             ControlError::Inapplicable {
                 event: task.event,
                 skipped,
-                known_false,
+                known_false: why.0,
+                unknown: why.1,
+                faulty: why.2,
             }
         } else if excluded.is_empty() {
             ControlError::NoApplicablePlan {
@@ -288,9 +329,18 @@ impl<
             let (plan, body) = match self.select(&memory, beliefs) {
                 Ok(selected) => selected,
                 // The same search from the same beliefs would give the plan that just failed.
-                Err(_) if G::PLANS && generated_failed != Some(beliefs) => {
-                    let body = self.generate(&mut planner, beliefs).await?;
-                    (PlanId::GENERATED, body)
+                Err(no_plan) if G::PLANS && generated_failed != Some(beliefs) => {
+                    match self.generate(&mut planner, beliefs).await {
+                        Ok(body) => (PlanId::GENERATED, body),
+                        // The planner found nothing either: plans passed over, and why, say
+                        // more than "unsolvable" does.
+                        Err(ControlError::Planning { .. })
+                            if matches!(no_plan, ControlError::Inapplicable { .. }) =>
+                        {
+                            return Err(no_plan);
+                        }
+                        Err(error) => return Err(error),
+                    }
                 }
                 Err(no_plan) => return Err(no_plan),
             };

@@ -594,6 +594,15 @@ impl<
             .lock(|s| s.sensed.get().difference(s.beliefs.get()))
     }
 
+    /// Percept facts neither believed nor shown by any sample yet: a sensor perceives them,
+    /// and nothing says whether they hold. (A fact no sensor perceives follows the model.)
+    pub fn unknown_facts(&self) -> FactSetOf<W> {
+        let perceivable = (self.mission.domain.sensors().iter())
+            .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per));
+        self.shared
+            .lock(|s| perceivable.difference(s.sensed.get().union(s.beliefs.get())))
+    }
+
     pub(crate) fn set_beliefs(&self, beliefs: FactSetOf<W>) {
         self.shared.lock(|s| s.beliefs.set(beliefs));
         self.notify();

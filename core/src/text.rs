@@ -223,7 +223,7 @@ impl<
             E::ModelEstablished { beliefs } => write!(f, "model established {}", facts(beliefs)),
             E::PlanGenerated { length, expanded } => write!(
                 f,
-                "no library plan applies: the planner generated {length} actions ({expanded} nodes expanded)"
+                "no library plan could run: the planner generated {length} actions ({expanded} nodes expanded)"
             ),
             E::PlanSelected { plan, .. } => write!(f, "plan selected: {}", n.plan(plan)),
             E::PlanSucceeded { plan } => write!(f, "plan succeeded: {}", n.plan(plan)),

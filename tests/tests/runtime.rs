@@ -378,9 +378,10 @@ fn a_sensor_that_stops_answering_fails_the_action_after_its_timeout() {
     )));
 }
 
-/// A sensor that failed is out of service: a later state that needs it, of a library plan as
-/// much as of a generated one, fails at once without switching it on; `clear_faults` puts it
-/// back into service.
+/// A sensor that failed is out of service: a library plan with an action that needs it is
+/// passed over, not started (the robot does not walk to a door it could not open), the run
+/// ends with an error naming the sensor, the planner leaves those actions out as well, and
+/// `clear_faults` puts the sensor back into service.
 #[test]
 fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared() {
     let (mut mission, ids) = tiny::mission(false);
@@ -417,18 +418,31 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     )
     .unwrap()
     .output;
+    // The planner finds nothing either; the error keeps the library's reason, the camera.
     assert!(
         matches!(
             planned,
-            Err(ControlError::Planning {
-                error: psmpa_core::planner::PlanningError::Unsolvable { .. }
-            })
+            Err(ControlError::Inapplicable { faulty, .. }) if faulty == SensorSet::EMPTY.with(ids.camera)
         ),
         "{planned:?}"
     );
     let (result, faulty, ended) = broken;
-    assert!(result.is_err(), "{result:?}");
     assert_eq!(faulty, SensorSet::EMPTY.with(ids.camera));
+    // "second" needs the camera for "open": passed over, and the error says why.
+    match result {
+        Err(ControlError::Inapplicable {
+            skipped,
+            faulty,
+            known_false,
+            unknown,
+            ..
+        }) => {
+            assert_eq!(skipped.bits(), 0b10, "the second plan passed over");
+            assert_eq!(faulty, SensorSet::EMPTY.with(ids.camera));
+            assert!(known_false.is_empty() && unknown.is_empty());
+        }
+        other => panic!("expected Inapplicable, got {other:?}"),
+    }
     let trace = rt.into_sink().0;
     let failures: Vec<(Instant, Failure)> = trace
         .iter()
@@ -437,18 +451,24 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
             _ => None,
         })
         .collect();
-    // The first plan: the camera timed out 500 ms into "open". The second plan: its "open"
-    // fails the instant it starts, before any switching on.
+    // The first plan: the camera timed out 500 ms into "open", and the run ended there.
     assert_eq!(
-        failures[0].1,
-        Failure::SensorFault {
-            sensor: ids.camera,
-            fault: psmpa_core::SensorFault::Timeout
-        }
+        failures,
+        [(
+            ended,
+            Failure::SensorFault {
+                sensor: ids.camera,
+                fault: psmpa_core::SensorFault::Timeout
+            }
+        )]
     );
+    let selected = trace
+        .iter()
+        .filter(|(_, e)| matches!(e, TraceEvent::PlanSelected { .. }))
+        .count();
     assert_eq!(
-        failures[1],
-        (ended, Failure::SensorUnavailable { sensor: ids.camera })
+        selected, 2,
+        "\"first\" before the fault and after the repair; \"second\" never started"
     );
     let camera_on: Vec<Instant> = trace
         .iter()
@@ -460,7 +480,7 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
         2,
         "once before the fault, once after the repair, never while it is out of service"
     );
-    assert!(camera_on[0] < failures[0].0 && camera_on[1] >= ended);
+    assert!(camera_on[0] < ended && camera_on[1] >= ended);
     // After the repair the same library plan runs to the goal.
     assert_eq!(repaired.unwrap().plans_failed, 0);
 }
@@ -691,6 +711,49 @@ fn a_negative_context_chooses_the_other_plan() {
     assert_eq!(selected_plans(&blocked.trace).first(), Some(&0));
 }
 
+/// A negative context on a fact that a sensor perceives but no sample has shown is unknown, not
+/// satisfied: the camera (one-shot, at the door) has not looked at the start, so a plan for
+/// "no handle seen" is passed over and the next plan runs; alone in the library, it gives an
+/// error naming the unknown fact, and nothing moves.
+#[test]
+fn a_negative_context_on_a_fact_never_sensed_does_not_apply() {
+    let (mut mission, ids) = tiny::mission(false);
+    let event = mission.task.event;
+    let handle = psmpa_core::FactSet::single(psmpa_core::FactId::new(2).unwrap());
+    let blind = psmpa_core::Plan::new("no handle", event, psmpa_core::FactSet::EMPTY, &[ids.walk])
+        .unwrap()
+        .with_context_not(handle);
+    let get_in = psmpa_core::Plan::new(
+        "get-in",
+        event,
+        psmpa_core::FactSet::EMPTY,
+        &[ids.walk, ids.open],
+    )
+    .unwrap();
+    let mut library = psmpa_core::PlanLibrary::new();
+    library.add(blind.clone()).unwrap();
+    library.add(get_in).unwrap();
+    mission.library = library;
+    let both = run_mission(&mission, ids, &[]);
+    assert_eq!(both.result.unwrap().plans_failed, 0);
+    assert_eq!(selected_plans(&both.trace), [1]);
+
+    let mut alone = psmpa_core::PlanLibrary::new();
+    alone.add(blind).unwrap();
+    mission.library = alone;
+    let r = run_mission(&mission, ids, &[]);
+    match r.result {
+        Err(ControlError::Inapplicable {
+            skipped, unknown, ..
+        }) => {
+            assert_eq!(skipped.bits(), 0b1);
+            assert_eq!(unknown, handle);
+        }
+        other => panic!("expected Inapplicable, got {other:?}"),
+    }
+    assert!(selected_plans(&r.trace).is_empty());
+}
+
 /// A plan whose first action needs a fact a percept has already shown false is not started:
 /// the next applicable plan is tried, and when there is none, a clear error names the plans
 /// passed over and the facts known false. Nothing moved.
@@ -731,6 +794,34 @@ fn a_plan_known_to_be_inapplicable_is_skipped() {
         .unwrap();
     let r = run_mission(&mission, ids, &[(0, 60_000)]);
     assert_eq!(selected_plans(&r.trace).first(), Some(&2));
+}
+
+/// With a planner to fall back on, the library's reason is kept: when every plan was passed
+/// over and the planner finds nothing either (the walk needs the path a sample showed
+/// blocked), the error names the plans and the fact, not just "unsolvable".
+#[test]
+fn a_planner_that_finds_nothing_keeps_the_reason_plans_were_passed_over() {
+    let (mission, ids) = tiny::mission(true);
+    let world = TinyWorld::new(ids, &[(0, 60_000)]);
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let planner =
+        psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
+    let mut space = psmpa_core::planner::Search::<64>::new();
+    let out = simulate_split(rt.sensing(), rt.run_planning(&planner, &mut space), LIMIT)
+        .unwrap()
+        .output;
+    let clear = psmpa_core::FactSet::single(psmpa_core::FactId::new(0).unwrap());
+    match out {
+        Err(ControlError::Inapplicable {
+            skipped,
+            known_false,
+            ..
+        }) => {
+            assert_eq!(skipped.bits(), 0b11);
+            assert_eq!(known_false, clear);
+        }
+        other => panic!("expected Inapplicable, got {other:?}"),
+    }
 }
 
 /// An action with a tolerance of its own was written to ride a violation out: it is started

@@ -31,9 +31,13 @@ const FIRMWARE: Budget = Budget {
 
 /// The product-shaped image. Its flash was a target it missed, reported but not enforced,
 /// until its clock stopped dividing 64 bits: the library division's 0.9 KB brought it within.
-/// Measured, like every budget here, on the Cortex-M4F's build (the M33's is a little larger).
+/// 32 KiB until plan selection learnt to pass over a plan that needs a sensor out of service
+/// or a fact never sensed to be false, and the loader to refuse escapes and blank names
+/// (0.65 KB; it was 60 B inside): a robot that does not drive on a dead sensor is worth more
+/// than the round number. Measured, like every budget here, on the Cortex-M4F's build (the
+/// M33's is about 260 B larger, inside it too).
 const PRODUCT: Budget = Budget {
-    flash: 32 * 1024,
+    flash: 33 * 1024,
     ram_with_stack: 8 * 1024,
 };
 
