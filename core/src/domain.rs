@@ -69,7 +69,7 @@ pub enum DomainError {
     Duplicate(Table),
     /// No entry of that name in the table.
     Unknown(Table),
-    /// A name is empty.
+    /// A name is empty, or white space only.
     EmptyName(Table),
     /// A cyclic sensor's period is shorter than one tick: it would sample forever at one
     /// instant.
@@ -101,12 +101,18 @@ impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> Default
     }
 }
 
+/// A name that is empty or only (ASCII) white space: it could not be told apart in print.
+/// (ASCII only: Unicode's whitespace table costs flash.)
+pub(crate) fn blank(name: &str) -> bool {
+    name.bytes().all(|b| b.is_ascii_whitespace())
+}
+
 fn push_name<'a, const N: usize>(
     table: &mut Vec<&'a str, N>,
     which: Table,
     name: &'a str,
 ) -> Result<usize, DomainError> {
-    if name.is_empty() {
+    if blank(name) {
         return Err(DomainError::EmptyName(which));
     }
     if table.contains(&name) {
@@ -154,7 +160,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
 
     /// Adds a fact and returns its id.
     pub fn add_fact(&mut self, name: &'a str) -> Result<FactId, DomainError> {
-        if name.is_empty() {
+        if blank(name) {
             return Err(DomainError::EmptyName(Table::Fact));
         }
         if self.fact_id(name).is_some() {
@@ -185,7 +191,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
             table: Table::Sensor,
             capacity: if NS < MAX_SENSORS { NS } else { MAX_SENSORS },
         };
-        if sensor.name.is_empty() {
+        if blank(sensor.name) {
             return Err(DomainError::EmptyName(Table::Sensor));
         }
         if self.sensor_id(sensor.name).is_some() {
@@ -207,7 +213,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
             table: Table::Action,
             capacity: NA,
         };
-        if action.name.is_empty() {
+        if blank(action.name) {
             return Err(DomainError::EmptyName(Table::Action));
         }
         if self.action_id(action.name).is_some() {

@@ -204,7 +204,7 @@ pub enum Problem<'a> {
     UnknownMode(&'a str),
     /// The name is already used in its table.
     Duplicate(&'a str),
-    /// A name is empty.
+    /// A name is empty, or white space only.
     EmptyName,
     /// A plan body is empty.
     EmptyBody,
@@ -219,6 +219,8 @@ pub enum Problem<'a> {
     Period,
     /// A number of milliseconds past what the runtime counts (2³² − 1).
     Millis,
+    /// A `period_ms` on a sensor that is not cyclic: it would be ignored.
+    NotCyclic,
     /// A plan's context requires this fact both true (`context`) and false (`context_not`).
     Contradiction(&'a str),
     /// No sequence of actions and percepts can ever make this goal fact true.
@@ -262,7 +264,7 @@ impl fmt::Display for LoadError<'_> {
             Problem::Json(JsonError::Syntax) => f.write_str("malformed JSON"),
             Problem::Json(JsonError::Type) => f.write_str("a value of the wrong type"),
             Problem::Json(JsonError::Number) => {
-                f.write_str("not a whole number of milliseconds (no sign, fraction or exponent)")
+                f.write_str("not a whole number of milliseconds up to 4294967295 (no sign, fraction or exponent)")
             }
             Problem::Json(JsonError::Escape) => {
                 f.write_str("escape sequences are not allowed in names")
@@ -279,20 +281,21 @@ impl fmt::Display for LoadError<'_> {
                 )
             }
             Problem::Duplicate(n) => write!(f, "duplicate name `{n}`"),
-            Problem::EmptyName => f.write_str("the name is empty"),
+            Problem::EmptyName => f.write_str("the name is empty or blank"),
             Problem::EmptyBody => f.write_str("the plan body is empty"),
             Problem::Capacity { what, limit } => {
                 write!(f, "more than {limit} {what} (the runtime's capacity)")
             }
             Problem::Period => f.write_str("needs a whole number of milliseconds of at least 1"),
             Problem::Millis => f.write_str("more than 4294967295 milliseconds"),
+            Problem::NotCyclic => f.write_str("`period_ms` is only for a `cyclic` sensor"),
             Problem::Contradiction(n) => {
                 write!(f, "fact `{n}` is in both `context` and `context_not`")
             }
             Problem::UnreachableGoal(n) => {
                 write!(
                     f,
-                    "goal fact `{n}` can never hold: no action adds it and no sensor perceives it"
+                    "goal fact `{n}` can never hold: no action that adds it can ever start, and no sensor perceives it"
                 )
             }
             Problem::Unbound(n) => write!(f, "the platform has no behaviour called `{n}`"),
@@ -555,20 +558,41 @@ const OPTIONAL_TOP: u16 = 1 << 3 | 1 << 7;
 /// A JSON string borrowed from the file.
 struct Str;
 
+/// A string borrowed as written, escapes and all: the mission's own name, which is only shown
+/// (escaped where shown), never compared.
+struct Text;
+
+/// The visitor of both: `plain` refuses escapes.
+struct StrVisitor {
+    plain: bool,
+}
+
+impl<'de> Visitor<'de> for StrVisitor {
+    type Value = &'de str;
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a string")
+    }
+    fn visit_borrowed_str<E: de::Error>(self, v: &'de str) -> Result<&'de str, E> {
+        // A name is borrowed as written, escapes undecoded: two spellings of one name would be
+        // two names. Refused (`load` reports it as `JsonError::Escape`).
+        if self.plain && v.bytes().any(|b| b == b'\\') {
+            return Err(E::custom("escape"));
+        }
+        Ok(v)
+    }
+}
+
 impl<'de> DeserializeSeed<'de> for Str {
     type Value = &'de str;
     fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<&'de str, D::Error> {
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = &'de str;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a string")
-            }
-            fn visit_borrowed_str<E: de::Error>(self, v: &'de str) -> Result<&'de str, E> {
-                Ok(v)
-            }
-        }
-        d.deserialize_str(V)
+        d.deserialize_str(StrVisitor { plain: true })
+    }
+}
+
+impl<'de> DeserializeSeed<'de> for Text {
+    type Value = &'de str;
+    fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<&'de str, D::Error> {
+        d.deserialize_str(StrVisitor { plain: false })
     }
 }
 
@@ -604,12 +628,16 @@ impl<'a, const W: usize> Visitor<'a> for NameList<'_, 'a, W> {
         let NameList(b, kind) = self;
         let mut set = FactSetOf::EMPTY;
         let mut index = 0usize;
-        while let Some(name) = seq.next_element_seed(Str)? {
+        loop {
+            // Set before the element is read: an element of the wrong type is named too.
             if matches!(kind, ListKind::DeclareFacts | ListKind::DeclareEvents) {
                 let mut at = b.at();
                 at.index = u16::try_from(index).ok();
                 b.set_at(at);
             }
+            let Some(name) = seq.next_element_seed(Str)? else {
+                break;
+            };
             let done = match kind {
                 ListKind::DeclareFacts => b.add_fact(name),
                 ListKind::DeclareEvents => b.add_event(name),
@@ -694,8 +722,11 @@ struct Fields<'a, const W: usize> {
 
 /// A number of milliseconds, at least 1. Integers only: no float parser on a microcontroller.
 fn millis<'a>(v: u64) -> Result<Duration, Problem<'a>> {
-    if v == 0 || v > u64::from(u32::MAX) {
+    if v == 0 {
         return Err(Problem::Period);
+    }
+    if v > u64::from(u32::MAX) {
+        return Err(Problem::Millis);
     }
     Ok(Duration::from_millis(v))
 }
@@ -770,6 +801,10 @@ impl<'a, const W: usize> Visitor<'a> for Entry<'_, 'a, W> {
                             period: millis(p).map_err(|e| fail::<M::Error, W>(b, e))?,
                         }
                     }
+                    "one-shot" | "on-demand" if f.number[0].is_some() => {
+                        field(b, Some("period_ms"));
+                        return Err(fail(b, Problem::NotCyclic));
+                    }
                     "one-shot" => SensorMode::OneShot,
                     "on-demand" => SensorMode::OnDemand,
                     other => {
@@ -826,7 +861,7 @@ impl<'a, const W: usize> Visitor<'a> for Entry<'_, 'a, W> {
                 let added = b.add_plan(name, trigger, context, context_not);
                 // Name the part at fault: the name, the whole plan (one too many), or the body.
                 let at = match added {
-                    Err(Problem::Duplicate(_)) => Some("name"),
+                    Err(Problem::Duplicate(_) | Problem::EmptyName) => Some("name"),
                     Err(Problem::Capacity { what: "plans", .. }) => None,
                     _ => Some("body"),
                 };
@@ -885,9 +920,8 @@ impl<'a, const W: usize> Visitor<'a> for Top<'_, 'a, W> {
             });
             match (pass, section) {
                 (Pass::Names, "name") => {
-                    let name = map.next_value_seed(Str)?;
-                    // ASCII spaces only: Unicode's whitespace table costs flash.
-                    if name.bytes().all(|b| b.is_ascii_whitespace()) {
+                    let name = map.next_value_seed(Text)?;
+                    if crate::domain::blank(name) {
                         return Err(fail(b, Problem::EmptyName));
                     }
                     b.set_name(name);
@@ -1067,8 +1101,11 @@ pub fn load_into<
                 problem: Problem::Json(match e {
                     serde_json_core::de::Error::InvalidType => JsonError::Type,
                     serde_json_core::de::Error::InvalidNumber => JsonError::Number,
+                    // Every other custom error is recorded in `b.error` first: this one is
+                    // `Str`'s.
                     serde_json_core::de::Error::InvalidEscapeSequence
-                    | serde_json_core::de::Error::EscapedStringIsTooLong => JsonError::Escape,
+                    | serde_json_core::de::Error::EscapedStringIsTooLong
+                    | serde_json_core::de::Error::CustomError => JsonError::Escape,
                     _ => JsonError::Syntax,
                 }),
             }));
@@ -1362,7 +1399,47 @@ mod tests {
             ),
             (
                 with(r#""name": "x","#, r#""name": "","#),
-                "actions[0].name: the name is empty",
+                "actions[0].name: the name is empty or blank",
+            ),
+            (
+                with(r#""name": "x","#, r#""name": "  ","#),
+                "actions[0].name: the name is empty or blank",
+            ),
+            (
+                with(r#""name": "p","#, r#""name": "","#),
+                "plans[0].name: the name is empty or blank",
+            ),
+            // Names are compared as written: an escape would make two spellings of one name.
+            (
+                with(
+                    r#""facts": ["a", "b"]"#,
+                    r#""facts": ["a", "b", "d/e", "d\/e"]"#,
+                ),
+                "facts[3]: escape sequences are not allowed in names",
+            ),
+            (
+                with(r#""body": ["x"]"#, r#""body": ["x\y"]"#),
+                "plans[0].body: escape sequences are not allowed in names",
+            ),
+            // The element at fault, even when it is not a string.
+            (
+                with(r#""facts": ["a", "b"]"#, r#""facts": ["a", "b", 1]"#),
+                "facts[2]: a value of the wrong type",
+            ),
+            (
+                with(r#""events": ["go"]"#, r#""events": ["go", 5]"#),
+                "events[1]: a value of the wrong type",
+            ),
+            (
+                with(r#""period_ms": 50"#, r#""period_ms": 4294967296"#),
+                "sensors[0].period_ms: more than 4294967295 milliseconds",
+            ),
+            (
+                with(
+                    r#""mode": "cyclic", "period_ms": 50"#,
+                    r#""mode": "one-shot", "period_ms": 50"#,
+                ),
+                "sensors[0].period_ms: `period_ms` is only for a `cyclic` sensor",
             ),
             (
                 with(r#""pre": ["a"]"#, r#""pre": "a""#),
@@ -1388,7 +1465,7 @@ mod tests {
             ),
             (
                 with(r#""add": ["b"]"#, r#""add": ["b"], "max_violation_ms": -1"#),
-                "actions[0].max_violation_ms: not a whole number of milliseconds (no sign, fraction or exponent)",
+                "actions[0].max_violation_ms: not a whole number of milliseconds up to 4294967295 (no sign, fraction or exponent)",
             ),
         ];
         for (json, expected) in cases {
@@ -1398,7 +1475,7 @@ mod tests {
         let unreachable = with(r#""add": ["b"]"#, r#""add": []"#);
         assert_eq!(
             error(&unreachable),
-            "task.goal: goal fact `b` can never hold: no action adds it and no sensor perceives it"
+            "task.goal: goal fact `b` can never hold: no action that adds it can ever start, and no sensor perceives it"
         );
         let no_plans = SMALL.replace(
             r#""plans": [{"name": "p", "trigger": "go", "body": ["x"]}],"#,

@@ -120,7 +120,7 @@ pub enum PlanError {
     },
     /// A plan of that name is already in the library.
     Duplicate,
-    /// A plan has an empty name.
+    /// A plan has an empty name (or one of white space only).
     EmptyName,
 }
 
@@ -183,7 +183,7 @@ impl<'a, const NP: usize, const L: usize, const W: usize> PlanLibrary<'a, NP, L,
         let full = PlanError::LibraryFull {
             capacity: if NP < MAX_PLANS { NP } else { MAX_PLANS },
         };
-        if plan.name.is_empty() {
+        if crate::domain::blank(plan.name) {
             return Err(PlanError::EmptyName);
         }
         if self.plans.iter().any(|p| p.name == plan.name) {

@@ -475,7 +475,8 @@ impl<const N: usize, const W: usize> Search<N, W> {
                     }
                     None => 0,
                 };
-                if self.arena.len() as u32 >= limit.saturating_add(1) {
+                // At most `limit` nodes, the start included.
+                if self.arena.len() as u32 >= limit {
                     return Some(Err(PlanningError::Budget { expanded, limit }));
                 }
                 // Both fit: the arena holds fewer than `NONE` nodes, and `start` refused more
@@ -886,6 +887,35 @@ mod tests {
                 .plan::<4>(d.actions(), init, goal)
                 .map(|f| f.body.len()),
             Err(PlanningError::TooLong { limit: 4 })
+        );
+    }
+
+    /// The budget counts every node generated, the start included: a one-action plan needs two.
+    #[test]
+    fn a_budget_of_n_nodes_generates_at_most_n() {
+        let mut d: Domain<'_, 1, 64> = Domain::new();
+        let a = d.add_fact("a").unwrap();
+        d.add_action(ActuatorAction::new(
+            "make a",
+            FactSet::EMPTY,
+            FactSet::single(a),
+            FactSet::EMPTY,
+        ))
+        .unwrap();
+        let with = |budget| Planner::<64> {
+            strategy: Strategy::BreadthFirst,
+            budget,
+        };
+        let goal = FactSet::single(a);
+        assert!(matches!(
+            with(1).plan::<4>(d.actions(), FactSet::EMPTY, goal),
+            Err(PlanningError::Budget { limit: 1, .. })
+        ));
+        assert_eq!(
+            with(2)
+                .plan::<4>(d.actions(), FactSet::EMPTY, goal)
+                .map(|f| f.body.len()),
+            Ok(1)
         );
     }
 

@@ -237,14 +237,13 @@ fn run(cli: Cli) -> Result<(), Stop> {
                     }
                     (summary, done)
                 };
-            files::commit_all(done).map_err(Stop::Bad)?;
             let text = if json {
                 let j = report::RunJson::new(&sc, &summary);
                 serde_json::to_string(&j).map_err(Stop::internal)? + "\n"
             } else {
                 report::human(&sc, &summary)
             };
-            files::print(text.as_bytes())?;
+            files::print_and_commit(text.as_bytes(), done)?;
         }
         Command::Check {
             mission,
@@ -261,13 +260,14 @@ fn run(cli: Cli) -> Result<(), Stop> {
             // The mission borrows its names from the file for the life of the process.
             let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
             let (report, graph) = check::check(&mission, bytes, any_platform).map_err(Stop::Bad)?;
-            if let Some(mut out) = dot {
+            let dot = dot.map(|mut out| {
+                // An `Output` keeps a write error for its commit.
                 let _ = out.write_all(graph.as_bytes());
-                files::commit_all([out]).map_err(Stop::Bad)?;
-            }
+                out
+            });
             // Names are shown as the file has them; a control character (DEL, C1) escaped.
             let shown: String = report.lines().map(|l| json::printable(l) + "\n").collect();
-            files::print(shown.as_bytes())?;
+            files::print_and_commit(shown.as_bytes(), dot)?;
         }
         Command::Plan {
             mission,
@@ -324,13 +324,12 @@ fn run(cli: Cli) -> Result<(), Stop> {
                     done.push(out);
                 }
             }
-            files::commit_all(done).map_err(Stop::Bad)?;
             let text = if json {
                 serde_json::to_string_pretty(&rows).map_err(Stop::internal)? + "\n"
             } else {
                 table1::render(&rows)
             };
-            files::print(text.as_bytes())?;
+            files::print_and_commit(text.as_bytes(), done)?;
         }
         Command::Sweep {
             runs,
@@ -354,13 +353,12 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 None => None,
             };
             let stats = sweep::sweep(seed, runs, &arches, !json).map_err(Stop::internal)?;
-            files::commit_all(log).map_err(Stop::Bad)?;
             let text = if json {
                 serde_json::to_string_pretty(&stats).map_err(Stop::internal)? + "\n"
             } else {
                 sweep::render(&stats)
             };
-            files::print(text.as_bytes())?;
+            files::print_and_commit(text.as_bytes(), log)?;
         }
         Command::Sensitivity {
             runs,
@@ -371,19 +369,22 @@ fn run(cli: Cli) -> Result<(), Stop> {
             // Opened before the study: a bad path fails before anything runs.
             let plot = create(plot.as_deref())?;
             let study = sensitivity::study(seed, runs, true).map_err(Stop::internal)?;
-            if let Some(mut out) = plot {
-                let svg = sensitivity::plot(&study)
-                    .map_err(|e| Stop::bad(format!("{}: {e}", out.path().display())))?;
-                // An `Output` keeps a write error for its commit.
-                let _ = out.write_all(svg.as_bytes());
-                files::commit_all([out]).map_err(Stop::Bad)?;
-            }
+            let plot = match plot {
+                Some(mut out) => {
+                    let svg = sensitivity::plot(&study)
+                        .map_err(|e| Stop::bad(format!("{}: {e}", out.path().display())))?;
+                    // An `Output` keeps a write error for its commit.
+                    let _ = out.write_all(svg.as_bytes());
+                    Some(out)
+                }
+                None => None,
+            };
             let text = if json {
                 serde_json::to_string_pretty(&study).map_err(Stop::internal)? + "\n"
             } else {
                 sensitivity::render(&study)
             };
-            files::print(text.as_bytes())?;
+            files::print_and_commit(text.as_bytes(), plot)?;
         }
     }
     Ok(())

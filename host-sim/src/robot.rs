@@ -113,6 +113,8 @@ pub enum MissionError {
     Load(LoadError<'static>),
     /// The mission lacks a fact the robot's sensors decide.
     MissingFact(&'static str),
+    /// A sensor the scenario gives a period to is not declared cyclic in the mission.
+    NotCyclic(&'static str),
     /// A scenario period could not be applied.
     Domain(DomainError),
 }
@@ -124,6 +126,10 @@ impl core::fmt::Display for MissionError {
             Self::MissingFact(name) => write!(
                 f,
                 "the mission has no fact `{name}`, which the robot's sensors decide"
+            ),
+            Self::NotCyclic(name) => write!(
+                f,
+                "sensor `{name}` must be `cyclic`: the robot samples it on the scenario's period"
             ),
             Self::Domain(e) => write!(f, "{e:?}"),
         }
@@ -171,15 +177,36 @@ impl Robot<'static> {
     pub fn load_into(&mut self, json: &'static [u8]) -> Result<(), MissionError> {
         mission::load_into(json, &NaoRegistry, &mut self.mission, &mut self.bindings)
             .map_err(MissionError::Load)?;
-        let d = &self.mission.domain;
-        let fact = |name: &'static str| d.fact_id(name).ok_or(MissionError::MissingFact(name));
-        self.percepts = Percepts {
-            path_clear: fact("path_clear")?,
-            handle_seen: fact("handle_seen")?,
-            door_unlocked: fact("door_unlocked")?,
-        };
+        self.percepts = requirements(&self.mission.domain, &self.bindings)?;
         Ok(())
     }
+}
+
+/// What the robot needs of a mission beyond the names of its behaviours: the facts its sensors
+/// decide, and a sonar and a bumper that sample cyclically (the scenario gives them their
+/// periods, which would otherwise override a mode the mission declared). `check --platform
+/// nao` checks the same.
+pub fn requirements<const NS: usize, const NA: usize>(
+    d: &psmpa_core::Domain<'_, NS, NA>,
+    bindings: &Bindings<NaoSensor, NaoAction, NS, NA>,
+) -> Result<Percepts, MissionError> {
+    let fact = |name: &'static str| d.fact_id(name).ok_or(MissionError::MissingFact(name));
+    let percepts = Percepts {
+        path_clear: fact("path_clear")?,
+        handle_seen: fact("handle_seen")?,
+        door_unlocked: fact("door_unlocked")?,
+    };
+    for (i, sensor) in d.sensors().iter().enumerate() {
+        let name = match SensorId::new(i).and_then(|id| bindings.sensor(id)) {
+            Some(NaoSensor::Sonar) => "sonar",
+            Some(NaoSensor::Bumper) => "bumper",
+            _ => continue,
+        };
+        if !matches!(sensor.mode, SensorMode::Cyclic { .. }) {
+            return Err(MissionError::NotCyclic(name));
+        }
+    }
+    Ok(percepts)
 }
 
 impl Robot<'_> {

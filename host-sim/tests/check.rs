@@ -55,7 +55,7 @@ fn the_fetch_tea_mission_checks_and_shows_its_parallel_states() {
 #[test]
 fn bad_missions_are_rejected_with_one_clear_line() {
     let good = fetch_tea();
-    let cases: [(&str, &str, &[&str]); 16] = [
+    let cases: [(&str, &str, &[&str]); 19] = [
         (
             r#""pre": ["door_open", "at_door"]"#,
             r#""pre": ["door_opened", "at_door"]"#,
@@ -141,6 +141,26 @@ fn bad_missions_are_rejected_with_one_clear_line() {
             r#""max_violation_ms": 60000"#,
             r#""max_violation_ms": "soon""#,
             &["actions[0].max_violation_ms", "wrong type"],
+        ),
+        // The simulated NAO samples its sonar on the scenario's period: a mission that says
+        // otherwise would be overridden, so it is refused.
+        (
+            r#""mode": "cyclic", "period_ms": 100, "timeout_ms": 50"#,
+            r#""mode": "one-shot", "timeout_ms": 50"#,
+            &["sensor `sonar` must be `cyclic`"],
+        ),
+        (
+            r#""mode": "cyclic", "period_ms": 100"#,
+            r#""mode": "on-demand", "period_ms": 100"#,
+            &["sensors[0].period_ms", "only for a `cyclic` sensor"],
+        ),
+        (
+            r#""name": "sonar""#,
+            r#""name": "so\\nar""#,
+            &[
+                "sensors[0].name",
+                "escape sequences are not allowed in names",
+            ],
         ),
     ];
     for (i, (from, to, expected)) in cases.iter().enumerate() {
@@ -249,6 +269,26 @@ fn per_action_tolerance_and_negative_context_are_shown() {
         text.contains("failure → failed, max_violation 0 ms"),
         "{text}"
     );
+}
+
+/// `--platform nao` finds what `run` would: a mission without a fact the robot's sensors
+/// decide is refused, though any robot's mission may lack it.
+#[test]
+fn the_nao_platform_needs_the_facts_its_sensors_decide() {
+    let path = file(
+        "no-path-clear.json",
+        &fetch_tea().replace("path_clear", "way_clear"),
+    );
+    let out = bin().arg("check").arg(&path).output().unwrap();
+    assert_success(&out);
+    let out = bin()
+        .args(["check", "--platform", "nao"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(stderr.contains("no fact `path_clear`"), "{stderr}");
 }
 
 /// Another robot's mission checks by default; `--platform nao` asks for the NAO's behaviours.

@@ -237,6 +237,54 @@ fn a_failing_output_leaves_every_other_file_as_it_was() {
     assert_refused(&out, &["left.csv", "not a folder"]);
 }
 
+/// A report that cannot be printed fails the command, and a failed command writes no file: the
+/// run's trace and `check`'s graph are put in place only once standard output took the report.
+#[test]
+fn a_full_standard_output_leaves_every_file_as_it_was() {
+    let dir = folder("fullout");
+    std::fs::write(dir.join("t.csv"), "keep").unwrap();
+    let full = || {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap()
+    };
+    let out = psmpa(sonar8())
+        .current_dir(&dir)
+        .args(["--trace", "t.csv"])
+        .stdout(full())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let kept = std::fs::read_to_string(dir.join("t.csv")).unwrap() == "keep";
+    assert!(
+        kept,
+        "t.csv was replaced by the trace of a run whose report failed"
+    );
+    let out = bin()
+        .current_dir(&dir)
+        .arg("check")
+        .arg(repo("missions/fetch-tea.json"))
+        .args(["--dot", "g.dot"])
+        .stdout(full())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("wrote"), "{stderr}");
+    assert_eq!(names_in(&dir), ["t.csv"], "no graph, no temporary file");
+    // With room to print, both are written.
+    let out = bin()
+        .current_dir(&dir)
+        .arg("check")
+        .arg(repo("missions/fetch-tea.json"))
+        .args(["--dot", "g.dot"])
+        .output()
+        .unwrap();
+    assert_success(&out);
+    assert_eq!(names_in(&dir), ["g.dot", "t.csv"]);
+}
+
 #[test]
 fn outputs_appear_complete_and_a_device_takes_them_in_place() {
     let dir = folder("complete");

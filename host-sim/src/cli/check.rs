@@ -10,7 +10,7 @@ use psmpa_core::planner::{Planner, PlanningError, Strategy};
 use psmpa_core::{Fsm, Mission, PlanId, SensorSet, Target};
 
 use crate::json;
-use crate::robot::NaoRegistry;
+use crate::robot::{self, NaoAction, NaoRegistry, NaoSensor};
 
 /// Capacities used when the mission is checked without this robot: the largest the core
 /// supports in a fact set, a sensor set and a plan set.
@@ -282,6 +282,11 @@ pub fn check_bytes(
     if any_platform {
         with(file, &doc, &AnyBehaviour, true)
     } else {
+        // What the simulated robot needs besides its behaviours' names, as `run` would find.
+        let loaded: mission::Loaded<'_, NaoSensor, NaoAction, 4, 8, 4, 6> =
+            mission::load(&doc, &NaoRegistry).map_err(|e| error_line(file, &e))?;
+        robot::requirements(&loaded.mission.domain, &loaded.bindings)
+            .map_err(|e| format!("{}: {}", file.display(), json::printable(&e.to_string())))?;
         with(file, &doc, &NaoRegistry, false)
     }
 }

@@ -319,6 +319,27 @@ pub fn commit_all(outputs: impl IntoIterator<Item = Output>) -> Result<(), Strin
     Ok(())
 }
 
+/// Prints `bytes` to standard output, then puts `outputs` in place: a command's files are
+/// written only when its report could be. Every output is flushed first (a full disk fails
+/// before anything is printed); when standard output fails (`>/dev/full`) the outputs are
+/// dropped, their targets left as they were. A reader that went away (`| head`) is not a
+/// failure: the files are still put in place.
+pub fn print_and_commit(
+    bytes: &[u8],
+    outputs: impl IntoIterator<Item = Output>,
+) -> Result<(), Stop> {
+    let mut outputs: Vec<Output> = outputs.into_iter().collect();
+    for o in &mut outputs {
+        o.finish().map_err(Stop::Bad)?;
+    }
+    let printed = print(bytes);
+    if let Err(Stop::Bad(_)) = printed {
+        return printed;
+    }
+    commit_all(outputs).map_err(Stop::Bad)?;
+    printed
+}
+
 /// The file a path names: symbolic links and `..` resolved where the file or its folder
 /// exists, so two spellings of one file compare equal.
 fn identity(path: &Path) -> PathBuf {
