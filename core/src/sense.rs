@@ -574,6 +574,17 @@ fn check_changed<const NS: usize, const NA: usize, const W: usize, const NF: usi
     action: ActionId,
     missing: FactSetOf<W>,
 ) -> Option<Change<W>> {
+    // A fact a running sensor perceives counts once a sensor perceiving it has sampled under
+    // this command: until then its belief is the last state's, not this state's evidence (a
+    // fast sensor's first sample must not fail the action on a fact a slower one has yet to
+    // read).
+    let running = s.running.get();
+    let sampled = running.intersection(s.fresh.get());
+    let waiting = running.intersection(SensorSet::from_bits(!sampled.bits()));
+    let unread = domain
+        .perception_of(waiting)
+        .difference(domain.perception_of(sampled));
+    let missing = missing.difference(unread);
     let before = s.violation.get();
     let after = match (missing.is_empty(), before) {
         (true, None) => return None,

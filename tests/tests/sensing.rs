@@ -93,6 +93,61 @@ fn two_states(park: bool) -> (Pair, Ids) {
     (mission, Ids { tof, cliff })
 }
 
+/// A plan of two states: "prepare" (no sensor) makes `z` hold, which the ranger needs to be
+/// switched on; "drive" needs `x` (the cliff sensor's) and `y` (the ranger's). The ranger has
+/// never sampled before "drive", so nothing says `y` holds until its first read ends.
+fn slow_fact() -> Pair {
+    let mut d: Domain<'static, 2, 2> = Domain::new();
+    let [x, y, z, done] = ["x", "y", "z", "done"].map(|f| d.add_fact(f).unwrap());
+    let go = d.add_event("go").unwrap();
+    let cyclic = |period| SensorMode::Cyclic { period };
+    d.add_sensor(
+        SensorAction::new("tof", FactSet::single(y), cyclic(TOF_PERIOD))
+            .with_pre(FactSet::single(z))
+            .with_timeout(Duration::from_millis(500)),
+    )
+    .unwrap();
+    d.add_sensor(SensorAction::new(
+        "cliff",
+        FactSet::single(x),
+        cyclic(CLIFF_PERIOD),
+    ))
+    .unwrap();
+    let prepare = d
+        .add_action(ActuatorAction::new(
+            "prepare",
+            FactSet::EMPTY,
+            FactSet::single(z),
+            FactSet::EMPTY,
+        ))
+        .unwrap();
+    let drive = d
+        .add_action(
+            ActuatorAction::new(
+                "drive",
+                FactSet::single(x).with(y),
+                FactSet::single(done),
+                FactSet::EMPTY,
+            )
+            .with_max_violation(Duration::from_ticks(0)),
+        )
+        .unwrap();
+    let mut library: PlanLibrary<'static, 1, 2> = PlanLibrary::new();
+    library
+        .add(Plan::new("drive", go, FactSet::EMPTY, &[prepare, drive]).unwrap())
+        .unwrap();
+    Mission {
+        name: "slow fact",
+        domain: d,
+        library,
+        task: Task {
+            event: go,
+            init: FactSet::EMPTY,
+            goal: FactSet::single(done),
+        },
+    }
+}
+
 /// One read: which sensor, when it started, when it ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Read {
@@ -234,6 +289,20 @@ fn grid(from: Instant, step: u64, to: Instant) -> Vec<u64> {
     (from.as_millis()..=to.as_millis())
         .step_by(step as usize)
         .collect()
+}
+
+/// A state's precondition is judged on that state's samples: the cliff sensor's first sample
+/// does not make "drive" violated on `y`, which only the ranger (30 ms a read) decides and has
+/// not read yet; the drive, which tolerates no violation, runs to its end.
+#[test]
+fn a_fast_sensor_does_not_violate_a_fact_a_slower_one_has_yet_to_read() {
+    let robot = Robot::new(30, 200);
+    let (trace, _) = run_mission(&robot, slow_fact());
+    let violations: Vec<_> = trace
+        .iter()
+        .filter(|(_, e)| matches!(e, TraceEvent::PreconditionViolated { .. }))
+        .collect();
+    assert!(violations.is_empty(), "{violations:?}");
 }
 
 #[test]
