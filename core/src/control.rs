@@ -72,6 +72,9 @@ pub enum ControlError<const W: usize = 1> {
         failed: PlanSet,
         /// The beliefs.
         beliefs: FactSetOf<W>,
+        /// The sensors out of service ([`Engine::faulty_sensors`]): a plan that failed on a
+        /// sensor fault says so here.
+        faulty: SensorSet,
     },
     /// More plans failed than [`Config::max_failures`](crate::exec::Config::max_failures).
     TooManyFailures {
@@ -97,6 +100,9 @@ pub enum ControlError<const W: usize = 1> {
     Planning {
         /// Why.
         error: PlanningError,
+        /// The sensors out of service: the planner leaves out every action they would
+        /// monitor.
+        faulty: SensorSet,
     },
     /// The initial model could not be established (a sensor fault, a full store).
     InitialModel {
@@ -275,6 +281,7 @@ impl<
                 event: task.event,
                 failed: excluded,
                 beliefs,
+                faulty: out_of_service,
             }
         })
     }
@@ -292,7 +299,10 @@ impl<
         let slice = u32::from(self.config.plan_slice.max(1));
         let found: Found<L> = loop {
             if let Some(result) = planner.step(&actions, slice) {
-                break result.map_err(|error| ControlError::Planning { error })?;
+                break result.map_err(|error| ControlError::Planning {
+                    error,
+                    faulty: self.faulty_sensors(),
+                })?;
             }
             // Let sensing, and everything else ready, run between two slices.
             yield_now().await;

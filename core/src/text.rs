@@ -13,11 +13,12 @@
 use core::fmt;
 
 use crate::action::SensorSet;
+use crate::control::ControlError;
 use crate::domain::Domain;
 use crate::exec::Failure;
 use crate::facts::FactSetOf;
 use crate::mission::Mission;
-use crate::plan::PlanId;
+use crate::plan::{PlanId, PlanSet};
 use crate::trace::TraceEvent;
 
 /// A fact set printed with its facts' names ([`Domain::names`]); `Debug` prints the same.
@@ -109,6 +110,18 @@ impl<
         }
     }
 
+    /// Why the control loop stopped, in words, with this mission's names: "no plan for
+    /// fetch_tea could start: passed over GetIn Kitchen; known false {path_clear}".
+    pub fn describe_error(
+        &self,
+        error: ControlError<W>,
+    ) -> Described<'_, 'a, ControlError<W>, NS, NA, NP, L, W, NF> {
+        Described {
+            mission: self,
+            what: error,
+        }
+    }
+
     /// A failure in words, with this mission's names.
     pub fn describe_failure(
         &self,
@@ -151,6 +164,19 @@ impl<
     }
     fn plan(&self, p: PlanId) -> &'a str {
         self.0.library.get(p).map_or("generated plan", |p| p.name)
+    }
+    fn event(&self, e: crate::EventId) -> &'a str {
+        self.0.domain.event_name(e).unwrap_or("?")
+    }
+    fn plans(&self, f: &mut fmt::Formatter<'_>, set: PlanSet) -> fmt::Result {
+        let ids = (0..32).filter_map(PlanId::new).filter(|p| set.contains(*p));
+        for (i, p) in ids.enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            f.write_str(self.plan(p))?;
+        }
+        Ok(())
     }
     fn sensors(&self, f: &mut fmt::Formatter<'_>, set: SensorSet) -> fmt::Result {
         f.write_str("[")?;
@@ -202,6 +228,100 @@ impl<
             Failure::StoreFull { key } => write!(f, "a data store is full (key {})", key.0),
             Failure::InvalidFsm { state } => write!(f, "the FSM has no state {state}"),
             Failure::SensingStalled => f.write_str("the sensing side does not run"),
+        }
+    }
+}
+
+/// "; sensors out of service [sonar]" when any is.
+fn out_of_service<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>(
+    n: &Names<'_, '_, NS, NA, NP, L, W, NF>,
+    f: &mut fmt::Formatter<'_>,
+    faulty: SensorSet,
+) -> fmt::Result {
+    if faulty.is_empty() {
+        return Ok(());
+    }
+    f.write_str("; sensors out of service ")?;
+    n.sensors(f, faulty)
+}
+
+impl<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+> fmt::Display for Described<'_, '_, ControlError<W>, NS, NA, NP, L, W, NF>
+{
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use ControlError as E;
+        let n = Names(self.mission);
+        let facts = |set| self.mission.domain.names(set);
+        match self.what {
+            E::NoApplicablePlan { event, beliefs } => write!(
+                f,
+                "no plan applies to {} under {}",
+                n.event(event),
+                facts(beliefs)
+            ),
+            E::Inapplicable {
+                event,
+                skipped,
+                known_false,
+                unknown,
+                faulty,
+            } => {
+                write!(
+                    f,
+                    "no plan for {} could start: passed over ",
+                    n.event(event)
+                )?;
+                n.plans(f, skipped)?;
+                if !known_false.is_empty() {
+                    write!(f, "; known false {}", facts(known_false))?;
+                }
+                if !unknown.is_empty() {
+                    write!(f, "; never sensed {}", facts(unknown))?;
+                }
+                out_of_service(&n, f, faulty)
+            }
+            E::Exhausted {
+                event,
+                failed,
+                beliefs,
+                faulty,
+            } => {
+                write!(f, "every plan for {} failed: ", n.event(event))?;
+                n.plans(f, failed)?;
+                write!(f, " (beliefs {})", facts(beliefs))?;
+                out_of_service(&n, f, faulty)
+            }
+            E::TooManyFailures { failures, last } => write!(
+                f,
+                "{failures} plans failed, the last: {}",
+                self.mission.describe_failure(last)
+            ),
+            E::PlanLimit { plans } => write!(f, "{plans} plans ran without reaching the goal"),
+            E::Compile { plan, error } => {
+                write!(f, "plan {} does not compile: {error:?}", n.plan(plan))
+            }
+            E::Planning { error, faulty } => {
+                write!(f, "no library plan could run, and the planner: {error:?}")?;
+                out_of_service(&n, f, faulty)
+            }
+            E::InitialModel { failure } => write!(
+                f,
+                "the initial model could not be established: {}",
+                self.mission.describe_failure(failure)
+            ),
         }
     }
 }

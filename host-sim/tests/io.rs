@@ -528,3 +528,20 @@ fn each_file_written_is_named_once_on_stderr() {
     );
     assert!(trace.is_file() && plot.is_file());
 }
+
+/// A run that ends in an error says why in the mission's words, not as a debug dump of ids.
+#[test]
+fn a_run_that_gives_up_says_why_in_words() {
+    let path = file(
+        "dead-sonar.json",
+        r#"{"name":"dead","fault":{"kind":"silent","at_s":3.0},"interferences":[]}"#,
+    );
+    let out = psmpa(&path).output().unwrap();
+    assert_success(&out);
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        stdout.contains("; sensors out of service [sonar]"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("PlanSet"), "{stdout}");
+}

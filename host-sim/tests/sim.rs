@@ -796,11 +796,13 @@ fn assert_fails_safe(rec: &psmpa_sim::sim::Recorded, expected: psmpa_core::Senso
             .any(|(t, _, e)| *t == detected.0 && *e == WorldEvent::Stop)
     );
     assert_eq!(rec.summary.tally.collisions, 0);
-    // Without a working sonar no plan can monitor path_clear: a clear error, not a hang.
+    // Without a working sonar no plan can monitor path_clear: a clear error, not a hang, and
+    // it names the sensor out of service.
     assert!(
         matches!(
             rec.summary.ending,
-            Ending::Error(psmpa_core::ControlError::Planning { .. })
+            Ending::Error(psmpa_core::ControlError::Planning { faulty, .. })
+                if faulty.bits() != 0
         ),
         "{:?}",
         rec.summary.ending

@@ -29,6 +29,10 @@ impl Actuator for Robot {
         Timer::after(Duration::from_secs(2)).await; // drive for 2 s
         Outcome::Success
     }
+    fn halt(&self, _: ActionId) {
+        // The runtime cancelled the drive (a sensor failed, the way stayed blocked): a real
+        // robot stops its motors here; the default does nothing.
+    }
 }
 
 impl Platform for Robot {

@@ -419,6 +419,12 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     .unwrap()
     .output;
     // The planner finds nothing either; the error keeps the library's reason, the camera.
+    if let Err(e) = planned {
+        assert_eq!(
+            mission.describe_error(e).to_string(),
+            "no plan for get_in could start: passed over first, second; sensors out of service [camera]"
+        );
+    }
     assert!(
         matches!(
             planned,
@@ -764,13 +770,21 @@ fn a_plan_known_to_be_inapplicable_is_skipped() {
     let r = run_mission(&mission, ids, &[(0, 60_000)]);
     let clear = psmpa_core::FactSet::single(psmpa_core::FactId::new(0).unwrap());
     match r.result {
-        Err(ControlError::Inapplicable {
-            skipped,
-            known_false,
-            ..
-        }) => {
+        Err(
+            e @ ControlError::Inapplicable {
+                skipped,
+                known_false,
+                ..
+            },
+        ) => {
             assert_eq!(skipped.bits(), 0b11, "both plans passed over");
             assert_eq!(known_false, clear);
+            // In words, with the mission's names.
+            assert_eq!(
+                mission.describe_error(e).to_string(),
+                "no plan for get_in could start: passed over stumble-first, get-in; \
+                 known false {path_clear}"
+            );
         }
         other => panic!("expected Inapplicable, got {other:?}"),
     }

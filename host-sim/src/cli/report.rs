@@ -106,8 +106,8 @@ pub fn arch_title(arch: Arch) -> &'static str {
     }
 }
 
-/// How the run ended, in words.
-pub fn ending(e: &Ending) -> String {
+/// How the run of `scenario` ended, in words (the mission's names, not indices).
+pub fn ending(e: &Ending, scenario: &Scenario) -> String {
     match e {
         Ending::Goal(r) => format!(
             "goal reached: in the kitchen ({} plan{} started, {} failed)",
@@ -115,7 +115,13 @@ pub fn ending(e: &Ending) -> String {
             if r.plans_started == 1 { "" } else { "s" },
             r.plans_failed
         ),
-        Ending::Error(e) => format!("the control loop gave up: {e:?}"),
+        Ending::Error(e) => match crate::robot::fetch_tea(scenario) {
+            Ok(robot) => format!(
+                "the control loop gave up: {}",
+                robot.mission.describe_error(*e)
+            ),
+            Err(_) => format!("the control loop gave up: {e:?}"),
+        },
         Ending::TimeLimit => "stopped at max_s".to_owned(),
     }
 }
@@ -166,7 +172,11 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
         gap(j.sample_gap_max_ms.sonar),
         gap(j.sample_gap_max_ms.bumper)
     );
-    let _ = writeln!(out, "  outcome          {}", ending(&summary.ending));
+    let _ = writeln!(
+        out,
+        "  outcome          {}",
+        ending(&summary.ending, scenario)
+    );
     let _ = writeln!(out, "  trace hash       {}", j.trace_hash);
     for (i, (item, report)) in scenario
         .interferences
