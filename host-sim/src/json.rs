@@ -355,18 +355,33 @@ fn position(bytes: &[u8], i: usize) -> (usize, usize) {
 
 /// `text` with every control character written as a JSON escape: safe on a terminal, one line.
 pub fn printable(text: &str) -> Cow<'_, str> {
-    if !text.chars().any(char::is_control) {
+    if !text.chars().any(hidden) {
         return Cow::Borrowed(text);
     }
     let mut out = String::with_capacity(text.len() + 8);
     for c in text.chars() {
-        if c.is_control() {
+        if hidden(c) {
             out.push_str(&format!("\\u{:04x}", u32::from(c)));
         } else {
             out.push(c);
         }
     }
     Cow::Owned(out)
+}
+
+/// A character a terminal would act on or not show: a control character, or an invisible
+/// format character (zero-width spaces and joiners, bidirectional overrides and isolates, the
+/// byte order mark), which can make a name read as another.
+fn hidden(c: char) -> bool {
+    c.is_control()
+        || matches!(
+            c,
+            '\u{200B}'..='\u{200F}'
+                | '\u{202A}'..='\u{202E}'
+                | '\u{2060}'..='\u{2064}'
+                | '\u{2066}'..='\u{2069}'
+                | '\u{FEFF}'
+        )
 }
 
 /// Decodes the `\u` escapes of valid JSON that stand for ordinary characters.
@@ -449,6 +464,16 @@ mod tests {
             "{line}"
         );
         e
+    }
+
+    /// Control characters and invisible format characters are shown escaped; other text,
+    /// accents included, as it is.
+    #[test]
+    fn printable_escapes_what_a_terminal_would_hide_or_act_on() {
+        assert_eq!(printable("café"), "café");
+        assert_eq!(printable("a\u{1b}[31mb"), "a\\u001b[31mb");
+        assert_eq!(printable("abc\u{202e}fed"), "abc\\u202efed");
+        assert_eq!(printable("go\u{200b}door"), "go\\u200bdoor");
     }
 
     #[test]

@@ -310,3 +310,20 @@ fn any_robots_mission_checks_by_default() {
     let stderr = String::from_utf8(out.stderr).unwrap();
     assert!(stderr.contains("no behaviour called `tof`"), "{stderr}");
 }
+
+/// A task whose goal holds at the start: the planner's line says so, not an empty plan.
+#[test]
+fn a_goal_that_already_holds_is_said_in_words() {
+    let mission = r#"{"name": "m", "facts": ["a"], "events": ["go"], "sensors": [],
+        "actions": [{"name": "x", "add": ["a"]}],
+        "plans": [{"name": "p", "trigger": "go", "body": ["x"]}],
+        "task": {"event": "go", "init": ["a"], "goal": ["a"]}}"#;
+    let path = file("goal-holds.json", mission);
+    let out = bin().arg("check").arg(&path).output().unwrap();
+    assert_success(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("every percept holding: the goal already holds"),
+        "{text}"
+    );
+}

@@ -172,13 +172,20 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
                 .iter()
                 .filter_map(|a| d.action(*a).map(|a| a.name))
                 .collect();
-            let _ = writeln!(
-                out,
-                "\nplanner, from the initial state with every percept holding: {} ({} actions, {} nodes expanded)",
-                steps.join(" → "),
-                steps.len(),
-                found.expanded
-            );
+            let _ = if steps.is_empty() {
+                writeln!(
+                    out,
+                    "\nplanner, from the initial state with every percept holding: the goal already holds"
+                )
+            } else {
+                writeln!(
+                    out,
+                    "\nplanner, from the initial state with every percept holding: {} ({} actions, {} nodes expanded)",
+                    steps.join(" → "),
+                    steps.len(),
+                    found.expanded
+                )
+            };
         }
         Err(e) => {
             let why = match e {
