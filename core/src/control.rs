@@ -47,7 +47,8 @@ pub enum ControlError<const W: usize = 1> {
         /// The beliefs.
         beliefs: FactSetOf<W>,
     },
-    /// Every plan applicable to the event was passed over, and none was started: its first
+    /// Every plan applicable to the event (and not already failed under these beliefs) was
+    /// passed over, and none was started: its first
     /// action needs a fact a percept has already shown false and has no tolerance of its own
     /// to wait with ([`ActuatorAction::may_start_violated`]), or its `context_not` needs a
     /// fact false that no sample has shown yet, or one of its actions needs a sensor out of
@@ -128,6 +129,8 @@ impl<
     /// whose `pre(s)` holds is switched on, sampled once and switched off again, all at once.
     pub async fn establish_initial_model(&self) -> Result<FactSetOf<W>, ControlError<W>> {
         let init = self.mission.task.init;
+        // A new model: what earlier runs sensed is not known now.
+        self.shared.lock(|s| s.sensed.set(FactSetOf::EMPTY));
         self.set_beliefs(init);
         let faulty = self.faulty_sensors();
         let eligible: SensorSet = self
@@ -342,11 +345,13 @@ impl<
                 Err(no_plan) if G::PLANS && generated_failed != Some(beliefs) => {
                     match self.generate(&mut planner, beliefs).await {
                         Ok(body) => (PlanId::GENERATED, body),
-                        // The planner found nothing either: plans passed over, and why, say
-                        // more than "unsolvable" does.
-                        Err(ControlError::Planning { .. })
-                            if matches!(no_plan, ControlError::Inapplicable { .. }) =>
-                        {
+                        // The planner proved there is no plan either: plans passed over, and
+                        // why, say more than "unsolvable" does. (A search out of budget says
+                        // so itself: a larger budget may find one.)
+                        Err(ControlError::Planning {
+                            error: PlanningError::Unsolvable { .. },
+                            ..
+                        }) if matches!(no_plan, ControlError::Inapplicable { .. }) => {
                             return Err(no_plan);
                         }
                         Err(error) => return Err(error),

@@ -588,14 +588,16 @@ impl<
         self.shared.lock(|s| s.beliefs.get())
     }
 
-    /// Percept facts a sample has shown to be false (facts never sensed are unknown, not false).
+    /// Percept facts a sample (or an action's effects) has shown to be false: facts never
+    /// sensed are unknown, not false.
     pub fn known_false(&self) -> FactSetOf<W> {
         self.shared
             .lock(|s| s.sensed.get().difference(s.beliefs.get()))
     }
 
-    /// Percept facts neither believed nor shown by any sample yet: a sensor perceives them,
-    /// and nothing says whether they hold. (A fact no sensor perceives follows the model.)
+    /// Percept facts neither believed nor shown by any sample or action's effects since the
+    /// initial model: a sensor perceives them, and nothing says whether they hold. (A fact no
+    /// sensor perceives follows the model.)
     pub fn unknown_facts(&self) -> FactSetOf<W> {
         let perceivable = (self.mission.domain.sensors().iter())
             .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per));
@@ -920,6 +922,10 @@ impl<
         if result.is_ok() {
             if let Some(spec) = self.mission.domain.action(action) {
                 let beliefs = self.beliefs().apply(spec.add, spec.del);
+                // The effects are known, as a sample's percepts are: a percept fact an action
+                // deleted is known false, not unknown.
+                self.shared
+                    .lock(|s| s.sensed.set(s.sensed.get().union(spec.add).union(spec.del)));
                 self.set_beliefs(beliefs);
                 self.trace(TraceEvent::EffectsApplied { action, beliefs });
             }

@@ -574,16 +574,18 @@ fn check_changed<const NS: usize, const NA: usize, const W: usize, const NF: usi
     action: ActionId,
     missing: FactSetOf<W>,
 ) -> Option<Change<W>> {
-    // A fact a running sensor perceives counts once a sensor perceiving it has sampled under
-    // this command: until then its belief is the last state's, not this state's evidence (a
-    // fast sensor's first sample must not fail the action on a fact a slower one has yet to
-    // read).
+    // A fact a running sensor perceives counts once a sensor perceiving it has delivered under
+    // this command or is ready (it has attempted the samples due at the command's start, or has
+    // none due): until then its belief is the last state's, not this state's evidence, and a
+    // fast sensor's first sample must not fail the action on a fact a slower one is still
+    // reading. Only until then: a sample lost, or none due (a one-shot sensor in a later SMPA
+    // phase, an on-demand one not asked), leaves the belief to count as before.
     let running = s.running.get();
-    let sampled = running.intersection(s.fresh.get());
-    let waiting = running.intersection(SensorSet::from_bits(!sampled.bits()));
+    let ready = running.intersection(s.ready.get().union(s.fresh.get()));
+    let waiting = running.intersection(SensorSet::from_bits(!ready.bits()));
     let unread = domain
         .perception_of(waiting)
-        .difference(domain.perception_of(sampled));
+        .difference(domain.perception_of(ready));
     let missing = missing.difference(unread);
     let before = s.violation.get();
     let after = match (missing.is_empty(), before) {

@@ -370,17 +370,29 @@ pub fn printable(text: &str) -> Cow<'_, str> {
 }
 
 /// A character a terminal would act on or not show: a control character, or an invisible
-/// format character (zero-width spaces and joiners, bidirectional overrides and isolates, the
-/// byte order mark), which can make a name read as another.
+/// format or filler character (soft hyphen, zero-width spaces and joiners, bidirectional marks,
+/// overrides and isolates, line and paragraph separators, variation selectors, tags, Hangul
+/// fillers, the byte order mark), which can make a name read as another.
 fn hidden(c: char) -> bool {
     c.is_control()
         || matches!(
             c,
-            '\u{200B}'..='\u{200F}'
-                | '\u{202A}'..='\u{202E}'
-                | '\u{2060}'..='\u{2064}'
-                | '\u{2066}'..='\u{2069}'
+            '\u{00AD}'
+                | '\u{034F}'
+                | '\u{061C}'
+                | '\u{115F}'..='\u{1160}'
+                | '\u{17B4}'..='\u{17B5}'
+                | '\u{180B}'..='\u{180F}'
+                | '\u{200B}'..='\u{200F}'
+                | '\u{2028}'..='\u{202E}'
+                | '\u{2060}'..='\u{206F}'
+                | '\u{3164}'
+                | '\u{FE00}'..='\u{FE0F}'
                 | '\u{FEFF}'
+                | '\u{FFA0}'
+                | '\u{FFF9}'..='\u{FFFB}'
+                | '\u{1D173}'..='\u{1D17A}'
+                | '\u{E0000}'..='\u{E0FFF}'
         )
 }
 
@@ -474,6 +486,8 @@ mod tests {
         assert_eq!(printable("a\u{1b}[31mb"), "a\\u001b[31mb");
         assert_eq!(printable("abc\u{202e}fed"), "abc\\u202efed");
         assert_eq!(printable("go\u{200b}door"), "go\\u200bdoor");
+        assert_eq!(printable("door\u{ad}"), "door\\u00ad");
+        assert_eq!(printable("a\u{e0041}"), "a\\ue0041");
     }
 
     #[test]

@@ -148,6 +148,12 @@ pub struct TinyWorld {
     obstacles: Vec<(Instant, Instant)>,
     /// When false the camera never answers a sample.
     pub camera_answers: core::cell::Cell<bool>,
+    /// When true the camera answers without a frame: the sample is lost.
+    pub camera_loses: core::cell::Cell<bool>,
+    /// What the camera sees: whether the handle is in view.
+    pub handle_visible: core::cell::Cell<bool>,
+    /// How long "open" works, ms.
+    pub open_ms: core::cell::Cell<u64>,
     state: RefCell<State>,
 }
 
@@ -161,6 +167,9 @@ impl TinyWorld {
                 .map(|&(a, b)| (Instant::from_millis(a), Instant::from_millis(b)))
                 .collect(),
             camera_answers: core::cell::Cell::new(true),
+            camera_loses: core::cell::Cell::new(false),
+            handle_visible: core::cell::Cell::new(true),
+            open_ms: core::cell::Cell::new(500),
             state: RefCell::new(State::default()),
         }
     }
@@ -255,9 +264,17 @@ impl Sensor for TinyWorld {
             if !self.camera_answers.get() {
                 core::future::pending::<()>().await;
             }
+            if self.camera_loses.get() {
+                return Ok(None);
+            }
+            let seen = self.handle_visible.get();
             Ok(Some(Reading::new(
-                Value::Bool(true),
-                FactSet::single(psmpa_core::FactId::new(2).unwrap()),
+                Value::Bool(seen),
+                if seen {
+                    FactSet::single(psmpa_core::FactId::new(2).unwrap())
+                } else {
+                    FactSet::EMPTY
+                },
             )))
         }
     }
@@ -272,7 +289,7 @@ impl Actuator for TinyWorld {
         if action == self.ids.walk || action == self.ids.stumble {
             self.walk(io, action == self.ids.stumble).await
         } else {
-            Timer::after_millis(500).await;
+            Timer::after_millis(self.open_ms.get()).await;
             Outcome::Success
         }
     }

@@ -491,6 +491,66 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     assert_eq!(repaired.unwrap().plans_failed, 0);
 }
 
+/// The precondition of "open" on the camera's percept, with the camera's frame `lost` or
+/// showing no handle, under `policy`, "open" working `open_ms`: the trace.
+fn open_with_camera(policy: Policy, lost: bool, open_ms: u64) -> Vec<(Instant, TraceEvent)> {
+    let (mission, ids) = tiny::mission(false);
+    let world = TinyWorld::new(ids, &[]);
+    world.camera_loses.set(lost);
+    world.handle_visible.set(false);
+    world.open_ms.set(open_ms);
+    run_on(&mission, &world, policy).trace
+}
+
+/// Whether "open" was traced violated on `handle_seen`, and whether it was traced restored.
+fn open_violated(trace: &[(Instant, TraceEvent)]) -> (bool, bool) {
+    let open = tiny::mission(false).1.open;
+    let handle = psmpa_core::FactSet::single(psmpa_core::FactId::new(2).unwrap());
+    let violated = trace.iter().any(|(_, e)| {
+        matches!(e, TraceEvent::PreconditionViolated { action, missing }
+            if *action == open && missing.intersects(handle))
+    });
+    let restored = trace
+        .iter()
+        .any(|(_, e)| matches!(e, TraceEvent::PreconditionRestored { action } if *action == open));
+    (violated, restored)
+}
+
+/// A one-shot camera whose only frame is lost leaves `handle_seen` unshown: "open" runs with
+/// its precondition violated, and the trace says so (a lost sample hides nothing).
+#[test]
+fn a_lost_one_shot_sample_leaves_the_precondition_violated() {
+    let trace = open_with_camera(Policy::PSmpa, true, 500);
+    assert!(
+        trace
+            .iter()
+            .any(|(_, e)| matches!(e, TraceEvent::SampleLost { .. })),
+        "the camera's frame was lost"
+    );
+    assert_eq!(open_violated(&trace), (true, false));
+}
+
+/// Under SMPA a one-shot camera samples in the first sense phase only: its "no handle" stands
+/// in every later phase, and the violation is not cleared when a phase starts without a frame.
+#[test]
+fn under_smpa_a_one_shot_percept_stands_in_later_phases() {
+    let trace = open_with_camera(tiny::SMPA, false, 6_000);
+    let phases = trace
+        .iter()
+        .filter(|(_, e)| {
+            matches!(
+                e,
+                TraceEvent::PhaseStarted {
+                    phase: psmpa_core::Phase::Sense,
+                    ..
+                }
+            )
+        })
+        .count();
+    assert!(phases >= 3, "open spans several sense phases: {phases}");
+    assert_eq!(open_violated(&trace), (true, false));
+}
+
 /// A precondition that stays false longer than `max_violation` takes the failure edge.
 #[test]
 fn a_precondition_that_stays_violated_fails_the_state() {
@@ -760,6 +820,76 @@ fn a_negative_context_on_a_fact_never_sensed_does_not_apply() {
     assert!(selected_plans(&r.trace).is_empty());
 }
 
+/// What is known starts again with each run's initial model: the camera's "handle seen" of one
+/// run does not make a "no handle" plan's negative context hold in the next run, which has
+/// not looked yet. Both runs pass it over.
+#[test]
+fn a_new_run_does_not_know_what_an_earlier_run_sensed() {
+    let (mut mission, ids) = tiny::mission(false);
+    let event = mission.task.event;
+    let handle = psmpa_core::FactSet::single(psmpa_core::FactId::new(2).unwrap());
+    let mut library = psmpa_core::PlanLibrary::new();
+    let blind = psmpa_core::Plan::new("no handle", event, psmpa_core::FactSet::EMPTY, &[ids.walk]);
+    library
+        .add(blind.unwrap().with_context_not(handle))
+        .unwrap();
+    let get_in = psmpa_core::Plan::new(
+        "get-in",
+        event,
+        psmpa_core::FactSet::EMPTY,
+        &[ids.walk, ids.open],
+    );
+    library.add(get_in.unwrap()).unwrap();
+    mission.library = library;
+    let world = TinyWorld::new(ids, &[]);
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let (first, second) = simulate_split(
+        rt.sensing(),
+        async { (rt.run().await, rt.run().await) },
+        LIMIT,
+    )
+    .unwrap()
+    .output;
+    assert!(first.is_ok() && second.is_ok(), "{first:?} {second:?}");
+    assert_eq!(selected_plans(&rt.into_sink().0), [1, 1]);
+}
+
+/// An action's effects are known as a percept is: a fact a sensor perceives, deleted by an
+/// action, is known false, and a plan that needs it false applies.
+#[test]
+fn a_percept_fact_an_action_deleted_is_known_false() {
+    let (mut mission, ids) = tiny::mission(false);
+    let event = mission.task.event;
+    let handle = psmpa_core::FactSet::single(psmpa_core::FactId::new(2).unwrap());
+    let drop = mission
+        .domain
+        .add_action(psmpa_core::ActuatorAction::new(
+            "forget the handle",
+            psmpa_core::FactSet::EMPTY,
+            psmpa_core::FactSet::EMPTY,
+            handle,
+        ))
+        .unwrap();
+    mission.task.init = handle;
+    let mut library = psmpa_core::PlanLibrary::new();
+    library
+        .add(psmpa_core::Plan::new("forget", event, handle, &[drop]).unwrap())
+        .unwrap();
+    let express = psmpa_core::Plan::new(
+        "express",
+        event,
+        psmpa_core::FactSet::EMPTY,
+        &[ids.walk, ids.open],
+    );
+    library
+        .add(express.unwrap().with_context_not(handle))
+        .unwrap();
+    mission.library = library;
+    let r = run_mission(&mission, ids, &[]);
+    assert!(r.result.is_ok(), "{:?}", r.result);
+    assert_eq!(selected_plans(&r.trace), [0, 1]);
+}
+
 /// A plan whose first action needs a fact a percept has already shown false is not started:
 /// the next applicable plan is tried, and when there is none, a clear error names the plans
 /// passed over and the facts known false. Nothing moved.
@@ -836,6 +966,37 @@ fn a_planner_that_finds_nothing_keeps_the_reason_plans_were_passed_over() {
         }
         other => panic!("expected Inapplicable, got {other:?}"),
     }
+    // A search that ran out of its budget proved nothing: it says so itself (a larger budget
+    // may find a plan). One more action gives the search somewhere to go.
+    let mut mission = mission;
+    let at_door = psmpa_core::FactSet::single(psmpa_core::FactId::new(1).unwrap());
+    mission
+        .domain
+        .add_action(psmpa_core::ActuatorAction::new(
+            "sidle to the door",
+            psmpa_core::FactSet::EMPTY,
+            at_door,
+            psmpa_core::FactSet::EMPTY,
+        ))
+        .unwrap();
+    let world = TinyWorld::new(ids, &[(0, 60_000)]);
+    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let mut small =
+        psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
+    small.budget = 1;
+    let out = simulate_split(rt.sensing(), rt.run_planning(&small, &mut space), LIMIT)
+        .unwrap()
+        .output;
+    assert!(
+        matches!(
+            out,
+            Err(ControlError::Planning {
+                error: psmpa_core::planner::PlanningError::Budget { .. },
+                ..
+            })
+        ),
+        "{out:?}"
+    );
 }
 
 /// An action with a tolerance of its own was written to ride a violation out: it is started

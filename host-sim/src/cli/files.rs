@@ -322,8 +322,9 @@ pub fn commit_all(outputs: impl IntoIterator<Item = Output>) -> Result<(), Strin
 /// Prints `bytes` to standard output, then puts `outputs` in place: a command's files are
 /// written only when its report could be. Every output is flushed first (a full disk fails
 /// before anything is printed); when standard output fails (`>/dev/full`) the outputs are
-/// dropped, their targets left as they were. A reader that went away (`| head`) is not a
-/// failure: the files are still put in place.
+/// dropped, their files left as they were (a device or pipe written in place has had its
+/// bytes already). A reader that went away (`| head`) is not a failure: the files are still
+/// put in place.
 pub fn print_and_commit(
     bytes: &[u8],
     outputs: impl IntoIterator<Item = Output>,
