@@ -225,9 +225,7 @@ impl<
         let library = &self.mission.library;
         let domain = &self.mission.domain;
         let excluded = memory.excluded(task.event, beliefs);
-        let known_false = self.known_false();
-        let unknown = self.unknown_facts();
-        let out_of_service = self.faulty_sensors();
+        let (known_false, unknown, out_of_service) = self.knowledge();
         let mut skipped = PlanSet::EMPTY;
         let mut why = (FactSetOf::EMPTY, FactSetOf::EMPTY, SensorSet::EMPTY);
         while let Some(id) = library.select(task.event, beliefs, excluded.union(skipped)) {

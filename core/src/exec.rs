@@ -605,6 +605,22 @@ impl<
             .lock(|s| perceivable.difference(s.sensed.get().union(s.beliefs.get())))
     }
 
+    /// [`known_false`](Self::known_false), [`unknown_facts`](Self::unknown_facts) and
+    /// [`faulty_sensors`](Self::faulty_sensors) in one lock.
+    pub(crate) fn knowledge(&self) -> (FactSetOf<W>, FactSetOf<W>, SensorSet) {
+        let perceivable = (self.mission.domain.sensors().iter()).fold(FactSetOf::EMPTY, |acc, s| {
+            acc.union(s.per)
+        });
+        self.shared.lock(|s| {
+            let (sensed, beliefs) = (s.sensed.get(), s.beliefs.get());
+            (
+                sensed.difference(beliefs),
+                perceivable.difference(sensed.union(beliefs)),
+                s.faulty.get(),
+            )
+        })
+    }
+
     pub(crate) fn set_beliefs(&self, beliefs: FactSetOf<W>) {
         self.shared.lock(|s| s.beliefs.set(beliefs));
         self.notify();
