@@ -608,9 +608,8 @@ impl<
     /// [`known_false`](Self::known_false), [`unknown_facts`](Self::unknown_facts) and
     /// [`faulty_sensors`](Self::faulty_sensors) in one lock.
     pub(crate) fn knowledge(&self) -> (FactSetOf<W>, FactSetOf<W>, SensorSet) {
-        let perceivable = (self.mission.domain.sensors().iter()).fold(FactSetOf::EMPTY, |acc, s| {
-            acc.union(s.per)
-        });
+        let perceivable = (self.mission.domain.sensors().iter())
+            .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per));
         self.shared.lock(|s| {
             let (sensed, beliefs) = (s.sensed.get(), s.beliefs.get());
             (
