@@ -51,7 +51,7 @@ pub use sim::{Completed, SimError, simulate, simulate_split};
 #[cfg(feature = "std")]
 mod record {
     use embassy_time::{Duration, Instant};
-    use psmpa_core::{TraceEvent, TraceSink};
+    use psmpa_core::{Failure, PlanId, TraceEvent, TraceSink};
 
     /// A trace sink that keeps every event with its instant (of a runtime whose fact sets have
     /// `W` words).
@@ -80,6 +80,57 @@ mod record {
         /// The instant of the first event `matching` picks.
         pub fn first(&self, matching: impl Fn(&TraceEvent<W>) -> bool) -> Option<Instant> {
             self.0.iter().find(|(_, e)| matching(e)).map(|(t, _)| *t)
+        }
+
+        /// The plans selected, in order ([`PlanId::GENERATED`] for a planner's).
+        pub fn plans_selected(&self) -> Vec<PlanId> {
+            self.0
+                .iter()
+                .filter_map(|(_, e)| match e {
+                    TraceEvent::PlanSelected { plan, .. } => Some(*plan),
+                    _ => None,
+                })
+                .collect()
+        }
+
+        /// Every plan that failed, when, and why.
+        pub fn plan_failures(&self) -> Vec<(Instant, PlanId, Failure<W>)> {
+            self.0
+                .iter()
+                .filter_map(|(t, e)| match e {
+                    TraceEvent::PlanFailed { plan, reason } => Some((*t, *plan, *reason)),
+                    _ => None,
+                })
+                .collect()
+        }
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+        use psmpa_core::{EventId, TraceSink};
+
+        #[test]
+        fn the_recorder_lists_the_plans_selected_and_those_that_failed() {
+            let mut r: Recorder = Recorder::default();
+            let (first, second) = (PlanId::new(0).unwrap(), PlanId::GENERATED);
+            let failed = Failure::SensingStalled;
+            let at = |ms| Instant::from_millis(ms);
+            let selected = |plan| TraceEvent::PlanSelected {
+                plan,
+                event: EventId::FIRST,
+            };
+            r.record(at(0), &selected(first));
+            r.record(
+                at(5),
+                &TraceEvent::PlanFailed {
+                    plan: first,
+                    reason: failed,
+                },
+            );
+            r.record(at(5), &selected(second));
+            assert_eq!(r.plans_selected(), [first, second]);
+            assert_eq!(r.plan_failures(), [(at(5), first, failed)]);
         }
     }
 

@@ -38,24 +38,13 @@ fn sensors(names: &[&str]) -> SensorSet {
         .collect()
 }
 
-fn plans(trace: &Recorder) -> Vec<PlanId> {
-    trace
-        .find(|e| matches!(e, TraceEvent::PlanSelected { .. }))
-        .into_iter()
-        .filter_map(|(_, e)| match e {
-            TraceEvent::PlanSelected { plan, .. } => Some(plan),
-            _ => None,
-        })
-        .collect()
-}
-
 #[test]
 fn docks_driving_with_a_good_battery_and_creeping_with_a_low_one() {
     for (battery, plan, mm_s) in [(90, 0, 300), (20, 1, 100)] {
         let yard = Yard::new().with_battery(battery);
         let (result, trace) = run(&yard);
         assert!(result.is_ok(), "{result:?}");
-        assert_eq!(plans(&trace), [PlanId::new(plan).unwrap()]);
+        assert_eq!(trace.plans_selected(), [PlanId::new(plan).unwrap()]);
         // The approach takes its distance at its speed; aligning 0.5 s, connecting 0.3 s.
         let goal = trace.first(|e| matches!(e, TraceEvent::GoalReached { .. }));
         let approach_ms = ((DOCK_MM - NEAR_MM) as u64 * 1_000).div_ceil(mm_s);
