@@ -285,3 +285,15 @@ impl Platform for Dock<'_> {
     // interrupt executor above deciding.
     type Mutex = NoopRawMutex;
 }
+
+/// Polls the runtime's two sides once each, sensing first, as an executor would: what a
+/// firmware's tasks do. A generic library built alone is only type-checked; this function is
+/// not generic, so building the crate for a microcontroller (`--target thumbv7em-none-eabihf`)
+/// compiles the whole runtime for this robot, its futures' code included. `true` once the
+/// mission has ended.
+pub fn poll_once(rt: &DockRuntime<'_>, cx: &mut core::task::Context<'_>) -> bool {
+    let sensing = core::pin::pin!(rt.sensing());
+    let _ = core::future::Future::poll(sensing, cx);
+    let run = core::pin::pin!(rt.run());
+    core::future::Future::poll(run, cx).is_ready()
+}
