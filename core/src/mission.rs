@@ -134,6 +134,30 @@ impl<S: Copy, A: Copy, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> 
     }
 }
 
+impl<S: Copy, A: Copy, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
+    /// The behaviours of a domain built in Rust, from `registry`: what [`load`] binds for a
+    /// mission file. `Err` names the first sensor or action the registry has no behaviour for.
+    /// O(NS + NA) registry lookups.
+    pub fn resolve<'a, R, const W: usize, const NF: usize>(
+        domain: &Domain<'a, NS, NA, W, NF>,
+        registry: &R,
+    ) -> Result<Self, &'a str>
+    where
+        R: Registry<Sensor = S, Action = A>,
+    {
+        let mut bound = Self::new();
+        for sensor in domain.sensors() {
+            let behaviour = registry.sensor(sensor.name).ok_or(sensor.name)?;
+            bound.sensors.push(behaviour).map_err(|_| sensor.name)?;
+        }
+        for action in domain.actions() {
+            let behaviour = registry.action(action.name).ok_or(action.name)?;
+            bound.actions.push(behaviour).map_err(|_| action.name)?;
+        }
+        Ok(bound)
+    }
+}
+
 impl<S: PartialEq, A: PartialEq, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
     /// The sensor a behaviour is bound to (the first, if several): from a device to its id.
     /// O(NS).
@@ -1231,6 +1255,60 @@ mod tests {
 
     fn error(json: &str) -> String {
         load_str(json).unwrap_err().to_string()
+    }
+
+    /// A domain built in Rust binds its behaviours as a loaded file does; a name the platform
+    /// lacks is the error.
+    #[test]
+    fn a_domain_built_in_rust_binds_its_behaviours_through_a_registry() {
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        enum Dev {
+            Bumper,
+            Wheels,
+        }
+        struct Robot;
+        impl Registry for Robot {
+            type Sensor = Dev;
+            type Action = Dev;
+            fn sensor(&self, name: &str) -> Option<Dev> {
+                (name == "bumper").then_some(Dev::Bumper)
+            }
+            fn action(&self, name: &str) -> Option<Dev> {
+                (name == "drive").then_some(Dev::Wheels)
+            }
+        }
+        let mut d: Domain<'_, 1, 2> = Domain::new();
+        let clear = d.add_fact("clear").unwrap();
+        let bumper = d
+            .add_sensor(SensorAction::new(
+                "bumper",
+                FactSet::single(clear),
+                SensorMode::OneShot,
+            ))
+            .unwrap();
+        let drive = d
+            .add_action(ActuatorAction::new(
+                "drive",
+                FactSet::single(clear),
+                FactSet::EMPTY,
+                FactSet::EMPTY,
+            ))
+            .unwrap();
+        let b: Bindings<Dev, Dev, 1, 2> = Bindings::resolve(&d, &Robot).unwrap();
+        assert_eq!(b.sensor(bumper), Some(Dev::Bumper));
+        assert_eq!(b.action(drive), Some(Dev::Wheels));
+        assert_eq!(b.sensor_id(&Dev::Bumper), Some(bumper));
+        d.add_action(ActuatorAction::new(
+            "fly",
+            FactSet::EMPTY,
+            FactSet::EMPTY,
+            FactSet::EMPTY,
+        ))
+        .unwrap();
+        assert_eq!(
+            Bindings::<Dev, Dev, 1, 2>::resolve(&d, &Robot).err(),
+            Some("fly")
+        );
     }
 
     #[test]
