@@ -215,6 +215,7 @@ impl<
     ///   planner's view of the actions leaves those out too).
     ///
     /// O(NP · L · NS).
+    // Out of line: inlined into the deciding task's poll it made the firmware larger.
     #[inline(never)]
     fn select(
         &self,

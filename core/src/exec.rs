@@ -599,10 +599,7 @@ impl<
     /// initial model: a sensor perceives them, and nothing says whether they hold. (A fact no
     /// sensor perceives follows the model.)
     pub fn unknown_facts(&self) -> FactSetOf<W> {
-        let perceivable = (self.mission.domain.sensors().iter())
-            .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per));
-        self.shared
-            .lock(|s| perceivable.difference(s.sensed.get().union(s.beliefs.get())))
+        self.knowledge().1
     }
 
     /// [`known_false`](Self::known_false), [`unknown_facts`](Self::unknown_facts) and

@@ -18,7 +18,7 @@ use crate::domain::Domain;
 use crate::exec::Failure;
 use crate::facts::FactSetOf;
 use crate::mission::Mission;
-use crate::plan::{PlanId, PlanSet};
+use crate::plan::{MAX_PLANS, PlanId, PlanSet};
 use crate::trace::TraceEvent;
 
 /// A fact set printed with its facts' names ([`Domain::names`]); `Debug` prints the same.
@@ -169,7 +169,9 @@ impl<
         self.0.domain.event_name(e).unwrap_or("?")
     }
     fn plans(&self, f: &mut fmt::Formatter<'_>, set: PlanSet) -> fmt::Result {
-        let ids = (0..32).filter_map(PlanId::new).filter(|p| set.contains(*p));
+        let ids = (0..MAX_PLANS)
+            .filter_map(PlanId::new)
+            .filter(|p| set.contains(*p));
         for (i, p) in ids.enumerate() {
             if i > 0 {
                 f.write_str(", ")?;
@@ -177,6 +179,14 @@ impl<
             f.write_str(self.plan(p))?;
         }
         Ok(())
+    }
+    /// "; sensors out of service [sonar]" when any is.
+    fn out_of_service(&self, f: &mut fmt::Formatter<'_>, faulty: SensorSet) -> fmt::Result {
+        if faulty.is_empty() {
+            return Ok(());
+        }
+        f.write_str("; sensors out of service ")?;
+        self.sensors(f, faulty)
     }
     fn sensors(&self, f: &mut fmt::Formatter<'_>, set: SensorSet) -> fmt::Result {
         f.write_str("[")?;
@@ -232,26 +242,6 @@ impl<
     }
 }
 
-/// "; sensors out of service [sonar]" when any is.
-fn out_of_service<
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
->(
-    n: &Names<'_, '_, NS, NA, NP, L, W, NF>,
-    f: &mut fmt::Formatter<'_>,
-    faulty: SensorSet,
-) -> fmt::Result {
-    if faulty.is_empty() {
-        return Ok(());
-    }
-    f.write_str("; sensors out of service ")?;
-    n.sensors(f, faulty)
-}
-
 impl<
     const NS: usize,
     const NA: usize,
@@ -291,7 +281,7 @@ impl<
                 if !unknown.is_empty() {
                     write!(f, "; never sensed {}", facts(unknown))?;
                 }
-                out_of_service(&n, f, faulty)
+                n.out_of_service(f, faulty)
             }
             E::Exhausted {
                 event,
@@ -302,7 +292,7 @@ impl<
                 write!(f, "every plan for {} failed: ", n.event(event))?;
                 n.plans(f, failed)?;
                 write!(f, " (beliefs {})", facts(beliefs))?;
-                out_of_service(&n, f, faulty)
+                n.out_of_service(f, faulty)
             }
             E::TooManyFailures { failures, last } => write!(
                 f,
@@ -315,7 +305,7 @@ impl<
             }
             E::Planning { error, faulty } => {
                 write!(f, "no library plan could run, and the planner: {error:?}")?;
-                out_of_service(&n, f, faulty)
+                n.out_of_service(f, faulty)
             }
             E::InitialModel { failure } => write!(
                 f,

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use psmpa_core::action::ActuatorAction;
-use psmpa_core::mission::{self, AnyBehaviour, JsonError, LoadError, Problem, Registry};
+use psmpa_core::mission::{self, AnyBehaviour, JsonError, LoadError, Problem};
 use psmpa_core::planner::{Planner, PlanningError, Strategy};
 use psmpa_core::{Fsm, Mission, PlanId, SensorSet, Target};
 
@@ -268,32 +268,18 @@ pub fn check_bytes(
     bytes: &[u8],
     any_platform: bool,
 ) -> Result<(String, String), String> {
-    fn with<R: Registry>(
-        file: &Path,
-        bytes: &[u8],
-        registry: &R,
-        large: bool,
-    ) -> Result<(String, String), String> {
-        if large {
-            let loaded: mission::Loaded<'_, R::Sensor, R::Action, 32, 64, 32, 16> =
-                mission::load(bytes, registry).map_err(|e| error_line(file, &e))?;
-            let m: Large<'_> = loaded.mission;
-            reachable_then_describe(file, &m)
-        } else {
-            let loaded: mission::Loaded<'_, R::Sensor, R::Action, 4, 8, 4, 6> =
-                mission::load(bytes, registry).map_err(|e| error_line(file, &e))?;
-            reachable_then_describe(file, &loaded.mission)
-        }
-    }
     let doc = json::strict_file(file, bytes)?;
     if any_platform {
-        with(file, &doc, &AnyBehaviour, true)
+        let loaded: mission::Loaded<'_, (), (), 32, 64, 32, 16> =
+            mission::load(&doc, &AnyBehaviour).map_err(|e| error_line(file, &e))?;
+        let m: Large<'_> = loaded.mission;
+        reachable_then_describe(file, &m)
     } else {
-        // What the simulated robot needs besides its behaviours' names, as `run` would find.
         let loaded: mission::Loaded<'_, NaoSensor, NaoAction, 4, 8, 4, 6> =
             mission::load(&doc, &NaoRegistry).map_err(|e| error_line(file, &e))?;
+        // What the simulated robot needs besides its behaviours' names, as `run` would find.
         robot::requirements(&loaded.mission.domain, &loaded.bindings)
             .map_err(|e| format!("{}: {}", file.display(), json::printable(&e.to_string())))?;
-        with(file, &doc, &NaoRegistry, false)
+        reachable_then_describe(file, &loaded.mission)
     }
 }
