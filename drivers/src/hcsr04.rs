@@ -8,7 +8,11 @@
 //! [`PULSE_LIMIT`].
 //!
 //! The width is timed with `embassy_time::Instant` from when the task sees the rise to when it
-//! sees the fall: both wake-ups have about the same latency, which cancels. The resolution is
+//! sees the fall. Each edge reaches the task through the GPIO interrupt and an executor poll:
+//! the two latencies cancel only when both edges find the processor equally busy. An edge
+//! that waits behind other work (another sensor's sample on the same executor, a critical
+//! section) lengthens or shortens the pulse by that wait, 0.17 mm a microsecond; a late fall
+//! reads farther. For better, time the pulse in hardware (PWM input or PIO). The resolution is
 //! the time driver's tick: 1 µs (0.17 mm) at 1 MHz; at a 1 kHz tick, whole milliseconds
 //! (171 mm).
 
@@ -23,8 +27,10 @@ pub const TRIGGER_PULSE: Duration = Duration::from_micros(10);
 /// module raises it after its 200 µs burst, well within this.
 pub const RISE_TIMEOUT: Duration = Duration::from_millis(5);
 /// The echo must fall this long after it rose, or the line is stuck. The module ends a pulse
-/// by itself after about 38 ms when no echo returns.
-pub const PULSE_LIMIT: Duration = Duration::from_millis(60);
+/// by itself after about 38 ms when no echo returns. A whole read (trigger, rise, pulse) stays
+/// within 48 ms, inside the Fetch Tea sonar's 50 ms timeout: a stuck line is this driver's
+/// [`Hcsr04Error::Stuck`], not the runtime's timeout.
+pub const PULSE_LIMIT: Duration = Duration::from_millis(42);
 /// Nearer than this the module cannot measure (its rated minimum).
 pub const MIN_MM: u32 = 20;
 /// Farther than this the module's readings are not rated; a reading beyond counts as

@@ -313,8 +313,9 @@ where
                 Reading::of(Value::Bool(pressed), !pressed)
             }
             Some(Part::Camera) => Reading::flag(self.camera.lock().await.seen().map_err(pin)?),
+            // Read on demand, once: a bounce must not pass for the state.
             Some(Part::Handle) => {
-                Reading::flag(self.handle.lock().await.pressed().await.map_err(pin)?)
+                Reading::flag(self.handle.lock().await.settled().await.map_err(pin)?)
             }
             None => return Err(SensorFault::Device(UNBOUND)),
         };
@@ -323,9 +324,10 @@ where
 
     /// The bumper's next edge (a contact, a release, a bounce) makes its next sample due at
     /// once: the read debounces it, and a contact is seen the debounce time after the switch
-    /// settles, not a period later. The runtime drops this future before it samples, so the
-    /// lock it holds never keeps a read waiting. A pin error never wakes (the periodic reads
-    /// report it).
+    /// settles, not a period later. At most one such sample a debounce time ([`Switch::edge`]):
+    /// a noisy wire cannot flood the sensing side. The runtime drops this future before it
+    /// samples, so the lock it holds never keeps a read waiting. A pin error never wakes (the
+    /// periodic reads report it).
     async fn wake(&self, sensor: SensorId) {
         if self.parts.sensor(sensor) == Some(Part::Bumper)
             && self.bumper.lock().await.edge().await.is_ok()
@@ -405,7 +407,8 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin> FetchTea<So, Bu, Ca, Ha, 
         }
     }
 
-    /// Presses the handle (an on-demand `handle` reading) and pushes the door open if it gave.
+    /// Asks the handle's limit switch whether the handle gave (an on-demand `handle` reading,
+    /// taken once it settles) and pushes the door open if it did.
     async fn open_door(&self, io: &ActionIo<'_>) -> Outcome {
         if let Some(handle) = self.parts.sensor_id(&Part::Handle) {
             let asked = Instant::now();

@@ -5,9 +5,10 @@
 //! pin for the debounce time: only a level that holds that long, with no edge, is accepted;
 //! a bounce keeps the previous state, and a later read tries again. So a bouncing switch gives
 //! one contact, and a read costs nothing (no await) while nothing changes, and at most the
-//! debounce time when something does.
+//! debounce time when something does. A one-off read, which no later read follows up
+//! ([`Switch::settled`]), waits the bounces out instead.
 
-use embassy_time::{Duration, with_timeout};
+use embassy_time::{Duration, Instant, Timer, with_timeout};
 use embedded_hal::digital::InputPin;
 use embedded_hal_async::digital::Wait;
 
@@ -23,6 +24,8 @@ pub struct Switch<P> {
     active: Active,
     debounce: Duration,
     pressed: bool,
+    /// When [`Switch::edge`] last returned.
+    last_edge: Option<Instant>,
 }
 
 impl<P: InputPin + Wait> Switch<P> {
@@ -34,6 +37,7 @@ impl<P: InputPin + Wait> Switch<P> {
             active,
             debounce,
             pressed: false,
+            last_edge: None,
         }
     }
 
@@ -60,15 +64,48 @@ impl<P: InputPin + Wait> Switch<P> {
         Ok(self.pressed)
     }
 
+    /// Reads the switch once and for all: waits until the level has held for the debounce time
+    /// with no edge, accepts it and returns it (`true`: pressed). For a read no later read
+    /// follows up (an on-demand one): [`Switch::pressed`] may return the previous state while
+    /// the contact bounces, this never does. Takes the debounce time at least; a contact that
+    /// keeps chattering never settles, so bound it with a timeout (the runtime bounds every
+    /// read). Cancel-safe: a cancelled read accepts nothing.
+    pub async fn settled(&mut self) -> Result<bool, PinError> {
+        loop {
+            let seen = self.level()?;
+            match with_timeout(self.debounce, self.pin.wait_for_any_edge()).await {
+                // It bounced: watch again.
+                Ok(edge) => edge.map_err(|_| PinError)?,
+                Err(_) if self.level()? == seen => {
+                    self.pressed = seen;
+                    return Ok(seen);
+                }
+                // An edge just before the wait began: watch again.
+                Err(_) => {}
+            }
+        }
+    }
+
     /// The state the last read accepted, without reading the pin.
     pub const fn last(&self) -> bool {
         self.pressed
     }
 
     /// Waits for the next edge of the pin, rising or falling (a contact, a release, a bounce):
-    /// the moment to read again. Does not change the accepted state.
+    /// the moment to read again. At most one a debounce time: an edge that comes sooner after
+    /// the last one this returned is returned when that time is up, so a chattering contact
+    /// or a noisy wire (motor switching noise on a line held by a weak pull-up) cannot ask
+    /// for reads faster than that. Does not change the accepted state. Cancel-safe.
     pub async fn edge(&mut self) -> Result<(), PinError> {
-        self.pin.wait_for_any_edge().await.map_err(|_| PinError)
+        self.pin.wait_for_any_edge().await.map_err(|_| PinError)?;
+        if let Some(quiet) = self.last_edge.map(|t| t.saturating_add(self.debounce)) {
+            // (A timer always yields once, even for an instant that has passed.)
+            if Instant::now() < quiet {
+                Timer::at(quiet).await;
+            }
+        }
+        self.last_edge = Some(Instant::now());
+        Ok(())
     }
 
     /// The pin back.

@@ -8,7 +8,7 @@ mod common;
 use common::{Run, Wheeling, World, action, echo_ms, run, sensor};
 use embassy_time::{Duration, Instant};
 use psmpa_core::{Config, ControlError, Outcome, SensorFault, TraceEvent, Value};
-use psmpa_drivers::hcsr04::{Hcsr04Error, RISE_TIMEOUT, Range};
+use psmpa_drivers::hcsr04::{Hcsr04Error, PULSE_LIMIT, RISE_TIMEOUT, Range};
 use psmpa_drivers::robot::{PIN_FAULT, Settings, sonar_reading};
 use psmpa_drivers::switch::DEBOUNCE;
 
@@ -337,6 +337,65 @@ fn a_sonar_that_never_answers_loses_its_samples_then_faults_and_the_robot_brakes
         assert_eq!(wheel.at(failed), Wheeling::Brake);
         assert_eq!(wheel.writes().last(), Some(&failed));
     }
+}
+
+#[test]
+fn a_stuck_echo_line_is_the_drivers_stuck_fault_within_the_sonars_timeout() {
+    // The echo rises and never falls. The driver gives up PULSE_LIMIT after the rise, before
+    // the runtime's timeout of the read: the fault says what happened (`Stuck`), not only that
+    // the read took too long (`Timeout`).
+    let run = run(World {
+        echo: std::sync::Arc::new(|_| Some(Duration::from_secs(3_600))),
+        ..World::clear()
+    });
+    let sonar = sensor("sonar");
+    let faults: Vec<SensorFault> = run
+        .trace
+        .find(|e| matches!(e, TraceEvent::SensorFailed { sensor, .. } if *sensor == sonar))
+        .into_iter()
+        .filter_map(|(_, e)| match e {
+            TraceEvent::SensorFailed { fault, .. } => Some(fault),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(faults.first(), Some(&SensorFault::Stuck), "{faults:?}");
+    // Trigger (one 1 ms tick here), the module's delay, the pulse limit: inside the timeout.
+    let mission = psmpa_drivers::robot::mission().expect("the mission loads");
+    let timeout = mission.mission.domain.sensor(sonar).map(|s| s.timeout);
+    let read = Duration::from_millis(1) + common::ECHO_DELAY + PULSE_LIMIT;
+    assert!(
+        timeout.is_some_and(|t| read < t),
+        "{read:?} against {timeout:?}"
+    );
+    assert!(run.result.is_err(), "{:?}", run.result);
+}
+
+#[test]
+fn a_noisy_bumper_wire_cannot_flood_the_sensing_side() {
+    // Motor noise on the bumper's line during the walk: an edge every millisecond from 1 s to
+    // 2 s, too short for a contact. Each edge would make a sample due; the switch lets one
+    // through a debounce time, so the bumper's reads stay within one a debounce time plus its
+    // periodic ones, and no contact is seen.
+    let noise: Vec<(u64, bool)> = (1_000..2_000).map(|ms| (ms, ms % 2 == 1)).collect();
+    let run = run(World {
+        bumper: noise,
+        ..World::clear()
+    });
+    assert!(run.result.is_ok(), "{:?}", run.result);
+    let walk = action("go to door");
+    assert!(
+        run.trace
+            .first(
+                |e| matches!(e, TraceEvent::PreconditionViolated { action, .. } if *action == walk)
+            )
+            .is_none()
+    );
+    let during = |t: &Instant| (1_000..2_000).contains(&t.as_millis());
+    let reads = run.bumper.reads().into_iter().filter(during).count() as u64;
+    let most = 1_000 / DEBOUNCE.as_millis() + 1_000 / BUMPER_PERIOD_MS + 1;
+    assert!(reads <= most, "{reads} reads in the noise, at most {most}");
+    // The edges did wake it: more reads than its period alone gives.
+    assert!(reads > 1_000 / BUMPER_PERIOD_MS + 1, "{reads} reads");
 }
 
 #[test]

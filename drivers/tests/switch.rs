@@ -103,8 +103,11 @@ fn reading_at_each_edge_gives_one_contact() {
     let states = simulate(
         async move {
             let mut states = Vec::new();
-            // The script's five edges (a sixth wait would never end).
-            for _ in 0..5 {
+            // Four edges come out of the script's eight (a fifth wait would never end): the
+            // read at 100 ms sees the bounce at 101 ms; the edge at 102 ms comes within the
+            // debounce time of the one at 100 ms, so it is returned at 105 ms, and that read
+            // sees the level hold from 104 ms. The same at 300 ms.
+            for _ in 0..4 {
                 switch.edge().await.unwrap();
                 let pressed = switch.pressed().await.unwrap();
                 states.push((Instant::now().as_millis(), pressed));
@@ -116,7 +119,67 @@ fn reading_at_each_edge_gives_one_contact() {
     .unwrap()
     .output;
     let d = DEBOUNCE.as_millis();
-    assert_eq!(changes(&states), [(104 + d, true), (302 + d, false)]);
+    assert_eq!(
+        states,
+        [(101, false), (105 + d, true), (301, true), (305 + d, false)]
+    );
+}
+
+#[test]
+fn a_chattering_line_gives_at_most_one_edge_a_debounce_time() {
+    // Noise on the line: an edge every millisecond for 100 ms. Each edge would ask for a read.
+    let noise: Vec<(u64, bool)> = (1..=100).map(|ms| (ms, ms % 2 == 0)).collect();
+    let mut switch = Switch::new(ScriptedPin::new(true, &noise), Active::Low, DEBOUNCE);
+    let edges = simulate(
+        async move {
+            let mut edges = Vec::new();
+            while Instant::now().as_millis() < 100 {
+                switch.edge().await.unwrap();
+                edges.push(Instant::now().as_millis());
+            }
+            edges
+        },
+        Duration::from_secs(1),
+    )
+    .unwrap()
+    .output;
+    // The first at once, then one a debounce time: 1, 6, 11, ..., 101.
+    let d = DEBOUNCE.as_millis();
+    let expected: Vec<u64> = (0..=100 / d).map(|i| 1 + i * d).collect();
+    assert_eq!(edges, expected);
+}
+
+#[test]
+fn a_one_off_read_waits_the_bounces_out() {
+    // Read once at 101 ms, in the press's bounce, when the pin shows "released" for a moment:
+    // `pressed` returns the old state at once, `settled` the contact once it held.
+    let read = |settled: bool| {
+        let mut switch = Switch::new(bouncing(), Active::Low, DEBOUNCE);
+        simulate(
+            async move {
+                Timer::at(Instant::from_millis(101)).await;
+                let pressed = if settled {
+                    switch.settled().await
+                } else {
+                    switch.pressed().await
+                };
+                (pressed.unwrap(), switch.last())
+            },
+            Duration::from_secs(1),
+        )
+        .unwrap()
+    };
+    let quick = read(false);
+    assert_eq!(
+        (quick.output, quick.elapsed.as_millis()),
+        ((false, false), 101)
+    );
+    let settled = read(true);
+    let d = DEBOUNCE.as_millis();
+    assert_eq!(
+        (settled.output, settled.elapsed.as_millis()),
+        ((true, true), 104 + d)
+    );
 }
 
 #[test]
