@@ -168,20 +168,21 @@ const LEVELS: &[Level] = &[
     },
 ];
 
-/// The Pico 2 board's bounded cycles. Its panic handler is panic-probe's.
+/// The Pico 2 board's bounded cycles. Its panic handler is its own (`boards/pico2`'s `panic`).
 const PICO2_RECURSION: &[Recursion] = &[
     MISSION_DEPTH,
     (
         "core::panicking::panic_fmt",
         2,
-        "panic-probe masks interrupts and prints on its first entry only (its PANICKED flag), \
-         then raises a HardFault, so a panic while printing ends there",
+        "the board's panic handler stops the motors, masks interrupts and logs on its first \
+         entry only (its PANICKED flag), then raises a HardFault, so a panic while logging ends \
+         there",
     ),
     SLICE_ERROR,
     (
         "core::fmt::write",
         4,
-        "the board formats with core::fmt only in panic-probe's panic message (its own errors \
+        "the board formats with core::fmt only in its panic handler's message (its own errors \
          go through defmt::Format): write(the PanicInfo) -> write(its message) -> write(the \
          message's arguments: str, u32, char, Range<usize>, core's and embassy's errors) -> \
          write(a char's escape or a range's \"..\"), none of them recursive types",
@@ -223,7 +224,12 @@ const PICO2_SENSING_TASK: Task = Task {
 /// * `SWI_IRQ_1` at priority 2 (the board's `main`): polls the sensing executor;
 /// * `TIMER0_IRQ_0`, enabled by `time_driver::init` without a priority, so at the reset
 ///   value 0, the most urgent: the alarm wakes the timers' tasks;
-/// * HardFault above them all (panic-probe ends a panic in one).
+/// * HardFault above them all (the panic handler ends a panic in one; its handler stops the
+///   motors and waits for the watchdog).
+///
+/// The watchdog's feeding task runs on the thread-mode executor; the analysis counts its poll
+/// at `SWI_IRQ_1` too (it tells tasks apart by what they call, and excludes only the two
+/// named), which can only over-count.
 ///
 /// Not levels: `DMA_IRQ_0` (given priority 3 by `dma::init`, never enabled: the board uses no
 /// DMA, and its vector is the default handler), `IO_IRQ_QSPI` (feature `qspi-as-gpio` off),
