@@ -594,6 +594,12 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
 impl<L: WorldLog, M: RawMutex> Sensor for Nao<'_, '_, L, M> {
     async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault> {
         let device = self.device(sensor).ok_or(SensorFault::Device(1))?;
+        if device == Device::Sonar {
+            // What the echo did before the sonar was off says nothing about it now: under SMPA
+            // the robot walks between sense phases, and the next box, put down as far ahead
+            // as the last, echoes at the same distance.
+            self.echo.lock(|e| e.set(None));
+        }
         self.world.power(device, true);
         Ok(())
     }
@@ -689,8 +695,10 @@ async fn read_latency(read: Option<Duration>) {
 
 impl<L: WorldLog, M: RawMutex> Nao<'_, '_, L, M> {
     /// The sonar driver's plausibility checks: a reading outside the sonar's range is a device
-    /// fault; an echo in range that keeps the same distance while the robot walks on is stuck.
-    /// (A sonar stuck at its maximum, "nothing in range", cannot be told from an empty path.)
+    /// fault; an echo in range that keeps the same distance while the robot walks on, the sonar
+    /// on all along, is stuck. (A sonar stuck at its maximum, "nothing in range", cannot be told
+    /// from an empty path; nor, under SMPA, a stuck one, as the robot never walks while it is
+    /// on.)
     fn check_sonar(&self, mm: u32, at: i64) -> Result<(), SensorFault> {
         let sonar = self.world.scenario().sonar;
         let (min, max) = (

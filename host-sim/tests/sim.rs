@@ -837,6 +837,20 @@ fn a_stuck_sonar_is_caught_by_odometry_and_the_robot_stops() {
 }
 
 #[test]
+fn two_boxes_at_one_distance_in_two_smpa_sense_phases_are_not_a_stuck_sonar() {
+    // sonar-7 with every instant 2.1 s later: SMPA's sense phases at 7.5 s and 9 s both see a
+    // box at 315 mm (each put down as far ahead of the robot), the robot having walked 5 cm in
+    // between with the sonar off. Two boxes, not an echo stuck while the robot walked.
+    let mut sc = scenario("sonar-7");
+    for i in sc.interferences.iter_mut() {
+        i.at_ms += 2_100;
+    }
+    let s = run_summary(&sc, Arch::Smpa).unwrap();
+    assert!(matches!(s.ending, Ending::Goal(_)), "{:?}", s.ending);
+    assert_eq!(s.tally.placed, 7);
+}
+
+#[test]
 fn a_sonar_stuck_while_the_robot_stands_is_not_a_false_alarm() {
     // Standing before a box (side-stepping it), readings repeat: that is no fault.
     let sc = scenario("sonar-6");
