@@ -240,6 +240,31 @@ fn a_sample_gap_is_null_for_a_sensor_with_fewer_than_two_samples() {
 }
 
 #[test]
+fn an_interference_never_put_down_is_not_counted_or_missed() {
+    // The second box is due a day in, long after the run ends; with `max_s` 2 the first is
+    // never put down either. Neither existed, so neither counts against the detection rate.
+    for (name, body, counted) in [
+        (
+            "late.json",
+            r#"{"name":"late","interferences":[{},{"at_s":86400}]}"#,
+            1,
+        ),
+        (
+            "short.json",
+            r#"{"name":"short","max_s":2,"interferences":[{}]}"#,
+            0,
+        ),
+    ] {
+        let out = run(&file(name, body), "psmpa", true);
+        assert_success(&out);
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["interferences"], counted, "{name}");
+        assert_eq!(v["detected"], counted, "{name}");
+        assert_eq!(v["detection_rate"], 1.0, "{name}");
+    }
+}
+
+#[test]
 fn max_reaction_is_null_when_nothing_was_detected() {
     let out = run(&scenarios().join("quiet.json"), "smpa", true);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

@@ -78,9 +78,9 @@ impl RunJson {
         Self {
             scenario: scenario.name.as_str().to_owned(),
             arch: summary.arch.name(),
-            interferences: t.interferences,
+            interferences: t.placed,
             detected: t.detected,
-            detection_rate: rate(t.detected, t.interferences),
+            detection_rate: rate(t.detected, t.placed),
             collisions: t.collisions,
             reached_door: t.reached_door,
             time_cost_s: seconds(summary.time_cost_ms),

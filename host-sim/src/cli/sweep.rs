@@ -170,7 +170,7 @@ impl ArchStats {
         }
         let t = &s.tally;
         self.scenarios += 1;
-        self.interferences += u64::from(t.interferences);
+        self.interferences += u64::from(t.placed);
         self.detected += u64::from(t.detected);
         self.collisions += u64::from(t.collisions);
         self.reached_door += u64::from(t.reached_door);

@@ -173,9 +173,9 @@ fn shifted(scenario: &Scenario, row: u64, shifts: u32) -> Result<Shifted, RunErr
             let p = run_summary(&sc, Arch::PSmpa)?;
             let s = run_summary(&sc, Arch::Smpa)?;
             Ok([
-                100.0 * rate(p.tally.detected, p.tally.interferences),
+                100.0 * rate(p.tally.detected, p.tally.placed),
                 f64::from(p.tally.collisions),
-                100.0 * rate(s.tally.detected, s.tally.interferences),
+                100.0 * rate(s.tally.detected, s.tally.placed),
                 f64::from(s.tally.collisions),
                 s.time_cost_ms as f64 / p.time_cost_ms.max(1) as f64,
             ])
@@ -232,9 +232,9 @@ fn ours(scenario: &Scenario, arch: Arch) -> Result<Ours, RunError> {
     let s = run_summary(scenario, arch)?;
     let t = s.tally;
     Ok(Ours {
-        interferences: t.interferences,
+        interferences: t.placed,
         detected: t.detected,
-        percent: 100.0 * rate(t.detected, t.interferences),
+        percent: 100.0 * rate(t.detected, t.placed),
         collisions: t.collisions,
         time_s: s.time_cost_ms as f64 / 1000.0,
         trace_hash: s.trace_hash,
