@@ -71,6 +71,8 @@ impl<P: InputPin + Wait> Switch<P> {
     /// keeps chattering never settles, so bound it with a timeout (the runtime bounds every
     /// read). Cancel-safe: a cancelled read accepts nothing.
     pub async fn settled(&mut self) -> Result<bool, PinError> {
+        // The watch repeats `pressed`'s on purpose: shared through an async helper, the nested
+        // future cost the Pico 2 board 32 B of static RAM (`cargo xtask size`).
         loop {
             let seen = self.level()?;
             match with_timeout(self.debounce, self.pin.wait_for_any_edge()).await {
