@@ -545,3 +545,31 @@ fn a_run_that_gives_up_says_why_in_words() {
     );
     assert!(!stdout.contains("PlanSet"), "{stdout}");
 }
+
+#[cfg(unix)]
+#[test]
+fn an_output_through_a_link_keeps_the_link() {
+    use std::os::unix::fs::symlink;
+    let dir = folder("links");
+    // A link to a file not made yet (a dangling link): written through, as `>` does.
+    symlink("made/t.csv", dir.join("t.csv")).unwrap();
+    std::fs::create_dir(dir.join("made")).unwrap();
+    assert_success(&run_in(&dir, &["--trace", "t.csv"]));
+    let link = std::fs::symlink_metadata(dir.join("t.csv")).unwrap();
+    assert!(link.file_type().is_symlink(), "the link is kept");
+    let text = std::fs::read_to_string(dir.join("made/t.csv")).unwrap();
+    assert!(text.starts_with("time_s,"), "{text:.40}");
+    // The same file by its link and by its own name.
+    let out = run_in(&dir, &["--trace", "t.csv", "--timeline", "made/t.csv"]);
+    assert_refused(&out, &["--trace", "--timeline"]);
+    // A loop of links: refused, and both links kept.
+    symlink("b", dir.join("a")).unwrap();
+    symlink("a", dir.join("b")).unwrap();
+    let out = run_in(&dir, &["--trace", "a"]);
+    assert_refused(&out, &["a: cannot write", "symbolic links"]);
+    for name in ["a", "b"] {
+        let meta = std::fs::symlink_metadata(dir.join(name)).unwrap();
+        assert!(meta.file_type().is_symlink(), "{name} is still a link");
+    }
+    assert_eq!(names_in(&dir), ["a", "b", "made", "t.csv"]);
+}

@@ -185,8 +185,9 @@ impl Output {
         // was redirected to: written in place, appending (as `>>` asked, and so as not to
         // overwrite what `>` already wrote), never replaced by a rename.
         let stream = path.starts_with("/dev") || path.starts_with("/proc");
-        // Write through a symbolic link to the file it names.
-        let target = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+        // Write through a symbolic link to the file it names, as `>` does, even one that
+        // names a file not made yet: renaming over the link would lose it.
+        let target = follow(path).map_err(fail)?;
         let sink = match std::fs::metadata(&target) {
             Ok(meta) if meta.is_dir() => {
                 return Err(format!("{}: is a directory, not a file", path.display()));
@@ -341,9 +342,34 @@ pub fn print_and_commit(
     printed
 }
 
+/// Most symbolic links followed in a row (Linux's own limit).
+const MAX_LINKS: usize = 40;
+
+/// The path `path` names once its symbolic links are followed: the file itself where it
+/// exists, else the path the last link points at (a dangling link names the file `>` would
+/// make). A loop of links is an error, as it is to the shell.
+fn follow(path: &Path) -> io::Result<PathBuf> {
+    if let Ok(p) = std::fs::canonicalize(path) {
+        return Ok(p);
+    }
+    let mut p = path.to_path_buf();
+    for _ in 0..MAX_LINKS {
+        if !std::fs::symlink_metadata(&p).is_ok_and(|m| m.file_type().is_symlink()) {
+            return Ok(p);
+        }
+        let next = std::fs::read_link(&p)?;
+        // A relative link is relative to its own folder (`join` keeps an absolute one).
+        p = p
+            .parent()
+            .map_or_else(|| next.clone(), |dir| dir.join(&next));
+    }
+    Err(io::Error::other("too many levels of symbolic links"))
+}
+
 /// The file a path names: symbolic links and `..` resolved where the file or its folder
 /// exists, so two spellings of one file compare equal.
 fn identity(path: &Path) -> PathBuf {
+    let path = &follow(path).unwrap_or_else(|_| path.to_path_buf());
     if let Ok(p) = std::fs::canonicalize(path) {
         return p;
     }
