@@ -271,8 +271,8 @@ pub struct Sonar {
     pub latency_ms: u64,
     /// How high it sits, µm (0: it sees every box).
     pub height_um: i64,
-    /// The cone's lower edge drops this many thousandths of a metre per metre ahead.
-    pub cone_slope_permille: i64,
+    /// The cone's lower edge drops this many µm per metre ahead (millionths of the slope).
+    pub cone_slope_ppm: i64,
 }
 
 impl Sonar {
@@ -293,11 +293,12 @@ impl Sonar {
         let below = self.height_um - height_um;
         if below <= 0 {
             0
-        } else if self.cone_slope_permille <= 0 {
+        } else if self.cone_slope_ppm <= 0 {
             i64::MAX
         } else {
             // Whole µm, rounded up: below that the edge still passes above the box.
-            (below * 1000 + self.cone_slope_permille - 1) / self.cone_slope_permille
+            // (At most 10 m below, so `below` times a million stays far inside `i64`.)
+            (below * 1_000_000 + self.cone_slope_ppm - 1) / self.cone_slope_ppm
         }
     }
 }
@@ -429,7 +430,7 @@ impl Serialize for Scenario {
             o.dropout,
             o.latency_ms,
             o.height_um,
-            o.cone_slope_permille,
+            o.cone_slope_ppm,
         );
         let mut t = serializer.serialize_tuple(CANONICAL_FIELDS)?;
         t.serialize_element(self.name.as_str())?;
@@ -519,7 +520,7 @@ impl<'de> serde::de::Visitor<'de> for Fill<'_> {
             dropout: row.5,
             latency_ms: row.6,
             height_um: row.7,
-            cone_slope_permille: row.8,
+            cone_slope_ppm: row.8,
         };
         s.bumper_period_ms = element(&mut seq, 9)?;
         s.bumper_latency_ms = element(&mut seq, 10)?;
@@ -1020,7 +1021,7 @@ impl Scenario {
                 dropout: 0,
                 latency_ms: 0,
                 height_um: 0,
-                cone_slope_permille: 0,
+                cone_slope_ppm: 0,
             },
             bumper_period_ms: 0,
             bumper_latency_ms: 0,
@@ -1138,11 +1139,11 @@ impl Scenario {
                 pick(s.height_m, ds.height_m),
                 MAX_HEIGHT_M,
             )?,
-            cone_slope_permille: up_to(
+            cone_slope_ppm: up_to(
                 Field::of("sonar", "cone_slope"),
                 pick(s.cone_slope, ds.cone_slope),
                 MAX_CONE_SLOPE,
-            )? / 1000,
+            )?,
         };
         if sonar.max_um <= sonar.min_um {
             return Err(invalid(

@@ -90,6 +90,24 @@ fn a_low_box_close_by_is_below_the_cone_and_left_to_the_bumper() {
     assert_eq!(s.obstacles[0].fate, Fate::Collided);
 }
 
+#[test]
+fn the_cone_slope_is_kept_to_the_millionth() {
+    // A sonar 0.5 m high sees a box on the floor from 0.5 m / slope on, in whole µm rounded
+    // up: with a slope of 0.0019 from 263.157895 m; it was kept as 0.001, seen from 500 m.
+    let seen_from = |slope: &str| {
+        let sc = inline(&format!(
+            r#"{{"name":"c","sonar":{{"height_m":0.5,"cone_slope":{slope}}},"interferences":[]}}"#
+        ));
+        sc.sonar.seen_from_um(0)
+    };
+    assert_eq!(seen_from("0.0019"), 263_157_895);
+    assert_eq!(seen_from("0.001"), 500_000_000);
+    // tan 30°, to six decimals: the harder world's kind of cone.
+    assert_eq!(seen_from("0.57735"), 866_026);
+    // Three decimals or fewer, as before.
+    assert_eq!(seen_from("0.5"), 1_000_000);
+}
+
 /// A ball put down under the walking robot's foot at 3.0 s and taken away `hold_s` later,
 /// with a 20 ms bumper that feels a contact once it lasted `min_contact_ms`.
 fn ball_underfoot(hold_s: f64, min_contact_ms: u32) -> psmpa_sim::sim::Recorded {

@@ -125,7 +125,7 @@ pub const PERSON_SPEEDS_MM_S: [u16; 5] = [0, 500, 1_000, 1_500, 3_000];
 pub const HARDER_SONAR_HEIGHT_UM: i64 = 350_000;
 
 /// The harder world's cone: its lower edge drops 0.577 m a metre (a 60° cone on a level axis).
-pub const HARDER_CONE_SLOPE_PERMILLE: i64 = 577;
+pub const HARDER_CONE_SLOPE_PPM: i64 = 577_000;
 
 /// The heights of the harder world's standing boxes, uniform, mm.
 pub const HARDER_BOX_HEIGHT_MM: (u64, u64) = (50, 800);
@@ -136,7 +136,7 @@ pub const PERSON_HEIGHT_UM: u32 = 1_700_000;
 
 /// World `index` of the study with the hazards, its people walking at `speed_mm_s`: the clean
 /// world ([`world`]) with the sonar [`HARDER_SONAR_HEIGHT_UM`] high under a cone that drops
-/// [`HARDER_CONE_SLOPE_PERMILLE`] and a bumper that feels a contact once it has lasted one
+/// [`HARDER_CONE_SLOPE_PPM`] and a bumper that feels a contact once it has lasted one
 /// bumper period. Each box is, with even odds, a person walking towards the robot or a
 /// standing box of a height drawn uniformly in [`HARDER_BOX_HEIGHT_MM`] (drawn from their own
 /// stream: the same at every speed). Balls lie still.
@@ -144,7 +144,7 @@ pub fn harder_world(seed: u64, index: u64, speed_mm_s: u16) -> Scenario {
     let mut sc = world(seed, index, false);
     let mut rng = Pcg32::new(seed ^ 0x6861_7264_6572, index);
     sc.sonar.height_um = HARDER_SONAR_HEIGHT_UM;
-    sc.sonar.cone_slope_permille = HARDER_CONE_SLOPE_PERMILLE;
+    sc.sonar.cone_slope_ppm = HARDER_CONE_SLOPE_PPM;
     sc.bumper_min_contact_ms = sc.bumper_period_ms;
     for i in &mut sc.interferences {
         let person = uniform(&mut rng, 0, 1) == 0;
@@ -556,7 +556,7 @@ pub fn study(seed: u64, runs: u64, progress: bool) -> Result<Study, RunError> {
         faults: faults.pass("faults"),
         harder: Harder {
             sonar_height_m: HARDER_SONAR_HEIGHT_UM as f64 / 1e6,
-            cone_slope: HARDER_CONE_SLOPE_PERMILLE as f64 / 1e3,
+            cone_slope: HARDER_CONE_SLOPE_PPM as f64 / 1e6,
             box_height_m: [lo as f64 / 1e3, hi as f64 / 1e3],
             person_height_m: f64::from(PERSON_HEIGHT_UM) / 1e6,
             bumper_min_contact: "one bumper period",

@@ -47,7 +47,7 @@ pub(crate) fn sonar(period_ms: u64, noise_um: i64, dropout: u64, latency_ms: u64
         dropout,
         latency_ms,
         height_um: 0,
-        cone_slope_permille: 500,
+        cone_slope_ppm: 500_000,
     }
 }
 
