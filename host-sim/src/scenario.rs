@@ -742,7 +742,7 @@ impl fmt::Display for Problem {
             Self::AboveMax { value, max } => {
                 write!(f, "must be at most {max}, got {}", Shown(value))
             }
-            Self::Empty => f.write_str("must not be empty"),
+            Self::Empty => f.write_str("must not be empty or only spaces"),
             Self::NotWholeMicros { value, max } => write!(
                 f,
                 "must be a whole number of microseconds from 0 to {max}, got {}",
@@ -1146,14 +1146,26 @@ impl Scenario {
             )?,
         };
         if sonar.max_um <= sonar.min_um {
-            return Err(invalid(
-                Field::of("sonar", "max_m"),
-                Problem::OutOfRange {
-                    value: pick(s.max_m, ds.max_m),
-                    min: pick(s.min_m, ds.min_m),
-                    max: MAX_M,
-                },
-            ));
+            // Name the field the file gave: a `min_m` above the default `max_m` is min's fault.
+            let (field, problem) = match s.max_m {
+                None => (
+                    Field::of("sonar", "min_m"),
+                    Problem::OutOfRange {
+                        value: pick(s.min_m, ds.min_m),
+                        min: 0.0,
+                        max: pick(s.max_m, ds.max_m),
+                    },
+                ),
+                Some(max_m) => (
+                    Field::of("sonar", "max_m"),
+                    Problem::OutOfRange {
+                        value: max_m,
+                        min: pick(s.min_m, ds.min_m),
+                        max: MAX_M,
+                    },
+                ),
+            };
+            return Err(invalid(field, problem));
         }
         if sonar.threshold_um <= sonar.min_um || sonar.threshold_um > sonar.max_um {
             return Err(invalid(
@@ -1307,9 +1319,20 @@ mod tests {
             "interferences[1].at_s: must not be negative, got -2"
         );
         let e = err(r#"{"name":"","interferences":[]}"#);
-        assert_eq!(e.to_string(), "name: must not be empty");
+        assert_eq!(e.to_string(), "name: must not be empty or only spaces");
         let e = err(r#"{"name":"   ","interferences":[]}"#);
-        assert_eq!(e.to_string(), "name: must not be empty");
+        assert_eq!(e.to_string(), "name: must not be empty or only spaces");
+        // The field the file gave is the one named.
+        let e = err(r#"{"name":"x","sonar":{"min_m":3.0},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "sonar.min_m: must lie between 0 and 2.55, got 3"
+        );
+        let e = err(r#"{"name":"x","sonar":{"min_m":1,"max_m":0.5},"interferences":[]}"#);
+        assert_eq!(
+            e.to_string(),
+            "sonar.max_m: must lie between 1 and 1000, got 0.5"
+        );
         let e = err(r#"{"name":"x","sonar":{"max_m":1e-9},"interferences":[]}"#);
         assert_eq!(
             e.to_string(),
