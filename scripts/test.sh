@@ -44,6 +44,15 @@ step "the Pico 2 board: formatted, clippy-clean and built as its README says (ca
 step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
 cargo test --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 
+step "the dock example, copied out of the checkout as the README says (\"Your own robot\"), passes its tests there"
+own=$(mktemp -d)
+trap 'rm -rf "$own"' EXIT
+ln -s "$PWD" "$own/psmpa"
+sed -n '/<!-- own-robot:start -->/,/<!-- own-robot:end -->/p' README.md | sed '/^```/d;/^<!--/d' > "$own/steps.sh"
+# Built beside the crate outside the workspace, whose crates it shares where features agree.
+outside_target="$PWD/target/outside"
+(cd "$own" && CARGO_TARGET_DIR="$outside_target" bash -eu -o pipefail steps.sh)
+
 step "firmware: clippy for both targets (mps2-an386's Cortex-M4F, mps2-an505's Cortex-M33)"
 for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
   cargo clippy -p psmpa-firmware --target "$target" --profile firmware -- -D warnings
