@@ -244,6 +244,8 @@ pub struct ActuatorAction<'a, const W: usize = 1> {
     /// How long `pre(a)` may stay false while the action runs before the runtime stops it;
     /// `None`: the runtime's [`Config::max_violation`](crate::exec::Config::max_violation).
     /// A robot at a cliff's edge stops at once (zero); one before a box may wait for it.
+    /// Zero fails the action at its start when a fact of `pre(a)` that only an on-demand
+    /// sensor perceives is still believed false, before the behaviour could ask for it.
     /// A tolerance of its own above zero also lets the action *start* while a fact of
     /// `pre(a)` is known false ([`may_start_violated`](Self::may_start_violated)).
     pub max_violation: Option<Duration>,

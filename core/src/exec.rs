@@ -15,8 +15,10 @@
 //! delay a sample. Under either policy:
 //!
 //! * [`Policy::PSmpa`]: a parallel state `δ'_i` has its sensors switched on and sampled once,
-//!   then runs the actuator behaviour while they keep sampling. When a percept makes `pre(a_i)`
-//!   false the behaviour is told at once ([`ActionIo::violation`]); if it stays false longer
+//!   then runs the actuator behaviour while they keep sampling. When the beliefs make
+//!   `pre(a_i)` false (a percept, or at the start a fact still believed false that no sensor
+//!   of the state has sampled yet, as an on-demand sensor's until it is asked) the behaviour
+//!   is told at once ([`ActionIo::violation`]); if it stays false longer
 //!   than the action's [`max_violation`](ActuatorAction::max_violation) (or
 //!   [`Config::max_violation`]) the runtime stops the behaviour and takes the failure edge. The sensors are switched off when the action ends.
 //! * [`Policy::Smpa`]: the baseline. The same state alternates a sense phase (sensors on,
@@ -222,7 +224,12 @@ impl<const W: usize> ActionIo<'_, W> {
         self.monitor.beliefs()
     }
 
-    /// `Some` while the action's precondition is false according to the latest samples.
+    /// `Some` while the action's precondition is false according to the beliefs: the latest
+    /// samples, and, for a fact no sensor of this state has sampled yet, the belief from
+    /// before the state. A fact only an on-demand sensor perceives is therefore violated
+    /// from the state's start until the behaviour asks for a sample that shows it, if it was
+    /// false or never sensed before: give such an action a tolerance
+    /// ([`ActuatorAction::max_violation`]) at least as long as that request takes.
     pub fn violation(&self) -> Option<Violation<W>> {
         self.monitor.violation()
     }
