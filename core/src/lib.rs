@@ -83,7 +83,7 @@ pub use plan::{Plan, PlanError, PlanId, PlanLibrary};
 pub use platform::{
     Actuator, MAX_PAIRS, Outcome, PairRejected, Platform, Reading, Sensor, SensorFault,
 };
-pub use runtime::{Capacity, Caps, LoadedOf, MissionOf, Runtime};
+pub use runtime::{BindingsOf, Capacity, Caps, LoadedOf, MissionOf, Runtime};
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
 pub use text::{Described, FactNames};
 pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};

@@ -26,8 +26,13 @@
 //! ```
 //!
 //! Sensor `mode` is `cyclic` (with `period_ms`), `one-shot` or `on-demand`; `timeout_ms`
-//! (default 500) bounds a sample. Both are whole numbers of milliseconds: the loader parses
-//! integers only, so a microcontroller needs no float parser. `pre`, `add`, `del`, `context` and `init` default to `[]`.
+//! (default 500) bounds a sample. An action may have `max_violation_ms`
+//! ([`ActuatorAction::max_violation`]; absent: the runtime's `Config::max_violation`), a
+//! plan `context_not`, facts that must not hold ([`Plan::context_not`]), and the file a
+//! top-level `description` (any JSON value, skipped). The `_ms` values are whole numbers of
+//! milliseconds: the loader parses integers only, so a microcontroller needs no float
+//! parser (`50.0` or `5e1` is an error). `pre`, `add`, `del`, `context`, `context_not` and
+//! `init` default to `[]`.
 
 use core::fmt;
 
@@ -266,8 +271,9 @@ pub enum JsonError {
     Type,
     /// A string uses an escape sequence (names must be plain).
     Escape,
-    /// A number that is not a whole number in range (negative, a fraction, an exponent, or
-    /// more than 2⁶⁴ − 1).
+    /// A number that is not a whole number in range: negative, or more than 2⁶⁴ − 1. (A
+    /// fraction or an exponent ends the whole number early, and what follows it is a
+    /// [`Syntax`](Self::Syntax) error, at the same field.)
     Number,
 }
 
@@ -285,6 +291,10 @@ impl fmt::Display for LoadError<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}: ", self.at)?;
         match self.problem {
+            // `50.0`: the whole number 50, then a `.` where JSON wants a comma.
+            Problem::Json(JsonError::Syntax) if self.at.field.is_some_and(|k| k.ends_with("_ms")) => {
+                f.write_str("malformed JSON, or not a whole number of milliseconds (no fraction or exponent)")
+            }
             Problem::Json(JsonError::Syntax) => f.write_str("malformed JSON"),
             Problem::Json(JsonError::Type) => f.write_str("a value of the wrong type"),
             Problem::Json(JsonError::Number) => {
@@ -1540,6 +1550,18 @@ mod tests {
                     r#""add": ["b"], "max_violation_ms": 4294967296"#,
                 ),
                 "actions[0].max_violation_ms: more than 4294967295 milliseconds",
+            ),
+            // A fraction or an exponent: the whole number ends before it.
+            (
+                with(r#""period_ms": 50"#, r#""period_ms": 50.0"#),
+                "sensors[0].period_ms: malformed JSON, or not a whole number of milliseconds (no fraction or exponent)",
+            ),
+            (
+                with(
+                    r#""add": ["b"]"#,
+                    r#""add": ["b"], "max_violation_ms": 1e3"#,
+                ),
+                "actions[0].max_violation_ms: malformed JSON, or not a whole number of milliseconds (no fraction or exponent)",
             ),
             (
                 with(r#""add": ["b"]"#, r#""add": ["b"], "max_violation_ms": -1"#),

@@ -79,6 +79,13 @@ pub type LoadedOf<'a, R, C> = <C as Capacity>::Loaded<
     <R as crate::mission::Registry>::Action,
 >;
 
+/// The bindings of registry `R`'s behaviours, of capacities `C`: what a platform keeps to go
+/// from a device to its sensor ([`Bindings::sensor_id`](crate::mission::Bindings::sensor_id)).
+pub type BindingsOf<R, C> = <C as Capacity>::Bindings<
+    <R as crate::mission::Registry>::Sensor,
+    <R as crate::mission::Registry>::Action,
+>;
+
 /// The P-SMPA runtime of one robot: platform `P`, capacities `C` ([`Caps`]), trace sink `T`
 /// (none by default). A name for the [`Engine`] of those capacities, which does the work:
 /// [`sensing`](Engine::sensing), [`run`](Engine::run), [`beliefs`](Engine::beliefs), ...

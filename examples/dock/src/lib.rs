@@ -18,10 +18,10 @@ use core::cell::Cell;
 
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
-use psmpa_core::mission::{Bindings, LoadError, Registry, load};
+use psmpa_core::mission::{LoadError, Registry, load};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, Caps, LoadedOf, Outcome, Platform, Reading, Runtime, Sensor,
-    SensorFault, SensorId, Value,
+    ActionId, ActionIo, Actuator, BindingsOf, Caps, LoadedOf, Outcome, Platform, Reading, Runtime,
+    Sensor, SensorFault, SensorId, Value,
 };
 
 /// The mission, as JSON.
@@ -198,7 +198,7 @@ pub struct Dock<'y> {
     /// The world it senses and moves in.
     pub yard: &'y Yard,
     /// Which sensor and behaviour each id of the mission is.
-    pub bindings: Bindings<Sense, Act, 4, 4>,
+    pub bindings: BindingsOf<Names, DockCaps>,
 }
 
 impl Sensor for Dock<'_> {
