@@ -17,6 +17,9 @@ cargo clippy --workspace --all-targets -- -D warnings
 step "host tests"
 cargo test --workspace
 
+step "psmpa-core's defmt text: fact names reach the log as names (defmt's host encoder)"
+cargo test -p psmpa-core --features defmt,defmt/unstable-test --lib text
+
 step "docs (warnings are errors)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 

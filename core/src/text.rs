@@ -21,7 +21,8 @@ use crate::mission::Mission;
 use crate::plan::{MAX_PLANS, PlanId, PlanSet};
 use crate::trace::TraceEvent;
 
-/// A fact set printed with its facts' names ([`Domain::names`]); `Debug` prints the same.
+/// A fact set printed with its facts' names ([`Domain::names`]); `Debug` prints the same, and
+/// so does `defmt::Format` (feature `defmt`).
 #[derive(Clone, Copy)]
 pub struct FactNames<
     'd,
@@ -68,6 +69,27 @@ impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> fmt::Deb
 {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         fmt::Display::fmt(self, f)
+    }
+}
+
+/// The same text in a defmt log, with no `core::fmt`: each name goes out as a string the host
+/// prints (`info!("missing {}", domain.names(set))`).
+#[cfg(feature = "defmt")]
+impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> defmt::Format
+    for FactNames<'_, '_, NS, NA, W, NF>
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "{{");
+        for (i, fact) in self.set.iter().enumerate() {
+            if i > 0 {
+                defmt::write!(f, ", ");
+            }
+            match self.domain.fact_name(fact) {
+                Some(name) => defmt::write!(f, "{=str}", name),
+                None => defmt::write!(f, "#{=usize}", fact.index()),
+            }
+        }
+        defmt::write!(f, "}}");
     }
 }
 
@@ -436,5 +458,30 @@ mod tests {
         assert_eq!(Reading::of(Value::Mm(5), true).holds, FactSet::ALL);
         assert_eq!(Reading::flag(false).holds, FactSet::EMPTY);
         assert_eq!(Reading::<1>::flag(true).value, Value::Bool(true));
+    }
+
+    /// Names, not indices, in a defmt log: the names go out as strings, in the set's order,
+    /// and an undeclared fact as its index. `cargo test -p psmpa-core --features
+    /// defmt,defmt/unstable-test --lib text` (defmt's host encoder).
+    #[cfg(feature = "defmt")]
+    #[test]
+    fn fact_names_reach_a_defmt_log_as_names() {
+        let m: Loaded<'_, (), (), 1, 1, 1, 1> = load(MISSION.as_bytes(), &AnyBehaviour).unwrap();
+        let d = &m.mission.domain;
+        let set = d.facts(&["clear", "done"]).unwrap();
+        let _ = defmt::export::fetch_bytes();
+        defmt::Format::format(&d.names(set), defmt::export::make_formatter());
+        let bytes = defmt::export::fetch_bytes();
+        let at = |bytes: &[u8], name: &[u8]| bytes.windows(name.len()).position(|w| w == name);
+        assert!(
+            at(&bytes, b"clear").unwrap() < at(&bytes, b"done").unwrap(),
+            "{bytes:?}"
+        );
+        // An undeclared fact: no name, its index (5) encoded as a number.
+        let odd = FactSet::single(crate::FactId::new(5).unwrap());
+        defmt::Format::format(&d.names(odd), defmt::export::make_formatter());
+        let bytes = defmt::export::fetch_bytes();
+        assert_eq!(at(&bytes, b"clear"), None, "{bytes:?}");
+        assert!(at(&bytes, &5u32.to_le_bytes()).is_some(), "{bytes:?}");
     }
 }

@@ -276,8 +276,11 @@ const PICO2_LEVELS: &[Level] = &[
 ];
 
 /// The Pico 2 board's stack budget, set from the first bound (14,888 B, no board to measure
-/// on) with 10 % to spare: 16 KiB, 3 % of its RAM.
-const PICO2_BUDGET: u64 = 16 * 1024;
+/// on) with 10 % to spare: 16 KiB. 20 KiB, 3.9 % of its RAM, since the board logs the trace
+/// with the mission's names (`boards/pico2/src/log.rs`): the bound went from 14,816 to
+/// 16,728 B, about 1.4 KB of it in the bounded recursions of the panic handler's formatting,
+/// which the analysis counts at every level.
+const PICO2_BUDGET: u64 = 20 * 1024;
 
 /// The Pico 2's RAM (the 512 KiB striped over SRAM0-7, as its memory.x says).
 const PICO2_RAM: u64 = 512 * 1024;

@@ -7,7 +7,8 @@
 //! * deciding (the control loop, the plan's state machine, the behaviours) in thread mode,
 //!   in `main`.
 //!
-//! It runs the task once, logs the outcome over RTT (defmt), and then keeps the wheels braked.
+//! It runs the task once, logs the runtime's trace with the mission's names and the outcome
+//! over RTT (defmt, [`log`]), and then keeps the wheels braked.
 //!
 //! When something goes wrong the motors stop: a panic or a fault puts the H-bridge in standby
 //! before anything else; a watchdog fed from thread mode resets the board when deciding stops
@@ -41,6 +42,9 @@ use psmpa_drivers::robot::{
 use psmpa_drivers::switch::{DEBOUNCE, Switch};
 use static_cell::StaticCell;
 
+mod log;
+use log::Log;
+
 /// One TB6612FNG channel: IN1, IN2 and the PWM of its speed.
 type Motor = Channel<Output<'static>, Output<'static>, Pwm<'static>>;
 /// The robot on this board's pins.
@@ -51,7 +55,7 @@ type Robot = FetchTea<
     Switch<Input<'static>>,
     Drive<Motor, Motor, Output<'static>>,
 >;
-type Runtime = FetchTeaRuntime<'static, Robot>;
+type Runtime = FetchTeaRuntime<'static, Robot, Log>;
 
 /// The PWM's counter wraps at this value: 150 MHz / 7,500 = 20 kHz, above hearing. A period
 /// is 7,500 counts; `SetDutyCycle`'s maximum is 7,499 of them (a brake does not need more:
@@ -211,8 +215,12 @@ async fn main(spawner: Spawner) {
         loaded.bindings.clone(),
         Settings::DEFAULT,
     ));
-    let runtime: &'static Runtime =
-        RUNTIME.init(Runtime::new(&loaded.mission, robot, (), Config::default()));
+    let runtime: &'static Runtime = RUNTIME.init(Runtime::new(
+        &loaded.mission,
+        robot,
+        Log(&loaded.mission),
+        Config::default(),
+    ));
 
     // Sensing above deciding: priority 2 preempts thread mode; GPIO (embassy-rp's bank 0
     // interrupt) is at 3, so an edge's waker only pends the sensing executor.
