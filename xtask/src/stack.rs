@@ -40,6 +40,24 @@ type Recursion = (&'static str, u64, &'static str);
 /// patterns, why).
 type OnlyFrom = (&'static str, &'static [&'static str], &'static str);
 
+/// Callers whose calls through a vtable reach only some functions: (caller patterns, callee
+/// patterns, why). Without it a call at a vtable's slot may reach whatever any vtable holds
+/// at that slot.
+type OnlyTo = (
+    &'static [&'static str],
+    &'static [&'static str],
+    &'static str,
+);
+
+/// core's own formatting code holds one kind of trait object, the formatter's output.
+const FORMATTER_OUTPUT: OnlyTo = (
+    &["<char as core::fmt::", "core::fmt::Formatter::"],
+    &[" as core::fmt::Write>::", "core::fmt::Write::"],
+    "a char's and the formatter's code call through a vtable only the formatter's output, a \
+     `&mut dyn core::fmt::Write` (without this, a char's Debug reached the runtime's \
+     Monitor::user, at the same slot of another vtable, and through it the trace)",
+);
+
 /// The mission loader's JSON recursion, in both images.
 const MISSION_DEPTH: Recursion = (
     "deserialize_ignored_any",
@@ -276,11 +294,8 @@ const PICO2_LEVELS: &[Level] = &[
 ];
 
 /// The Pico 2 board's stack budget, set from the first bound (14,888 B, no board to measure
-/// on) with 10 % to spare: 16 KiB. 20 KiB, 3.9 % of its RAM, since the board logs the trace
-/// with the mission's names (`boards/pico2/src/log.rs`): the bound went from 14,816 to
-/// 16,728 B, about 1.4 KB of it in the bounded recursions of the panic handler's formatting,
-/// which the analysis counts at every level.
-const PICO2_BUDGET: u64 = 20 * 1024;
+/// on) with 10 % to spare: 16 KiB, 3 % of its RAM.
+const PICO2_BUDGET: u64 = 16 * 1024;
 
 /// The Pico 2's RAM (the 512 KiB striped over SRAM0-7, as its memory.x says).
 const PICO2_RAM: u64 = 512 * 1024;
@@ -302,6 +317,7 @@ struct Image {
     task: (&'static str, Task),
     levels: &'static [Level],
     only_from: &'static [OnlyFrom],
+    only_to: &'static [OnlyTo],
     recursion: &'static [Recursion],
 }
 
@@ -320,6 +336,7 @@ const FIRMWARE: Image = Image {
     ),
     levels: LEVELS,
     only_from: ONLY_FROM,
+    only_to: &[FORMATTER_OUTPUT],
     recursion: BOUNDED_RECURSION,
 };
 
@@ -332,6 +349,7 @@ const PICO2: Image = Image {
     task: ("main task (one deciding poll)", PICO2_MAIN_TASK),
     levels: PICO2_LEVELS,
     only_from: PICO2_ONLY_FROM,
+    only_to: &[FORMATTER_OUTPUT],
     recursion: PICO2_RECURSION,
 };
 
@@ -1188,6 +1206,10 @@ impl Analysis<'_> {
                 && self.image.only_from.iter().all(|(callee, only, _)| {
                     !name.contains(callee) || only.iter().any(|o| caller.contains(o))
                 })
+                && self.image.only_to.iter().all(|(callers, to, _)| {
+                    !callers.iter().any(|c| caller.contains(c))
+                        || to.iter().any(|t| name.contains(t))
+                })
         };
         let tables = p.table_words.iter().filter(|(at, _)| match site {
             Site::Slot(k) => at.checked_sub(k).is_some_and(|start| p.is_table(start, k)),
@@ -1456,6 +1478,10 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
     for (callee, only, why) in image.only_from {
         let only = only.join("` or `");
         println!("`{callee}` is called through a pointer from `{only}` only: {why}");
+    }
+    for (callers, to, why) in image.only_to {
+        let (callers, to) = (callers.join("` or `"), to.join("` or `"));
+        println!("`{callers}` calls through a vtable only `{to}`: {why}");
     }
     for level in image.levels.iter().filter(|l| !l.excluded.name.is_empty()) {
         let Task { name, calls } = level.excluded;
