@@ -18,7 +18,7 @@ step "host tests"
 cargo test --workspace
 
 step "psmpa-core's defmt text: fact names reach the log as names (defmt's host encoder)"
-cargo test -p psmpa-core --features defmt,defmt/unstable-test --lib text
+cargo test -p psmpa-core --features defmt,defmt/unstable-test --lib text::tests
 
 step "docs (warnings are errors)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps

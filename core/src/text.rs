@@ -462,7 +462,7 @@ mod tests {
 
     /// Names, not indices, in a defmt log: the names go out as strings, in the set's order,
     /// and an undeclared fact as its index. `cargo test -p psmpa-core --features
-    /// defmt,defmt/unstable-test --lib text` (defmt's host encoder).
+    /// defmt,defmt/unstable-test --lib text::tests` (defmt's host encoder).
     #[cfg(feature = "defmt")]
     #[test]
     fn fact_names_reach_a_defmt_log_as_names() {

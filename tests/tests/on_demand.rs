@@ -7,7 +7,7 @@ use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::mission::{AnyBehaviour, load};
 use psmpa_core::{
     ActionId, ActionIo, Actuator, Caps, Config, ControlError, Failure, LoadedOf, Outcome, Platform,
-    Reading, Report, Runtime, Sensor, SensorFault, SensorId, TraceEvent,
+    Reading, Report, Runtime, Sensor, SensorFault, SensorId,
 };
 use psmpa_testkit::{Recorder, simulate_split};
 
@@ -75,12 +75,9 @@ fn run(tolerance_ms: u32) -> (Result<Report, ControlError>, Vec<(Instant, Failur
         simulate_split(rt.sensing(), rt.run(), Duration::from_secs(10)).expect("the run ends");
     let failures = rt
         .into_sink()
-        .find(|e| matches!(e, TraceEvent::PlanFailed { .. }))
+        .plan_failures()
         .into_iter()
-        .filter_map(|(t, e)| match e {
-            TraceEvent::PlanFailed { reason, .. } => Some((t, reason)),
-            _ => None,
-        })
+        .map(|(t, _, reason)| (t, reason))
         .collect();
     (done.output, failures)
 }

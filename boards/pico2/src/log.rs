@@ -1,5 +1,5 @@
 //! The runtime's trace in the defmt log, with the mission's names: what a robot builder
-//! watches on the bench (`INFO go_to_door started`, `WARN go_to_door: precondition violated,
+//! watches on the bench (`INFO go to door started`, `WARN go to door: precondition violated,
 //! {path_clear} false`). defmt's timestamp (`defmt-timestamp-uptime`) is the event's instant.
 //!
 //! Levels, so that `DEFMT_LOG` (`info` in `.cargo/config.toml`) chooses how much: plans,
