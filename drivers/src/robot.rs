@@ -73,7 +73,7 @@ use psmpa_core::{
 };
 
 use crate::PinError;
-use crate::hbridge::{Drive, Motor};
+use crate::hbridge::{Drive, FULL, Motor};
 use crate::hcsr04::{Hcsr04, Hcsr04Error, Range};
 use crate::marker::Marker;
 use crate::switch::Switch;
@@ -151,7 +151,9 @@ pub fn mission() -> Result<LoadedOf<'static, Names, FetchTeaCaps>, LoadError<'st
     load(MISSION.as_bytes(), &Names)
 }
 
-/// The robot's measurements and timings.
+/// The robot's measurements and timings. A board keeps them in a calibration record in
+/// flash ([`Settings::to_record`], [`Settings::from_record`]), so that a robot is calibrated
+/// (and a bench sets up its world) without building the firmware again.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Settings {
@@ -171,11 +173,91 @@ pub struct Settings {
     pub enter_permille: i16,
     /// How long going through the door takes.
     pub enter: Duration,
+    /// Processor time the walk spends planning its way each time it starts or resumes
+    /// driving (through [`FetchTea::with_compute`]; none by default): a robot's path planner,
+    /// computing on the deciding side while the sensors keep sampling.
+    pub plan: Duration,
+    /// The sonar's sampling period, if not the mission's.
+    pub sonar_period: Option<Duration>,
+    /// The bumper's sampling period, if not the mission's.
+    pub bumper_period: Option<Duration>,
+}
+
+/// Words in a calibration record: [`RECORD_MAGIC`], [`RECORD_VERSION`], the 11 settings, a
+/// CRC-32 of the rest.
+pub const RECORD_WORDS: usize = 14;
+/// A calibration record's first word: `PSMC` in little-endian bytes.
+pub const RECORD_MAGIC: u32 = u32::from_le_bytes(*b"PSMC");
+/// The layout of the calibration record this crate reads and writes.
+pub const RECORD_VERSION: u32 = 1;
+
+/// Why a calibration record was not taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecordError {
+    /// No record: the words are erased flash (all ones) or zeros.
+    Blank,
+    /// The first word is not [`RECORD_MAGIC`].
+    Magic,
+    /// A record of another layout (its version).
+    Version(u32),
+    /// The CRC-32 does not match: the record is damaged.
+    Checksum,
+    /// A setting out of its range: the walking speed is 0, a duty beyond full, a period of 0.
+    Invalid,
+}
+
+impl core::fmt::Display for RecordError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Blank => f.write_str("no calibration record"),
+            Self::Magic => f.write_str("not a calibration record (bad magic)"),
+            Self::Version(v) => write!(
+                f,
+                "a calibration record of version {v}, this firmware reads version {RECORD_VERSION}"
+            ),
+            Self::Checksum => f.write_str("the calibration record is damaged (CRC-32)"),
+            Self::Invalid => f.write_str("the calibration record holds a setting out of range"),
+        }
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for RecordError {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        match self {
+            Self::Blank => defmt::write!(f, "no calibration record"),
+            Self::Magic => defmt::write!(f, "not a calibration record (bad magic)"),
+            Self::Version(v) => defmt::write!(
+                f,
+                "a calibration record of version {=u32}, this firmware reads version {=u32}",
+                v,
+                RECORD_VERSION
+            ),
+            Self::Checksum => defmt::write!(f, "the calibration record is damaged (CRC-32)"),
+            Self::Invalid => {
+                defmt::write!(f, "the calibration record holds a setting out of range")
+            }
+        }
+    }
+}
+
+/// CRC-32 (IEEE 802.3, as zlib's) of `words` in little-endian bytes. Bitwise: 8 steps a
+/// byte, no table in flash.
+pub fn crc32(words: &[u32]) -> u32 {
+    let mut crc = u32::MAX;
+    for byte in words.iter().flat_map(|w| w.to_le_bytes()) {
+        crc ^= u32::from(byte);
+        for _ in 0..8 {
+            let mask = (crc & 1).wrapping_neg();
+            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+        }
+    }
+    !crc
 }
 
 impl Settings {
     /// 300 mm clearance; a 2 m walk at 600 ‰, 250 mm/s (8 s); pushing at 300 ‰ for 1.5 s;
-    /// entering at 500 ‰ for 3 s.
+    /// entering at 500 ‰ for 3 s; no planning time; the mission's periods.
     pub const DEFAULT: Self = Self {
         clearance_mm: 300,
         walk_mm: 2_000,
@@ -185,6 +267,9 @@ impl Settings {
         push: Duration::from_millis(1_500),
         enter_permille: 500,
         enter: Duration::from_millis(3_000),
+        plan: Duration::from_ticks(0),
+        sonar_period: None,
+        bumper_period: None,
     };
 
     /// How long the walk drives: `walk_mm / walk_mm_s`, rounded up to the millisecond; `None`
@@ -195,6 +280,93 @@ impl Settings {
             .checked_next_multiple_of(u64::from(self.walk_mm_s))?
             .checked_div(u64::from(self.walk_mm_s))?;
         Some(Duration::from_millis(ms))
+    }
+
+    /// The settings as a calibration record: durations in whole milliseconds (the planning
+    /// time in microseconds), a period of 0 for the mission's, duties as two's complement.
+    pub fn to_record(&self) -> [u32; RECORD_WORDS] {
+        let ms = |d: Duration| u32::try_from(d.as_millis()).unwrap_or(u32::MAX);
+        let period = |p: Option<Duration>| p.map_or(0, ms);
+        let duty = |d: i16| i32::from(d) as u32;
+        let mut r = [
+            RECORD_MAGIC,
+            RECORD_VERSION,
+            u32::from(self.clearance_mm),
+            self.walk_mm,
+            duty(self.walk_permille),
+            self.walk_mm_s,
+            duty(self.push_permille),
+            ms(self.push),
+            duty(self.enter_permille),
+            ms(self.enter),
+            u32::try_from(self.plan.as_micros()).unwrap_or(u32::MAX),
+            period(self.sonar_period),
+            period(self.bumper_period),
+            0,
+        ];
+        let (body, sum) = r.split_at_mut(RECORD_WORDS - 1);
+        if let Some(sum) = sum.first_mut() {
+            *sum = crc32(body);
+        }
+        r
+    }
+
+    /// The settings a calibration record holds, checked: its magic, version and CRC-32, and
+    /// each setting's range (a walking speed above 0, duties within ±1,000 ‰, periods above
+    /// 0).
+    pub fn from_record(r: &[u32; RECORD_WORDS]) -> Result<Self, RecordError> {
+        if r.iter().all(|w| *w == u32::MAX) || r.iter().all(|w| *w == 0) {
+            return Err(RecordError::Blank);
+        }
+        let [
+            magic,
+            version,
+            clearance,
+            walk_mm,
+            walk_permille,
+            walk_mm_s,
+            push_permille,
+            push_ms,
+            enter_permille,
+            enter_ms,
+            plan_us,
+            sonar_ms,
+            bumper_ms,
+            sum,
+        ] = *r;
+        if magic != RECORD_MAGIC {
+            return Err(RecordError::Magic);
+        }
+        if version != RECORD_VERSION {
+            return Err(RecordError::Version(version));
+        }
+        if r.get(..RECORD_WORDS - 1).map(crc32) != Some(sum) {
+            return Err(RecordError::Checksum);
+        }
+        let duty = |w: u32| {
+            i16::try_from(w as i32)
+                .ok()
+                .filter(|d| d.unsigned_abs() <= FULL.unsigned_abs())
+                .ok_or(RecordError::Invalid)
+        };
+        let period = |ms: u32| (ms > 0).then(|| Duration::from_millis(u64::from(ms)));
+        let settings = Self {
+            clearance_mm: u16::try_from(clearance).map_err(|_| RecordError::Invalid)?,
+            walk_mm,
+            walk_permille: duty(walk_permille)?,
+            walk_mm_s,
+            push_permille: duty(push_permille)?,
+            push: Duration::from_millis(u64::from(push_ms)),
+            enter_permille: duty(enter_permille)?,
+            enter: Duration::from_millis(u64::from(enter_ms)),
+            plan: Duration::from_micros(u64::from(plan_us)),
+            sonar_period: period(sonar_ms),
+            bumper_period: period(bumper_ms),
+        };
+        if walk_mm_s == 0 {
+            return Err(RecordError::Invalid);
+        }
+        Ok(settings)
     }
 }
 
@@ -249,7 +421,7 @@ pub struct Devices<So, Bu, Ca, Ha, Wh> {
 /// The Fetch Tea robot: its devices, bound to a mission's ids. Implements [`Sensor`],
 /// [`Actuator`] and [`Platform`] when the devices are this crate's drivers:
 /// `FetchTea<Hcsr04<_, _>, Switch<_>, Marker<_>, Switch<_>, Drive<_, _, _>>`.
-pub struct FetchTea<So, Bu, Ca, Ha, Wh> {
+pub struct FetchTea<So, Bu, Ca, Ha, Wh, Pc = ()> {
     parts: Parts,
     settings: Settings,
     sonar: Mutex<CriticalSectionRawMutex, So>,
@@ -257,6 +429,21 @@ pub struct FetchTea<So, Bu, Ca, Ha, Wh> {
     camera: Mutex<CriticalSectionRawMutex, Ca>,
     handle: Mutex<CriticalSectionRawMutex, Ha>,
     wheels: BlockingMutex<CriticalSectionRawMutex, RefCell<Wh>>,
+    /// Spends [`Settings::plan`] of processor time.
+    compute: Pc,
+}
+
+/// Processor work: what a walk's planning costs ([`Settings::plan`]). `()` does none (on the
+/// host, in virtual time, planning takes no time); a board busy-waits (a stand-in for a path
+/// planner's computing). Static dispatch: a call through a pointer would be one the stack
+/// analysis must assume may go anywhere.
+pub trait Compute {
+    /// Computes for `time`.
+    fn compute(&self, time: Duration);
+}
+
+impl Compute for () {
+    fn compute(&self, _: Duration) {}
 }
 
 impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
@@ -278,16 +465,37 @@ impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
             camera: Mutex::new(camera),
             handle: Mutex::new(handle),
             wheels: BlockingMutex::new(RefCell::new(wheels)),
+            compute: (),
         }
     }
 
+    /// The robot, spending [`Settings::plan`] through `compute` each time a walk starts or
+    /// resumes driving: on a board, a busy wait of that long (`embassy_time::block_for`), the
+    /// stand-in for a path planner. Without it (on the host, in virtual time) planning takes
+    /// no time.
+    pub fn with_compute<Pc: Compute>(self, compute: Pc) -> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
+        FetchTea {
+            parts: self.parts,
+            settings: self.settings,
+            sonar: self.sonar,
+            bumper: self.bumper,
+            camera: self.camera,
+            handle: self.handle,
+            wheels: self.wheels,
+            compute,
+        }
+    }
+}
+
+impl<So, Bu, Ca, Ha, Wh, Pc> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
     /// The settings.
     pub const fn settings(&self) -> &Settings {
         &self.settings
     }
 }
 
-impl<T, E, B, C, H, Wh> Sensor for FetchTea<Hcsr04<T, E>, Switch<B>, Marker<C>, Switch<H>, Wh>
+impl<T, E, B, C, H, Wh, Pc> Sensor
+    for FetchTea<Hcsr04<T, E>, Switch<B>, Marker<C>, Switch<H>, Wh, Pc>
 where
     T: OutputPin,
     E: InputPin + Wait,
@@ -338,7 +546,9 @@ where
     }
 }
 
-impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin> FetchTea<So, Bu, Ca, Ha, Drive<L, R, S>> {
+impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
+    FetchTea<So, Bu, Ca, Ha, Drive<L, R, S>, Pc>
+{
     /// Runs `command` on the wheels.
     fn wheels(
         &self,
@@ -369,7 +579,8 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin> FetchTea<So, Bu, Ca, Ha, 
         self.stop(Outcome::Success)
     }
 
-    /// Drives for the walk's time, braking while the precondition is false. The wheels are
+    /// Drives for the walk's time, braking while the precondition is false; each time it
+    /// starts or resumes driving it first plans its way ([`Settings::plan`]). The wheels are
     /// written only when the robot starts or stops, not on every sample.
     async fn walk(&self, io: &ActionIo<'_>) -> Outcome {
         let Some(mut left) = self.settings.walk_time() else {
@@ -382,6 +593,9 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin> FetchTea<So, Bu, Ca, Ha, 
             let go = io.violation().is_none();
             if moving != Some(go) {
                 let set = if go {
+                    if self.settings.plan.as_ticks() > 0 {
+                        self.compute.compute(self.settings.plan);
+                    }
                     self.wheels(|w| w.drive(duty, duty))
                 } else {
                     self.wheels(Drive::brake)
@@ -427,8 +641,8 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin> FetchTea<So, Bu, Ca, Ha, 
     }
 }
 
-impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin> Actuator
-    for FetchTea<So, Bu, Ca, Ha, Drive<L, R, S>>
+impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator
+    for FetchTea<So, Bu, Ca, Ha, Drive<L, R, S>, Pc>
 {
     async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
         match self.parts.action(action) {
@@ -448,7 +662,7 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin> Actuator
     }
 }
 
-impl<So, Bu, Ca, Ha, Wh> Platform for FetchTea<So, Bu, Ca, Ha, Wh> {
+impl<So, Bu, Ca, Ha, Wh, Pc> Platform for FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
     // Sensing runs on an interrupt executor above deciding.
     type Mutex = CriticalSectionRawMutex;
 }
