@@ -310,6 +310,9 @@ pub struct Echo {
     mm: Option<u32>,
     /// The obstacles it registers, by index.
     registers: u32,
+    /// The obstacles it came from (nearest ahead, in the cone), by index: what registers when
+    /// the reading is below the threshold.
+    from: u32,
     /// The obstacles it was certain to register whatever the noise.
     certain: u32,
     /// Whether a stuck fault is to stick at this reading.
@@ -324,6 +327,20 @@ pub struct Echo {
 pub struct Touch {
     /// The obstacles touched, by index.
     touching: u32,
+}
+
+impl Echo {
+    /// The reading in mm the echo carries (a ranger's pulse is this long); `None`: lost.
+    pub const fn mm(&self) -> Option<u32> {
+        self.mm
+    }
+}
+
+impl Touch {
+    /// Whether the read felt an obstacle: a bump switch that is closed.
+    pub const fn any(&self) -> bool {
+        self.touching != 0
+    }
 }
 
 /// Obstacles by index as bits: one `u32` holds them all.
@@ -466,6 +483,7 @@ impl<L: WorldLog> State<L> {
         let mut echo = Echo {
             mm: None,
             registers: 0,
+            from: 0,
             certain: 0,
             sticks: false,
             pos_um: self.pos_um,
@@ -510,6 +528,7 @@ impl<L: WorldLog> State<L> {
                 if o.kind == Kind::Box && o.pos_um - self.pos_um == d && d >= o.seen_from() {
                     echo.certain |= u32::from(certain) << i;
                     echo.registers |= u32::from(registered) << i;
+                    echo.from |= 1 << i;
                 }
             }
         }
@@ -1112,6 +1131,23 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         });
     }
 
+    /// Puts a robot that stands within `within_um` of `place`, and no obstacle between, on
+    /// it: where a robot that dead-reckons its walk (the bench's wheeled one) stops is its
+    /// place, to its odometry's error. Whether the robot stands at `place` now.
+    pub fn dock(&self, place: Place, within_um: i64) -> bool {
+        self.with(|s, sc| {
+            let at = place.at_um(sc);
+            let (from, to) = (s.pos_um.min(at), s.pos_um.max(at));
+            let between = s
+                .present_obstacles()
+                .any(|(_, o)| o.pos_um > from && o.pos_um < to);
+            if s.pos_um.abs_diff(at) <= within_um.unsigned_abs() && !between {
+                s.pos_um = at;
+            }
+            s.pos_um == at
+        })
+    }
+
     /// Opens a door.
     pub fn open_door(&self, place: Place) {
         self.with(|s, _| {
@@ -1232,6 +1268,24 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
             s.emit(WorldEvent::Sample(Device::Sonar, mm));
             Some(mm)
         })
+    }
+
+    /// [`sonar_deliver`](Self::sonar_deliver) of what the robot's ranger measured of `echo`,
+    /// `mm`, rather than the world's reading: a real ranger times the echo, and an edge that
+    /// waits moves its reading (the bench's firmware measures the pulse the world sent). The
+    /// measured reading decides whether the boxes the echo came from register, by the same
+    /// rule. `None`, and nothing registers, when the world's echo was lost.
+    pub fn sonar_deliver_measured(&self, mut echo: Echo, mm: u32) -> Option<u32> {
+        if echo.mm.is_none() {
+            return self.sonar_deliver(echo);
+        }
+        echo.mm = Some(mm);
+        echo.registers = if self.scenario.sonar.registers(i64::from(mm)) {
+            echo.from
+        } else {
+            0
+        };
+        self.sonar_deliver(echo)
     }
 
     /// Starts a bumper read: what the robot touches now.
