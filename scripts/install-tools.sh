@@ -1,18 +1,21 @@
 #!/usr/bin/env bash
 # Installs the tools a clean machine lacks, and only those that are missing:
 #
-#   bash scripts/install-tools.sh board      # build the Pico 2 board's image (boards/pico2)
+#   bash scripts/install-tools.sh board      # build the boards' images (boards/pico2, boards/pico)
+#   bash scripts/install-tools.sh bench      # and play them on the emulated Pico (cargo xtask hil)
 #   bash scripts/install-tools.sh firmware   # build the firmware and run it in QEMU
 #   bash scripts/install-tools.sh            # everything scripts/test.sh (CI) runs
 #
-# board: the thumbv8m.main-none-eabihf target (rustup) and flip-link (cargo install), what
-# `cargo build --release` in boards/pico2 needs.
+# board: the thumbv8m.main-none-eabihf and thumbv6m-none-eabi targets (rustup) and flip-link
+# (cargo install), what `cargo build --release` in boards/pico2 and boards/pico needs.
+# bench: also Node.js (apt, if the machine has none) and the harness's rp2040js, pinned by
+# xtask/hil/package-lock.json (`npm ci`), what `cargo xtask hil` needs.
 #
 # firmware: the thumbv7em-none-eabihf and thumbv8m.main-none-eabihf targets (rustup; QEMU's
 # mps2-an386 and mps2-an505; the Pico 2 board), qemu-system-arm (apt), defmt-print and flip-link (cargo install,
 # about 4 minutes on 2 cores).
-# all: also the thumbv6m-none-eabi and riscv32imac-unknown-none-elf targets, clippy and
-# rustfmt, binutils-arm-none-eabi (objdump for `cargo xtask stack`) and valgrind (callgrind).
+# all: all of these, the riscv32imac-unknown-none-elf target, clippy and rustfmt,
+# binutils-arm-none-eabi (objdump for `cargo xtask stack`) and valgrind (callgrind).
 #
 # apt installs without recommended packages: qemu-system-arm then pulls 25 packages (80 MB
 # installed) instead of 165 (870 MB). On Debian 12 it comes with qemu-system-common 7.2,
@@ -22,22 +25,25 @@ set -euo pipefail
 
 what="${1:-all}"
 case "$what" in
-  board | firmware | all) ;;
+  board | bench | firmware | all) ;;
   *)
-    echo "usage: bash scripts/install-tools.sh [board|firmware|all]" >&2
+    echo "usage: bash scripts/install-tools.sh [board|bench|firmware|all]" >&2
     exit 2
     ;;
 esac
 
-targets=(thumbv8m.main-none-eabihf)
+targets=(thumbv8m.main-none-eabihf thumbv6m-none-eabi)
 components=()
 packages=()
-if [ "$what" != board ]; then
+if [ "$what" = firmware ] || [ "$what" = all ]; then
   targets+=(thumbv7em-none-eabihf)
   packages+=(qemu-system-arm:qemu-system-arm)
 fi
+if [ "$what" = bench ] || [ "$what" = all ]; then
+  packages+=(node:nodejs npm:npm)
+fi
 if [ "$what" = all ]; then
-  targets+=(thumbv6m-none-eabi riscv32imac-unknown-none-elf)
+  targets+=(riscv32imac-unknown-none-elf)
   components+=(clippy rustfmt)
   packages+=(arm-none-eabi-objdump:binutils-arm-none-eabi valgrind:valgrind)
 fi
@@ -66,5 +72,17 @@ if ((${#missing[@]})); then
     apt-get install -y -q --no-install-recommends "${missing[@]}"
 fi
 
-[ "$what" = board ] || command -v defmt-print >/dev/null || cargo install defmt-print --locked
+if [ "$what" = firmware ] || [ "$what" = all ]; then
+  command -v defmt-print >/dev/null || cargo install defmt-print --locked
+fi
 command -v flip-link >/dev/null || cargo install flip-link --locked
+
+# The bench's harness: rp2040js at the version its lock file pins, installed again only when
+# the lock file changed since (npm ci writes node_modules/.package-lock.json).
+if [ "$what" = bench ] || [ "$what" = all ]; then
+  hil="$(dirname "$0")/../xtask/hil"
+  if ! cmp -s "$hil/package-lock.json" "$hil/node_modules/.psmpa-lock" 2>/dev/null; then
+    npm ci --prefix "$hil" --no-audit --no-fund
+    cp "$hil/package-lock.json" "$hil/node_modules/.psmpa-lock"
+  fi
+fi

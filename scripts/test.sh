@@ -5,7 +5,7 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n== %s\n' "$*"; }
 
-step "tools: MCU targets, clippy, rustfmt, QEMU, ARM binutils, valgrind, defmt-print, flip-link (only what is missing)"
+step "tools: MCU targets, clippy, rustfmt, QEMU, ARM binutils, valgrind, defmt-print, flip-link, the bench's rp2040js (only what is missing)"
 bash scripts/install-tools.sh all
 
 step "format"
@@ -41,8 +41,11 @@ for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
   cargo build -p psmpa-drivers --target "$target" --release --features defmt
 done
 
-step "the Pico 2 board: formatted, clippy-clean and built as its README says (cargo build --release in boards/pico2)"
-(cd boards/pico2 && cargo fmt --check && cargo clippy --release -- -D warnings && cargo build --release)
+step "the boards (Pico 2, Pico): formatted, clippy-clean and built as their READMEs say (cargo build --release in boards/pico2, boards/pico)"
+(cd boards && cargo fmt --all --check)
+for board in pico2 pico; do
+  (cd "boards/$board" && cargo clippy --release -- -D warnings && cargo build --release)
+done
 
 step "a crate outside the workspace, at its own tick rate, tests its mission with psmpa-testkit"
 cargo test --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside
@@ -70,7 +73,10 @@ cargo xtask qemu --inject-fault --expect-failure
 step "firmware size: flash, static RAM, stack high-water against budget and snapshot (the QEMU images and the Pico 2 board)"
 cargo xtask size
 
-step "firmware stack: static worst case from the binary, at least the QEMU high-water mark"
+step "the bench: the Pico's firmware on an emulated RP2040 (rp2040js) against the project's world, every scenario and fault, checked against psmpa-sim and its response-time bounds"
+cargo xtask hil
+
+step "firmware stack: static worst case from the binary, at least the high-water marks of QEMU and the bench"
 cargo xtask stack
 
 step "timing: response-time analysis from QEMU step costs on both cores; every measured reaction within its bound"

@@ -173,20 +173,57 @@ fn stack_overflow_faults(machine: Machine, elf: &Path) -> Result<bool, String> {
     }
 }
 
-/// Builds the Pico 2 board's image as its README says (`cargo build --release` in
-/// `boards/pico2`, whose `.cargo/config.toml` sets the target and linker) and returns its ELF:
-/// the image a user flashes, so no flags of this task's.
-pub fn build_board() -> Result<PathBuf, String> {
-    let dir = root().join("boards/pico2");
-    // A package of its own: `cargo build --release` there, into its own `target/`.
-    let status = cargo_in(&dir)
+/// A board of `boards/` (a workspace of its own, one target folder `boards/target`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Board {
+    /// Its crate and image.
+    pub name: &'static str,
+    /// Its folder under `boards/`.
+    pub dir: &'static str,
+    /// The target its `.cargo/config.toml` builds for.
+    pub target: &'static str,
+    /// The board, for messages.
+    pub what: &'static str,
+}
+
+/// The Raspberry Pi Pico 2 (RP2350A, Cortex-M33).
+pub const PICO2: Board = Board {
+    name: "psmpa-pico2",
+    dir: "pico2",
+    target: "thumbv8m.main-none-eabihf",
+    what: "Raspberry Pi Pico 2",
+};
+
+/// The Raspberry Pi Pico (RP2040, Cortex-M0+).
+pub const PICO: Board = Board {
+    name: "psmpa-pico",
+    dir: "pico",
+    target: "thumbv6m-none-eabi",
+    what: "Raspberry Pi Pico",
+};
+
+/// The boards' workspace.
+pub fn boards() -> PathBuf {
+    root().join("boards")
+}
+
+/// Builds a board's image as its README says (`cargo build --release` in its folder, whose
+/// `.cargo/config.toml` sets the target and linker) and returns its ELF: the image a user
+/// flashes, so no flags of this task's.
+pub fn build_board(board: Board) -> Result<PathBuf, String> {
+    let status = cargo_in(&boards().join(board.dir))
+        .env("CARGO_TARGET_DIR", boards().join("target"))
         .args(["build", "--quiet", "--release"])
         .status()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
     if !status.success() {
-        return Err("the Pico 2 board does not build".to_owned());
+        return Err(format!("the {} board does not build", board.what));
     }
-    Ok(dir.join("target/thumbv8m.main-none-eabihf/release/psmpa-pico2"))
+    Ok(boards()
+        .join("target")
+        .join(board.target)
+        .join("release")
+        .join(board.name))
 }
 
 /// The product-shaped image beside the firmware `elf` (one build makes both).

@@ -19,6 +19,7 @@
 mod bench;
 mod callgrind;
 mod firmware;
+mod hil;
 mod planning;
 mod size;
 mod stack;
@@ -76,6 +77,17 @@ enum Task {
         #[arg(long, conflicts_with_all = ["no_run", "instructions"])]
         planning: bool,
     },
+    /// The robot's firmware on an emulated Raspberry Pi Pico (RP2040, rp2040js), in the loop
+    /// with the project's world: every shipped scenario and the bench's fault scenarios, or
+    /// the files given; each checked against psmpa-sim and its response-time bounds.
+    Hil {
+        /// Scenario files (psmpa-sim's format) or the bench's fault scenarios
+        /// (boards/faults/*.json); none: every shipped one.
+        files: Vec<std::path::PathBuf>,
+        /// Print one JSON object a run on stdout, nothing else.
+        #[arg(long)]
+        json: bool,
+    },
     /// Response-time analysis from step costs measured in QEMU on both machines: a latency
     /// bound per sensor, checked against every measured reaction; the tables also go to a
     /// JSON file.
@@ -94,7 +106,21 @@ enum Task {
 }
 
 fn main() -> ExitCode {
-    let result = match Cli::parse().task {
+    let task = Cli::parse().task;
+    if let Task::Hil { files, json } = &task {
+        return match hil::run(files, *json) {
+            hil::Ending::Passed => ExitCode::SUCCESS,
+            hil::Ending::Failed(e) => {
+                eprintln!("xtask hil: {e}");
+                ExitCode::FAILURE
+            }
+            hil::Ending::BadInput(e) => {
+                eprintln!("xtask hil: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
+    let result = match task {
         Task::Qemu {
             inject_fault,
             expect_failure,
@@ -111,6 +137,7 @@ fn main() -> ExitCode {
             json,
             expect_failure,
         } => timing::run(clock_hz, json).then_expect(expect_failure),
+        Task::Hil { .. } => Ok(()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

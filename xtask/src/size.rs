@@ -11,7 +11,7 @@ use std::path::Path;
 use object::{Object, ObjectSection};
 use serde::{Deserialize, Serialize};
 
-use crate::firmware;
+use crate::firmware::{self, Board, PICO, PICO2};
 
 /// What an image may take, bytes.
 struct Budget {
@@ -41,11 +41,12 @@ const PRODUCT: Budget = Budget {
     ram_with_stack: 8 * 1024,
 };
 
-/// The Fetch Tea robot on a Pico 2 (`boards/pico2`, `cargo build --release` there): budgets
-/// set from its first measurement (65,024 B flash and 6,456 B static RAM at b35a701), with
-/// about 10 % and 25 % headroom. Its stack: `cargo xtask stack` (no QEMU runs the RP2350).
+/// The Fetch Tea robot on a Pico 2 or a Pico (`boards/pico2`, `boards/pico`, `cargo build
+/// --release` there): budgets set from the Pico 2's first measurement (65,024 B flash and
+/// 6,456 B static RAM), with about 10 % and 25 % headroom, the same for both chips. Their
+/// stacks: `cargo xtask stack`.
 const BOARD_FLASH: u64 = 72 * 1024;
-/// Static RAM budget of the board image (it has 512 KiB).
+/// Static RAM budget of a board image (the Pico has 264 KiB, the Pico 2 520 KiB).
 const BOARD_STATIC_RAM: u64 = 8 * 1024;
 
 /// Growth over the snapshot that fails the check.
@@ -80,13 +81,19 @@ pub struct Snapshot {
     pub product: Sizes,
     /// `psmpa-pico2`: the Fetch Tea robot on a Raspberry Pi Pico 2.
     pub pico2: BoardSizes,
+    /// `psmpa-pico`: the Fetch Tea robot on a Raspberry Pi Pico.
+    pub pico: BoardSizes,
 }
 
-const FLASH_SECTIONS: [&str; 5] = [
+const FLASH_SECTIONS: [&str; 7] = [
+    // The RP2040's second-stage bootloader.
+    ".boot2",
     ".vector_table",
     // The RP2350's boot block (the QEMU images have none).
     ".start_block",
     ".text",
+    // The boards' test points.
+    ".psmpa_test",
     ".rodata",
     ".data",
 ];
@@ -272,13 +279,22 @@ fn report(
     failures
 }
 
-/// Prints the board image's rows and returns what breaks its budget or grew past the snapshot.
-fn report_board(now: BoardSizes, old: Option<BoardSizes>, check_growth: bool) -> Vec<String> {
-    println!("psmpa-pico2 (Fetch Tea robot on a Pico 2: core, loader, drivers, embassy-rp):");
+/// Prints a board image's rows and returns what breaks its budget or grew past the snapshot.
+fn report_board(
+    board: Board,
+    now: BoardSizes,
+    old: Option<BoardSizes>,
+    check_growth: bool,
+) -> Vec<String> {
+    let name = board.name;
+    println!(
+        "{name} (Fetch Tea robot on a {}: core, loader, drivers, embassy-rp):",
+        board.what
+    );
     let mut failures = Vec::new();
     for (what, value, old, budget) in [
         (
-            "flash (.vector_table+.start_block+.text+..)",
+            "flash (boot block+.vector_table+.text+..)",
             now.flash,
             old.map(|s| s.flash),
             BOARD_FLASH,
@@ -297,13 +313,13 @@ fn report_board(now: BoardSizes, old: Option<BoardSizes>, check_growth: bool) ->
         );
         if value > budget {
             failures.push(format!(
-                "psmpa-pico2: {what} {value} B is over the budget of {budget} B"
+                "{name}: {what} {value} B is over the budget of {budget} B"
             ));
         }
         if let Some(old) = old.filter(|_| check_growth)
             && value * 100 > old * (100 + GROWTH_PERCENT)
         {
-            failures.push(format!("psmpa-pico2: {what} grew from {old} B to {value} B (more than {GROWTH_PERCENT} %); if intended, run cargo xtask size --bless"));
+            failures.push(format!("{name}: {what} grew from {old} B to {value} B (more than {GROWTH_PERCENT} %); if intended, run cargo xtask size --bless"));
         }
     }
     failures
@@ -313,12 +329,15 @@ fn report_board(now: BoardSizes, old: Option<BoardSizes>, check_growth: bool) ->
 pub fn run(bless: bool) -> Result<(), String> {
     let elf = firmware::build(&[])?;
     let product_elf = firmware::product(&elf);
-    let board_elf = firmware::build_board()?;
-    let (flash, static_ram) = sections(&board_elf)?;
+    let board_elf = firmware::build_board(PICO2)?;
+    let pico_elf = firmware::build_board(PICO)?;
+    let board =
+        |elf: &Path| sections(elf).map(|(flash, static_ram)| BoardSizes { flash, static_ram });
     let now = Snapshot {
         firmware: measure(&elf)?,
         product: measure(&product_elf)?,
-        pico2: BoardSizes { flash, static_ram },
+        pico2: board(&board_elf)?,
+        pico: board(&pico_elf)?,
     };
     let path = firmware::root().join("firmware/size.json");
     let snapshot: Option<Snapshot> = std::fs::read(&path)
@@ -340,11 +359,23 @@ pub fn run(bless: bool) -> Result<(), String> {
         &PRODUCT,
         !bless,
     ));
-    failures.extend(report_board(now.pico2, snapshot.map(|s| s.pico2), !bless));
+    failures.extend(report_board(
+        PICO2,
+        now.pico2,
+        snapshot.map(|s| s.pico2),
+        !bless,
+    ));
+    failures.extend(report_board(
+        PICO,
+        now.pico,
+        snapshot.map(|s| s.pico),
+        !bless,
+    ));
     for (name, elf, flash) in [
         ("psmpa-firmware", &elf, now.firmware.flash),
         ("psmpa-product", &product_elf, now.product.flash),
         ("psmpa-pico2", &board_elf, now.pico2.flash),
+        ("psmpa-pico", &pico_elf, now.pico.flash),
     ] {
         println!();
         println!(

@@ -211,9 +211,14 @@ const PICO2_RECURSION: &[Recursion] = &[
 const PICO2_ONLY_FROM: &[OnlyFrom] = &[
     (
         "embassy_executor::raw::TaskStorage<",
-        &["embassy_rp::executor::thread::Executor::run", "SWI_IRQ_1"],
-        "embassy's poll loop is the only caller of a task's poll function; here it is inlined \
-         into the thread-mode executor's run loop and the interrupt executor's handler",
+        &[
+            "embassy_rp::executor::thread::Executor::run",
+            "embassy_executor::raw::Executor::poll",
+            "SWI_IRQ_1",
+        ],
+        "embassy's poll loop is the only caller of a task's poll function; on the Cortex-M33 it \
+         is inlined into the thread-mode executor's run loop and the interrupt executor's \
+         handler, on the Cortex-M0+ it stays `raw::Executor::poll`",
     ),
     FORMATTING,
 ];
@@ -223,12 +228,12 @@ const PICO2_MAIN_TASK: Task = Task {
     name: "embassy_executor::raw::TaskStorage<",
     // Main's body, or, inlined into the poll, the mission it loads.
     calls: &[
-        "psmpa_pico2::____embassy_main_task",
+        "psmpa_board_rp::____embassy_main_task",
         "psmpa_core::mission::",
     ],
 };
 
-/// The task `psmpa_pico2::sensing`: its poll function runs the runtime's sensing side.
+/// The task `psmpa_board_rp::sensing`: its poll function runs the runtime's sensing side.
 const PICO2_SENSING_TASK: Task = Task {
     name: "embassy_executor::raw::TaskStorage<",
     calls: &[">>::sensing"],
@@ -255,55 +260,69 @@ const PICO2_SENSING_TASK: Task = Task {
 /// PendSV and SVCall are unused (the time driver is TIMER0), NMI is not routed (the RP2350's
 /// NMI mask is zero at reset). Every other vector is cortex-m-rt's `DefaultHandler`, never
 /// enabled.
-const PICO2_LEVELS: &[Level] = &[
-    Level {
-        label: "thread mode (main, deciding executor)",
-        entry: "Reset",
-        excluded: PICO2_SENSING_TASK,
-        why: "the sensing task is spawned on the interrupt executor, which SWI_IRQ_1 polls",
-        show_path: true,
-    },
-    Level {
-        label: "IO_IRQ_BANK0, priority 3 (GPIO edges)",
-        entry: "IO_IRQ_BANK0",
-        excluded: NO_TASK,
-        why: "",
-        show_path: true,
-    },
-    Level {
-        label: "SWI_IRQ_1, priority 2 (sensing executor)",
-        entry: "SWI_IRQ_1",
-        excluded: PICO2_MAIN_TASK,
-        why: "main's task is spawned on the thread-mode executor, which thread mode polls",
-        show_path: true,
-    },
-    Level {
-        label: "TIMER0_IRQ_0, priority 0 (alarm, time driver)",
-        entry: "TIMER0_IRQ_0",
-        excluded: NO_TASK,
-        why: "",
-        show_path: true,
-    },
-    Level {
-        label: "HardFault",
-        entry: "HardFault",
-        excluded: NO_TASK,
-        why: "",
-        show_path: true,
-    },
-];
+const fn board_levels(alarm: &'static str, alarm_label: &'static str) -> [Level; 5] {
+    [
+        Level {
+            label: "thread mode (main, deciding executor)",
+            entry: "Reset",
+            excluded: PICO2_SENSING_TASK,
+            why: "the sensing task is spawned on the interrupt executor, which SWI_IRQ_1 polls",
+            show_path: true,
+        },
+        Level {
+            label: "IO_IRQ_BANK0, priority 3 (GPIO edges)",
+            entry: "IO_IRQ_BANK0",
+            excluded: NO_TASK,
+            why: "",
+            show_path: true,
+        },
+        Level {
+            label: "SWI_IRQ_1, priority 2 (sensing executor)",
+            entry: "SWI_IRQ_1",
+            excluded: PICO2_MAIN_TASK,
+            why: "main's task is spawned on the thread-mode executor, which thread mode polls",
+            show_path: true,
+        },
+        Level {
+            label: alarm_label,
+            entry: alarm,
+            excluded: NO_TASK,
+            why: "",
+            show_path: true,
+        },
+        Level {
+            label: "HardFault",
+            entry: "HardFault",
+            excluded: NO_TASK,
+            why: "",
+            show_path: true,
+        },
+    ]
+}
 
-/// The Pico 2 board's stack budget, set from the first bound (14,888 B, no board to measure
-/// on) with 10 % to spare: 16 KiB, 3 % of its RAM.
-const PICO2_BUDGET: u64 = 16 * 1024;
+/// The Pico 2's levels: its alarm is `TIMER0_IRQ_0`.
+const PICO2_LEVELS: &[Level] = &board_levels(
+    "TIMER0_IRQ_0",
+    "TIMER0_IRQ_0, priority 0 (alarm, time driver)",
+);
 
-/// The Pico 2's RAM (the 512 KiB striped over SRAM0-7, as its memory.x says).
-const PICO2_RAM: u64 = 512 * 1024;
+/// The Pico's levels: the same on the RP2040, whose alarm is `TIMER_IRQ_0`.
+const PICO_LEVELS: &[Level] = &board_levels(
+    "TIMER_IRQ_0",
+    "TIMER_IRQ_0, priority 0 (alarm, time driver)",
+);
+
+/// A board's stack budget, set from the Pico 2's first bound (14,888 B) with 10 % to spare:
+/// 16 KiB, 3 % of the Pico 2's RAM, 6 % of the Pico's.
+const BOARD_BUDGET: u64 = 16 * 1024;
 
 /// Hardware exception frame with the floating-point context, plus the alignment word. The
 /// same on the RP2350's Cortex-M33: its image runs Secure and leaves FPCCR.TS at 0, so no
 /// extra Secure context is stacked.
 const EXCEPTION_FRAME: u64 = 108;
+
+/// The Cortex-M0+'s exception frame (no floating-point context), plus the alignment word.
+const EXCEPTION_FRAME_M0: u64 = 36;
 
 /// An image to analyse: how to build it (as shipped, and for the analysis), the sections that
 /// must be equal, its task line, levels and rules.
@@ -319,6 +338,8 @@ struct Image {
     only_from: &'static [OnlyFrom],
     only_to: &'static [OnlyTo],
     recursion: &'static [Recursion],
+    /// What an exception stacks.
+    exception_frame: u64,
 }
 
 /// The QEMU firmware (mps2-an386).
@@ -338,19 +359,49 @@ const FIRMWARE: Image = Image {
     only_from: ONLY_FROM,
     only_to: &[FORMATTER_OUTPUT],
     recursion: BOUNDED_RECURSION,
+    exception_frame: EXCEPTION_FRAME,
 };
 
 /// The Fetch Tea robot on a Pico 2 (`boards/pico2`).
 const PICO2: Image = Image {
     what: "Pico 2 image",
-    shipped: firmware::build_board,
-    analysed: build_board,
-    sections: &[".vector_table", ".start_block", ".text", ".rodata", ".data"],
+    shipped: || firmware::build_board(firmware::PICO2),
+    analysed: || build_board(firmware::PICO2),
+    sections: &[
+        ".vector_table",
+        ".start_block",
+        ".text",
+        ".psmpa_test",
+        ".rodata",
+        ".data",
+    ],
     task: ("main task (one deciding poll)", PICO2_MAIN_TASK),
     levels: PICO2_LEVELS,
     only_from: PICO2_ONLY_FROM,
     only_to: &[FORMATTER_OUTPUT],
     recursion: PICO2_RECURSION,
+    exception_frame: EXCEPTION_FRAME,
+};
+
+/// The Fetch Tea robot on a Pico (`boards/pico`): the same code on the RP2040's Cortex-M0+.
+const PICO: Image = Image {
+    what: "Pico image",
+    shipped: || firmware::build_board(firmware::PICO),
+    analysed: || build_board(firmware::PICO),
+    sections: &[
+        ".boot2",
+        ".vector_table",
+        ".text",
+        ".psmpa_test",
+        ".rodata",
+        ".data",
+    ],
+    task: ("main task (one deciding poll)", PICO2_MAIN_TASK),
+    levels: PICO_LEVELS,
+    only_from: PICO2_ONLY_FROM,
+    only_to: &[FORMATTER_OUTPUT],
+    recursion: PICO2_RECURSION,
+    exception_frame: EXCEPTION_FRAME_M0,
 };
 
 /// One disassembled instruction.
@@ -464,15 +515,15 @@ fn build() -> Result<PathBuf, String> {
         .join("psmpa-firmware"))
 }
 
-/// Builds the Pico 2 board for analysis, from `boards/pico2` so that its `.cargo/config.toml`
-/// applies (target, linker), into `target/stack` there: the shipped image's build (a plain
-/// `cargo build --release`, no flags) plus `-Z emit-stack-sizes` and `--emit-relocs`.
+/// Builds a board for analysis, from its folder so that its `.cargo/config.toml` applies
+/// (target, linker), into `boards/target/stack`: the shipped image's build (a plain `cargo
+/// build --release`, no flags) plus `-Z emit-stack-sizes` and `--emit-relocs`.
 /// `RUSTC_BOOTSTRAP` makes the compiler mangle with v0 as a nightly one does, which reorders
 /// the code and constants; `-C symbol-mangling-version=legacy` (unstable, hence
 /// `-Z unstable-options`) keeps the stable compiler's names, so [`run`] finds the same bytes.
-fn build_board() -> Result<PathBuf, String> {
-    let dir = firmware::root().join("boards/pico2");
-    let target_dir = dir.join("target/stack");
+fn build_board(board: firmware::Board) -> Result<PathBuf, String> {
+    let dir = firmware::boards().join(board.dir);
+    let target_dir = firmware::boards().join("target/stack");
     let flags = [
         "-Zemit-stack-sizes",
         "-Clink-arg=--emit-relocs",
@@ -482,8 +533,11 @@ fn build_board() -> Result<PathBuf, String> {
     .join("\x1f");
     let mut cmd = firmware::cargo_in(&dir);
     cmd.args(["build", "--quiet", "--release"]);
-    build_with(cmd, &flags, &target_dir, "the Pico 2 board")?;
-    Ok(target_dir.join("thumbv8m.main-none-eabihf/release/psmpa-pico2"))
+    build_with(cmd, &flags, &target_dir, board.what)?;
+    Ok(target_dir
+        .join(board.target)
+        .join("release")
+        .join(board.name))
 }
 
 /// Runs the cargo build `cmd` with `flags` (unit-separated) into `target_dir`, the `-Z` flags
@@ -610,6 +664,33 @@ fn comment_address(args: &str) -> Option<u64> {
         .split_whitespace()
         .next()?;
     u64::from_str_radix(hex, 16).ok()
+}
+
+/// Whether `mov pc, rY` at `code[i]` dispatches through a jump table of the function itself
+/// (`range`): Thumb-1 has no `tbb`, so LLVM's switches on the Cortex-M0+ are `adr rX, table;
+/// ldr rY, [rX, rZ]; mov pc, rY` with the table inside the function. A branch, not a call.
+fn jump_table(code: &[Insn], i: usize, range: std::ops::Range<u64>) -> bool {
+    let Some(insn) = code.get(i) else {
+        return false;
+    };
+    let target = insn.args.trim_start_matches("pc,").trim().to_owned();
+    let before = code.get(i.saturating_sub(6)..i).unwrap_or(&[]);
+    // `ldr rY, [rX, rZ]` loads the entry; rX is the table.
+    let Some(table) = before.iter().rev().find_map(|l| {
+        let m = l.mnemonic.split('.').next().unwrap_or("");
+        let rest = l.args.strip_prefix(&format!("{target}, ["))?;
+        (m == "ldr").then(|| rest.split(',').next().unwrap_or("").trim().to_owned())
+    }) else {
+        return false;
+    };
+    // `add rX, pc, #imm` (objdump: `@ (adr rX, ADDRESS <...>)`) inside the function.
+    let prefix = format!("(adr {table}, ");
+    code.get(i.saturating_sub(8)..i)
+        .unwrap_or(&[])
+        .iter()
+        .filter_map(|l| l.args.split_once(prefix.as_str()))
+        .filter_map(|(_, rest)| u64::from_str_radix(rest.split_whitespace().next()?, 16).ok())
+        .any(|at| range.contains(&at))
 }
 
 /// Registers an instruction writes (those the look-back needs: general registers).
@@ -1139,7 +1220,9 @@ fn program(elf_path: &Path) -> Result<Program, String> {
                         }
                     }
                 }
-            } else if loads_pc || (m == "mov" && insn.args.starts_with("pc,")) {
+            } else if (loads_pc || (m == "mov" && insn.args.starts_with("pc,")))
+                && !jump_table(code, i, *start..end)
+            {
                 f.sites.insert(Site::Unknown(insn.addr));
             }
         }
@@ -1427,7 +1510,7 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
         let w = addr.and_then(|addr| a.worst(addr).0);
         println!("{:<46} {:>10}", level.label, show(w));
         // A preempting level adds its hardware frame.
-        let frame = if i == 0 { 0 } else { EXCEPTION_FRAME };
+        let frame = if i == 0 { 0 } else { image.exception_frame };
         total = total.zip(w).map(|(t, w)| t + w + frame);
         if let Some(addr) = addr.filter(|_| level.show_path) {
             deepest.push((level.label, a.deepest_path(addr)));
@@ -1528,34 +1611,107 @@ fn check_firmware(elf: &Path, total: Option<u64>) -> Result<(), String> {
     }
 }
 
-/// The board's bound against its budget and its RAM (no QEMU for the RP2350: nothing measured).
-fn check_board(total: Option<u64>) -> Result<(), String> {
+/// A board's bound against its budget and its RAM, and against the high-water mark measured
+/// where the board runs (the Pico's, on the bench).
+fn check_board(
+    board: firmware::Board,
+    ram: u64,
+    total: Option<u64>,
+    measured: Option<u64>,
+) -> Result<(), String> {
+    let name = board.name;
     let Some(bound) = total else {
-        return Err("psmpa-pico2: the stack is unbounded (see above)".to_owned());
+        return Err(format!("{name}: the stack is unbounded (see above)"));
     };
     println!(
-        "\nbound {bound} B: {:.1} % of the budget of {PICO2_BUDGET} B, {:.1} % of the Pico 2's {} KiB of RAM",
-        100.0 * bound as f64 / PICO2_BUDGET as f64,
-        100.0 * bound as f64 / PICO2_RAM as f64,
-        PICO2_RAM / 1024
+        "\nbound {bound} B: {:.1} % of the budget of {BOARD_BUDGET} B, {:.1} % of the {}'s {} KiB of RAM",
+        100.0 * bound as f64 / BOARD_BUDGET as f64,
+        100.0 * bound as f64 / ram as f64,
+        board.what,
+        ram / 1024
     );
-    if bound > PICO2_BUDGET {
+    if bound > BOARD_BUDGET {
         return Err(format!(
-            "psmpa-pico2: the stack bound {bound} B is over the budget of {PICO2_BUDGET} B"
+            "{name}: the stack bound {bound} B is over the budget of {BOARD_BUDGET} B"
         ));
+    }
+    if let Some(measured) = measured {
+        println!(
+            "measured on the bench (the emulated Pico, every scenario): {measured} B; bound {bound} B ({:.2}x)",
+            bound as f64 / measured.max(1) as f64
+        );
+        if bound < measured {
+            return Err(format!(
+                "{name}: the bound {bound} B is below the {measured} B measured on the bench: the analysis is wrong"
+            ));
+        }
     }
     Ok(())
 }
 
-/// Analyses the firmware (and runs it in QEMU), then the Pico 2 board; prints, compares.
+/// Analyses the firmware (and runs it in QEMU), then the boards; prints, compares.
 pub fn run() -> Result<(), String> {
     let (elf, total) = analyse(&FIRMWARE)?;
-    let firmware = check_firmware(&elf, total);
+    let mut failures = Vec::new();
+    if let Err(e) = check_firmware(&elf, total) {
+        failures.push(e);
+    }
     println!("\npsmpa-pico2 (the Fetch Tea robot on a Raspberry Pi Pico 2, embassy-rp):");
-    let board = analyse(&PICO2).and_then(|(_, total)| check_board(total));
-    match (firmware, board) {
-        (Ok(()), Ok(())) => Ok(()),
-        (Err(e), Ok(())) | (Ok(()), Err(e)) => Err(e),
-        (Err(f), Err(b)) => Err(format!("{f}\n{b}")),
+    if let Err(e) =
+        analyse(&PICO2).and_then(|(_, total)| check_board(firmware::PICO2, 512 * 1024, total, None))
+    {
+        failures.push(e);
+    }
+    println!("\npsmpa-pico (the same robot on a Raspberry Pi Pico, RP2040, Cortex-M0+):");
+    let measured = crate::hil::stack_high_water();
+    if let Err(e) = analyse(&PICO)
+        .and_then(|(_, total)| check_board(firmware::PICO, 256 * 1024, total, measured))
+    {
+        failures.push(e);
+    }
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        Err(failures.join("\n"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Insn, jump_table};
+
+    fn insn(addr: u64, mnemonic: &str, args: &str) -> Insn {
+        Insn {
+            addr,
+            mnemonic: mnemonic.to_owned(),
+            args: args.to_owned(),
+        }
+    }
+
+    /// A Cortex-M0+ switch, as objdump prints one of `Engine::trace`'s.
+    fn switch(table_at: u64) -> Vec<Insn> {
+        vec![
+            insn(
+                0x1000,
+                "add",
+                &format!("r2, pc, #8\t@ (adr r2, {table_at:x} <f+0x10>)"),
+            ),
+            insn(0x1002, "ldr", "r4, [r2, r1]"),
+            insn(0x1004, "ldr", "r2, [sp, #36]\t@ 0x24"),
+            insn(0x1006, "mov", "r1, r2"),
+            insn(0x1008, "mov", "pc, r4"),
+        ]
+    }
+
+    #[test]
+    fn a_switch_through_a_table_in_the_function_is_a_branch_not_a_call() {
+        let code = switch(0x1010);
+        assert!(jump_table(&code, 4, 0x1000..0x1100));
+        // A table outside the function, or a jump through a register loaded otherwise, is a
+        // call the analysis cannot follow.
+        assert!(!jump_table(&code, 4, 0x0f00..0x1000));
+        let mut other = switch(0x1010);
+        other[1] = insn(0x1002, "ldr", "r4, [r0, #4]");
+        assert!(!jump_table(&other, 4, 0x1000..0x1100));
     }
 }

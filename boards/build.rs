@@ -1,4 +1,6 @@
-//! Links with this board's `memory.x` (the RP2350's flash and RAM, and its boot block).
+//! Links a board with its own `memory.x` (the chip's flash and RAM), shared by the boards'
+//! crates (`build = "../build.rs"`). The RP2040 also needs embassy-rp's `link-rp.x`, which
+//! places the second-stage bootloader in the first 256 bytes of flash.
 
 use std::{env, fs, path::PathBuf};
 
@@ -11,5 +13,8 @@ fn main() {
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rustc-link-arg-bins=--nmagic");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
+    if env::var("TARGET").is_ok_and(|t| t.starts_with("thumbv6m")) {
+        println!("cargo:rustc-link-arg-bins=-Tlink-rp.x");
+    }
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }

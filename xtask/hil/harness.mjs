@@ -1,0 +1,385 @@
+// The bench's harness: a Raspberry Pi Pico (RP2040) emulated by rp2040js, driven by
+// `cargo xtask hil` over stdin and stdout, one JSON object a line.
+//
+// It only moves pin levels and time. The world (where the robot is, what the sonar sees,
+// when a bump switch closes) is the project's Rust world in the xtask process; this file
+// boots the firmware's flash image, applies the input levels the world schedules, reports
+// the output pins' edges and the PWM duties measured from them, and reads what the firmware
+// writes to RAM (its defmt log over RTT, its sensors' health). It also counts cycles: each
+// interrupt handler's own, thread mode's busy stretches and the critical sections, for the
+// response-time analysis.
+//
+// Commands (xtask -> harness):
+//   {"cmd":"boot","flash":PATH,"symbols":{...},"health_words":N,"outputs":[..],"pwm":[..],
+//    "inputs":{pin:level}}                       the flash image (from 0x1000_0000) and where
+//                                                its RTT block, health block and test points are
+//   {"cmd":"set","pin":P,"level":0|1,"at":NS}    an input's level from NS on (NS >= now)
+//   {"cmd":"run","until":NS}                     runs until NS or until something happens
+//   {"cmd":"inject","what":"panic"|"hang"}       thread mode calls that test point next
+//   {"cmd":"stats"}                              the cycle accounts so far
+//   {"cmd":"stack","from":A,"to":B}              bytes of the stack [A, B) used: below B, down to
+//                                                the lowest word no longer 0xcccccccc (the paint)
+//   {"cmd":"quit"}
+// Events (harness -> xtask), each with the emulated time `ns`:
+//   {"ev":"pin","pin":P,"level":L}      an output's edge (a pin no longer driven reads 0)
+//   {"ev":"duty","pin":P,"permille":D}  a PWM output's duty, when it changes
+//   {"ev":"health","words":[...]}       the firmware's PSMPA_HEALTH block, when it changes
+//   {"ev":"rtt","data":HEX}          bytes of the defmt log
+//   {"ev":"reset","cause":"watchdog"}   the watchdog fired: the chip was reset, the world kept
+//   {"ev":"at"}                         the run stopped here (after its events)
+//
+// rp2040js's pitfalls, and what this file does about them (docs in boards/README.md):
+// * SEV is a no-op: embassy's thread executor needs it, so the logger's "SEV" message sets
+//   the core's event flag.
+// * A watchdog that fired fires again at the same instant for ever: the harness stops it and
+//   resets the chip itself (a new chip whose watchdog says it timed out, the same flash).
+// * The boot ROM's path halts: the image is started from its vector table (VTOR, SP, PC);
+//   the ROM is zeros (the firmware calls no ROM routine).
+// * Inputs do not follow pull-ups: the world drives every input's level.
+
+import { createInterface } from 'node:readline';
+import { readFileSync } from 'node:fs';
+import { Simulator, GPIOPinState } from 'rp2040js';
+
+const NS_PER_CYCLE = 8; // 125 MHz
+const WATCHDOG = 0x40058; // its peripheral slot (address >> 12)
+const WATCHDOG_REASON_TIMER = 1;
+const SIO_SPINLOCK31 = 0x17c; // embassy-rp's critical section takes spinlock 31
+const VECTOR_TABLE = 0x10000100; // after the 256 B second-stage bootloader
+
+const out = (event) => process.stdout.write(JSON.stringify(event) + '\n');
+
+/** Cycle accounts: per exception, thread mode's busy stretches, critical sections. */
+class Accounts {
+  constructor() {
+    this.handlers = {}; // exception number -> {count, total, max, maxAt}
+    this.thread = { count: 0, total: 0, max: 0, maxAt: 0 };
+    this.critical = { thread: 0, handler: 0, maxAt: 0 };
+  }
+  handler(n, cycles, at) {
+    const h = (this.handlers[n] ??= { count: 0, total: 0, max: 0, maxAt: 0 });
+    h.count++;
+    h.total += cycles;
+    if (cycles > h.max) {
+      h.max = cycles;
+      h.maxAt = at;
+    }
+  }
+}
+
+class Bench {
+  constructor(config) {
+    this.config = config;
+    this.image = readFileSync(config.flash);
+    this.base = 0; // ns of emulated time before the current chip booted
+    this.inputs = new Map(Object.entries(config.inputs).map(([p, l]) => [Number(p), l]));
+    this.schedule = []; // [{at, pin, level}], sorted by at
+    this.events = [];
+    this.accounts = new Accounts();
+    this.boot(false);
+  }
+
+  get now() {
+    return this.base + this.sim.clock.nanos;
+  }
+
+  /** A new chip at the current instant, running the flash image from its vector table. */
+  boot(afterWatchdog) {
+    const base = this.sim ? this.now : 0;
+    this.sim = new Simulator();
+    this.base = base;
+    const mcu = (this.mcu = this.sim.rp2040);
+    const core = (this.core = mcu.core);
+    mcu.loadBootrom(new Uint32Array(4096));
+    mcu.flash.set(this.image);
+    mcu.logger = {
+      debug() {},
+      info: (_, message) => {
+        if (message === 'SEV') core.eventRegistered = true;
+      },
+      warn() {},
+      error: (component, message) => this.events.push({ ev: 'error', component, message }),
+    };
+    const watchdog = mcu.peripherals[WATCHDOG];
+    if (afterWatchdog) watchdog.reason = WATCHDOG_REASON_TIMER;
+    watchdog.onWatchdogTrigger = () => {
+      // Fired once: stop it (rp2040js would fire it again at once, for ever) and reset.
+      watchdog.alarm.enable = false;
+      watchdog.timer.enable = false;
+      this.resetRequested = true;
+    };
+    this.watchCycles(core);
+    this.watchSpinlock(mcu);
+    for (const [pin, level] of this.inputs) mcu.gpio[pin].setInputValue(level === 1);
+    for (const pin of this.config.outputs) {
+      mcu.gpio[pin].addListener((state) => this.output(pin, state));
+      if (afterWatchdog) this.output(pin, GPIOPinState.Input);
+    }
+    this.pwm = new Map();
+    for (const pin of this.config.pwm) {
+      const p = { rise: null, fall: null, permille: null, quiet: null };
+      this.pwm.set(pin, p);
+      mcu.gpio[pin].addListener((state) => this.pwmEdge(pin, p, state));
+      this.pwmQuiet(pin, p, 200_000);
+    }
+    core.VTOR = VECTOR_TABLE;
+    core.SP = mcu.readUint32(VECTOR_TABLE);
+    core.PC = mcu.readUint32(VECTOR_TABLE + 4) & ~1;
+    this.rtt = null;
+    this.healthSeen = -1;
+    this.busySince = null;
+  }
+
+  output(pin, state) {
+    const level = state === GPIOPinState.High ? 1 : 0;
+    this.events.push({ ev: 'pin', pin, level, ns: this.now });
+  }
+
+  /** A PWM output's edge: the duty of the period that ends at a rise. */
+  pwmEdge(pin, p, state) {
+    const t = this.sim.clock.nanos;
+    if (state === GPIOPinState.High) {
+      if (p.rise !== null && p.fall !== null && p.fall > p.rise) {
+        const period = t - p.rise;
+        this.duty(pin, p, Math.round((1000 * (p.fall - p.rise)) / period));
+        this.pwmQuiet(pin, p, 3 * period);
+      }
+      p.rise = t;
+    } else {
+      p.fall = t;
+    }
+  }
+
+  /** A duty of 0 or 1,000 has no edges: a pin that stays put this long holds its level. */
+  pwmQuiet(pin, p, after) {
+    if (p.quiet) p.quiet.cancel();
+    p.quiet = this.sim.clock.createAlarm(() => {
+      const high = this.mcu.gpio[pin].value === GPIOPinState.High;
+      this.duty(pin, p, high ? 1000 : 0);
+      p.rise = null;
+      p.fall = null;
+      this.pwmQuiet(pin, p, after);
+    });
+    p.quiet.schedule(after);
+  }
+
+  duty(pin, p, permille) {
+    if (permille !== p.permille) {
+      p.permille = permille;
+      this.events.push({ ev: 'duty', pin, permille, ns: this.now });
+    }
+  }
+
+  /** Exclusive cycles of every handler, and thread mode's busy stretches between sleeps. */
+  watchCycles(core) {
+    const stack = []; // [{n, start, nested}]
+    this.handlerCycles = 0; // every handler's cycles so far
+    const entry = core.exceptionEntry.bind(core);
+    const ret = core.exceptionReturn.bind(core);
+    core.exceptionEntry = (n) => {
+      stack.push({ n, start: core.cycles, nested: 0 });
+      entry(n);
+    };
+    core.exceptionReturn = (excReturn) => {
+      ret(excReturn);
+      const top = stack.pop();
+      if (!top) return;
+      const all = core.cycles - top.start;
+      const own = all - top.nested;
+      this.accounts.handler(top.n, own, this.now);
+      this.handlerCycles += own;
+      if (stack.length) stack[stack.length - 1].nested += all;
+      this.pollHealth();
+    };
+    this.exceptions = stack;
+  }
+
+  /** Critical sections: how long spinlock 31 is held, by the context that took it. */
+  watchSpinlock(mcu) {
+    const sio = mcu.sio;
+    const read = sio.readUint32.bind(sio);
+    const write = sio.writeUint32.bind(sio);
+    let taken = null;
+    sio.readUint32 = (offset) => {
+      const v = read(offset);
+      if (offset === SIO_SPINLOCK31 && v !== 0) {
+        taken = { cycles: this.core.cycles, thread: this.core.IPSR === 0 };
+      }
+      return v;
+    };
+    sio.writeUint32 = (offset, value) => {
+      write(offset, value);
+      if (offset === SIO_SPINLOCK31 && taken) {
+        const held = this.core.cycles - taken.cycles;
+        const c = this.accounts.critical;
+        const key = taken.thread ? 'thread' : 'handler';
+        if (held > c[key]) {
+          c[key] = held;
+          if (taken.thread) c.maxAt = this.now;
+        }
+        taken = null;
+      }
+    };
+  }
+
+  readRtt() {
+    const rttAt = this.config.symbols.rtt;
+    if (rttAt === undefined) return;
+    const v = this.mcu.sramView;
+    const up = rttAt - 0x20000000 + 24; // the first up buffer, after the 16 B id and 2 counts
+    const buffer = v.getUint32(up + 4, true) - 0x20000000;
+    const size = v.getUint32(up + 8, true);
+    const wr = v.getUint32(up + 12, true);
+    let rd = v.getUint32(up + 16, true);
+    if (rd === wr || size === 0) return;
+    const bytes = [];
+    while (rd !== wr) {
+      bytes.push(this.mcu.sram[buffer + rd]);
+      rd = (rd + 1) % size;
+    }
+    v.setUint32(up + 16, rd, true);
+    // The log stops a run too: what the firmware says may end it (its task's outcome).
+    this.events.push({ ev: 'rtt', data: Buffer.from(bytes).toString('hex'), ns: this.now });
+  }
+
+  pollHealth() {
+    const at = this.config.symbols.health;
+    if (at === undefined) return;
+    const v = this.mcu.sramView;
+    const changes = v.getUint32(at - 0x20000000, true);
+    if (changes === this.healthSeen) return;
+    this.healthSeen = changes;
+    const words = [];
+    for (let i = 0; i < this.config.health_words; i++) words.push(v.getUint32(at - 0x20000000 + 4 * i, true));
+    this.events.push({ ev: 'health', words, ns: this.now });
+  }
+
+  /** Thread mode enters or leaves sleep: a busy stretch ends or begins. */
+  sleeping(waiting) {
+    const core = this.core;
+    if (waiting && this.busySince !== null && core.IPSR === 0) {
+      const busy = core.cycles - this.busySince.cycles - (this.handlerCycles - this.busySince.handlers);
+      const t = this.accounts.thread;
+      t.count++;
+      t.total += busy;
+      if (busy > t.max) {
+        t.max = busy;
+        t.maxAt = this.now;
+      }
+      this.busySince = null;
+      this.pollHealth();
+      this.readRtt();
+    } else if (!waiting && this.busySince === null) {
+      this.busySince = { cycles: core.cycles, handlers: this.handlerCycles };
+    }
+  }
+
+  inject(what) {
+    const symbol = what === 'panic' ? this.config.symbols.test_panic : this.config.symbols.test_hang;
+    this.injection = symbol;
+  }
+
+  run(until) {
+    const { core } = this;
+    let n = 0;
+    let wasWaiting = core.waiting;
+    while (this.now < until && this.events.length === 0) {
+      while (this.schedule.length && this.schedule[0].at <= this.now) {
+        const { pin, level } = this.schedule.shift();
+        this.inputs.set(pin, level);
+        this.mcu.gpio[pin].setInputValue(level === 1);
+      }
+      if (this.injection !== undefined && core.IPSR === 0) {
+        // Thread mode calls the test point now, abandoning what it was doing.
+        core.PC = this.injection & ~1;
+        core.waiting = false;
+        this.injection = undefined;
+      }
+      if (core.waiting) {
+        const clock = this.sim.clock;
+        let step = until - this.now;
+        if (this.schedule.length) step = Math.min(step, this.schedule[0].at - this.now);
+        const alarm = clock.nanosToNextAlarm;
+        if (alarm > 0) step = Math.min(step, alarm);
+        clock.tick(Math.max(step, 0));
+      } else {
+        this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
+        if ((++n & 255) === 0) {
+          this.readRtt();
+          this.pollHealth();
+        }
+      }
+      if (core.waiting !== wasWaiting) {
+        wasWaiting = core.waiting;
+        this.sleeping(wasWaiting);
+      }
+      if (this.resetRequested) {
+        this.resetRequested = false;
+        this.readRtt();
+        this.boot(true);
+        this.events.push({ ev: 'reset', cause: 'watchdog', ns: this.now });
+      }
+    }
+    this.readRtt();
+    for (const e of this.events) out(e);
+    this.events = [];
+    out({ ev: 'at', ns: this.now });
+  }
+
+  set(pin, level, at) {
+    const item = { at: Math.max(at, this.now), pin, level };
+    let i = this.schedule.length;
+    while (i > 0 && this.schedule[i - 1].at > item.at) i--;
+    this.schedule.splice(i, 0, item);
+  }
+
+  /** The stack's high-water mark: cortex-m-rt painted [from, to) before main. */
+  stack(from, to) {
+    const v = this.mcu.sramView;
+    let at = from;
+    while (at < to && v.getUint32(at - 0x20000000, true) === 0xcccccccc) at += 4;
+    out({ ev: 'stack', used: to - at, ns: this.now });
+  }
+
+  stats() {
+    out({ ev: 'stats', ns: this.now, ...this.accounts, instructions_per_ns: this.core.cycles / this.now });
+  }
+}
+
+let bench = null;
+const lines = createInterface({ input: process.stdin });
+lines.on('line', (line) => {
+  let cmd;
+  try {
+    cmd = JSON.parse(line);
+  } catch {
+    out({ ev: 'error', message: `not JSON: ${line.slice(0, 80)}` });
+    return;
+  }
+  switch (cmd.cmd) {
+    case 'boot':
+      bench = new Bench(cmd);
+      out({ ev: 'at', ns: 0 });
+      break;
+    case 'set':
+      bench.set(cmd.pin, cmd.level, cmd.at);
+      break;
+    case 'run':
+      bench.run(cmd.until);
+      break;
+    case 'inject':
+      bench.inject(cmd.what);
+      break;
+    case 'stats':
+      bench.stats();
+      break;
+    case 'stack':
+      bench.stack(cmd.from, cmd.to);
+      break;
+    case 'quit':
+      process.exit(0);
+      break;
+    default:
+      out({ ev: 'error', message: `unknown command ${cmd.cmd}` });
+  }
+});

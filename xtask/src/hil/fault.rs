@@ -1,0 +1,205 @@
+//! The bench's fault scenarios (`boards/faults/*.json`): a scenario of `scenarios/`, a fault
+//! and what must come of it.
+//!
+//! ```json
+//! { "name": "hang", "scenario": "../../scenarios/quiet.json",
+//!   "fault": { "kind": "hang", "at_s": 4.0 },
+//!   "expect": { "watchdog_resets": 1, "still": true, "reached_door": false,
+//!               "log": ["the watchdog reset the board"] } }
+//! ```
+//!
+//! Faults (`kind`): on the pins, played by the world, `no-echo` (the sonar never answers from
+//! `at_s`), `echo-stuck-high` (its echo line sticks high at the next trigger),
+//! `bumper-chatter` (the bumper's wire makes an edge every `every_us` for `for_s`); in the
+//! firmware, through its test points, `hang` (thread mode loops for ever, as a behaviour
+//! stuck in a loop) and `panic` (thread mode panics, as a bug would).
+//!
+//! Expectations (`expect`, each optional): `reached_door`, `collisions`, `watchdog_resets`;
+//! `still`: once the fault has struck (the firmware fails a sensor, resets or panics) the
+//! motors never drive again; `motors_off_first`: after a panic the motors are off before the
+//! firmware's log says a word; `log`: lines the log must hold (substrings);
+//! `sample_gap_max_ms`: the most each sensor's samples may lie apart.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+/// A fault on the bench.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Fault {
+    /// The sonar never answers.
+    NoEcho {
+        /// From when, s.
+        at_s: f64,
+    },
+    /// The echo line sticks high.
+    EchoStuckHigh {
+        /// From when, s.
+        at_s: f64,
+    },
+    /// The bumper's wire chatters.
+    BumperChatter {
+        /// From when, s.
+        at_s: f64,
+        /// For how long, s.
+        for_s: f64,
+        /// Between edges, µs.
+        every_us: u64,
+    },
+    /// Thread mode hangs.
+    Hang {
+        /// When, s.
+        at_s: f64,
+    },
+    /// Thread mode panics.
+    Panic {
+        /// When, s.
+        at_s: f64,
+    },
+}
+
+impl Fault {
+    /// When it strikes, ns.
+    pub fn at_ns(&self) -> u64 {
+        let s = match *self {
+            Self::NoEcho { at_s }
+            | Self::EchoStuckHigh { at_s }
+            | Self::BumperChatter { at_s, .. }
+            | Self::Hang { at_s }
+            | Self::Panic { at_s } => at_s,
+        };
+        (s.max(0.0) * 1e9) as u64
+    }
+
+    /// Its name in the file.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::NoEcho { .. } => "no-echo",
+            Self::EchoStuckHigh { .. } => "echo-stuck-high",
+            Self::BumperChatter { .. } => "bumper-chatter",
+            Self::Hang { .. } => "hang",
+            Self::Panic { .. } => "panic",
+        }
+    }
+}
+
+/// `fault` as written (serde's tagged enums read numbers through a buffer that serde_json's
+/// `arbitrary_precision`, which another crate here turns on, breaks: fields are read flat).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FaultSpec {
+    kind: String,
+    at_s: f64,
+    for_s: Option<f64>,
+    every_us: Option<u64>,
+}
+
+impl FaultSpec {
+    fn fault(&self) -> Result<Fault, String> {
+        let at_s = self.at_s;
+        let only_at = |f: Fault| match (self.for_s, self.every_us) {
+            (None, None) => Ok(f),
+            _ => Err(format!("fault {}: only at_s", self.kind)),
+        };
+        match self.kind.as_str() {
+            "no-echo" => only_at(Fault::NoEcho { at_s }),
+            "echo-stuck-high" => only_at(Fault::EchoStuckHigh { at_s }),
+            "hang" => only_at(Fault::Hang { at_s }),
+            "panic" => only_at(Fault::Panic { at_s }),
+            "bumper-chatter" => match (self.for_s, self.every_us) {
+                (Some(for_s), Some(every_us)) => Ok(Fault::BumperChatter {
+                    at_s,
+                    for_s,
+                    every_us,
+                }),
+                _ => Err("fault bumper-chatter: at_s, for_s and every_us".to_owned()),
+            },
+            other => Err(format!(
+                "unknown fault kind {other:?}: no-echo, echo-stuck-high, bumper-chatter, hang or panic"
+            )),
+        }
+    }
+}
+
+/// What must come of a fault.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Expect {
+    /// Whether the robot reaches the kitchen door.
+    pub reached_door: Option<bool>,
+    /// Collisions.
+    pub collisions: Option<u32>,
+    /// Resets by the watchdog.
+    pub watchdog_resets: Option<u32>,
+    /// The motors never drive once the fault has struck.
+    #[serde(default)]
+    pub still: bool,
+    /// After a panic, the motors are off before the log says a word.
+    #[serde(default)]
+    pub motors_off_first: bool,
+    /// Lines the log must hold (substrings).
+    #[serde(default)]
+    pub log: Vec<String>,
+    /// The most each sensor's samples may lie apart, ms.
+    #[serde(default)]
+    pub sample_gap_max_ms: BTreeMap<String, f64>,
+}
+
+/// A fault scenario file.
+#[derive(Clone, Debug)]
+pub struct FaultFile {
+    /// Its name.
+    pub name: String,
+    /// The scenario it plays.
+    pub scenario: PathBuf,
+    /// The fault.
+    pub fault: Fault,
+    /// What must come of it.
+    pub expect: Expect,
+}
+
+/// A fault scenario file as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    name: String,
+    scenario: PathBuf,
+    fault: FaultSpec,
+    expect: Expect,
+}
+
+/// Whether `bytes` are a fault scenario rather than a scenario: an object with `fault` and
+/// `expect` and a `scenario` path.
+pub fn is_fault_file(bytes: &[u8]) -> bool {
+    serde_json::from_slice::<serde_json::Value>(bytes).is_ok_and(|v| {
+        v.get("expect").is_some() && v.get("scenario").is_some_and(|s| s.is_string())
+    })
+}
+
+/// Reads a fault scenario; its scenario's path made relative to the file's folder.
+pub fn load(path: &Path, bytes: &[u8]) -> Result<FaultFile, String> {
+    let bad = |e: String| format!("{}: not a fault scenario: {e}", path.display());
+    let raw: File = serde_json::from_slice(bytes).map_err(|e| bad(e.to_string()))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let file = FaultFile {
+        name: raw.name,
+        scenario: base.join(&raw.scenario),
+        fault: raw.fault.fault().map_err(bad)?,
+        expect: raw.expect,
+    };
+    if file.fault.at_ns() == 0 && !matches!(file.fault, Fault::NoEcho { .. }) {
+        return Err(format!("{}: fault.at_s must be above 0", path.display()));
+    }
+    if let Fault::BumperChatter {
+        for_s, every_us, ..
+    } = file.fault
+        && (!(0.0..=60.0).contains(&for_s) || every_us == 0)
+    {
+        return Err(format!(
+            "{}: a chatter lasts 0 to 60 s with at least 1 us between edges",
+            path.display()
+        ));
+    }
+    Ok(file)
+}

@@ -1,0 +1,1132 @@
+//! `cargo xtask hil`: the robot's firmware on an emulated Raspberry Pi Pico, in the loop with
+//! the project's world.
+//!
+//! It builds the board's image for the RP2040 (`boards/pico`, as its README says), writes the
+//! robot's calibration record for each scenario into the image's flash ([`settings_for`]),
+//! and plays the scenario in rp2040js ([`harness`]) against psmpa-sim's world of it
+//! ([`world`]): the firmware's motor pins move the robot, the world answers its sonar's
+//! triggers with echoes, closes its bump switch, shows it the door's marker. The firmware's
+//! defmt log comes off the chip's RTT buffer and is decoded with its own table.
+//!
+//! Every run is checked: the outcome (detections, collisions, reaching the door) against
+//! `psmpa-sim run` of the same scenario; every reaction (from the pin edge that showed an
+//! obstacle to the motors stopping) against the response-time bound that
+//! [`psmpa_core::timing`] gives from the step costs the bench measured ([`bound`]); the
+//! bench's fault scenarios (`boards/faults/`) against what they expect ([`fault`]). The first
+//! run is played twice: the same pin log both times.
+
+mod bound;
+pub mod fault;
+mod harness;
+mod svg;
+pub mod world;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant as WallClock;
+
+use embassy_time::{Duration, Instant, Timer};
+use object::{Object, ObjectSymbol};
+use psmpa_core::TraceHash;
+use psmpa_drivers::robot::{Part, RECORD_WORDS, Settings};
+use psmpa_sim::robot::Arch;
+use psmpa_sim::scenario::{Scenario, to_mm};
+use psmpa_sim::sim::run_summary;
+use psmpa_sim::world::{Fate, ObstacleReport, Tally, WorldEvent};
+use serde::Serialize;
+
+use crate::firmware;
+use fault::{Expect, Fault, FaultFile};
+use harness::{Boot, Event, Harness, Stats, Symbols};
+use world::{BenchWorld, PinFault, pin};
+
+/// The RP2040's flash in the address space.
+const FLASH: u32 = 0x1000_0000;
+/// After the firmware's outcome (or its reset), the run goes on this long: the robot must stay
+/// still.
+const GRACE_NS: u64 = 1_000_000_000;
+
+/// How `cargo xtask hil` ended.
+pub enum Ending {
+    /// Every run held its checks.
+    Passed,
+    /// A run did not.
+    Failed(String),
+    /// A file is not a scenario (exit 2).
+    BadInput(String),
+}
+
+/// One thing to play: a scenario, maybe with a fault.
+struct Play {
+    /// The file given.
+    file: PathBuf,
+    scenario: Scenario,
+    fault: Option<FaultFile>,
+}
+
+impl Play {
+    fn name(&self) -> String {
+        match &self.fault {
+            Some(f) => format!("fault {}", f.name),
+            None => self.scenario.name.as_str().to_owned(),
+        }
+    }
+}
+
+/// Reads what to play: the files given, or every shipped scenario and fault scenario.
+fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
+    let defaults = files.is_empty();
+    let files: Vec<PathBuf> = if defaults {
+        let root = firmware::root();
+        let mut all = json_files(&root.join("scenarios"))?;
+        all.extend(json_files(&root.join("boards/faults"))?);
+        all
+    } else {
+        files.to_vec()
+    };
+    let mut plays = Vec::new();
+    for file in files {
+        let bytes = std::fs::read(&file)
+            .map_err(|e| format!("{}: cannot read the file: {e}", file.display()))?;
+        if fault::is_fault_file(&bytes) {
+            let f = fault::load(&file, &bytes)?;
+            let scenario = psmpa_sim::load::load(&f.scenario).map_err(|e| e.to_string())?;
+            plays.push(Play {
+                file,
+                scenario,
+                fault: Some(f),
+            });
+        } else {
+            let scenario = psmpa_sim::load::parse(&file, &bytes).map_err(|e| e.to_string())?;
+            plays.push(Play {
+                file,
+                scenario,
+                fault: None,
+            });
+        }
+    }
+    Ok((plays, defaults))
+}
+
+/// The `.json` files of `dir`, sorted.
+fn json_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// The robot's settings for `sc`: the walk to its door at its speed, the sonar's threshold as
+/// the clearance (the robot stops for a reading below it, as the world registers one), its
+/// sensors' periods and the walk's planning time. The rest as the board's defaults.
+pub fn settings_for(sc: &Scenario) -> Settings {
+    let ms = Duration::from_millis;
+    Settings {
+        clearance_mm: u16::try_from(sc.sonar.threshold_mm() - 1).unwrap_or(u16::MAX),
+        walk_mm: u32::try_from(to_mm(sc.door_um)).unwrap_or(u32::MAX),
+        // µm a ms is mm a s.
+        walk_mm_s: u32::try_from(sc.speed_um_per_ms).unwrap_or(u32::MAX).max(1),
+        plan: Duration::from_micros(u64::from(sc.plan_us)),
+        sonar_period: Some(ms(sc.sonar.period_ms)),
+        bumper_period: Some(ms(sc.bumper_period_ms)),
+        ..Settings::DEFAULT
+    }
+}
+
+/// The firmware image and what the bench needs of it.
+struct Firmware {
+    elf: Vec<u8>,
+    /// Flash from [`FLASH`], up to the calibration record's end.
+    flash: Vec<u8>,
+    symbols: Symbols,
+    health_words: u32,
+    /// Where the calibration record goes, as an offset in `flash`.
+    settings_at: usize,
+    /// The mission's sensor ids of the sonar, bumper, camera and handle.
+    ids: [usize; 4],
+    /// The stack: from its lowest address to its top (`_stack_end`, `_stack_start`).
+    stack: (u32, u32),
+}
+
+/// Builds the board's RP2040 image (`cargo build --release` in `boards/pico`).
+fn build() -> Result<PathBuf, String> {
+    firmware::build_board(firmware::PICO)
+}
+
+impl Firmware {
+    fn read(path: &Path) -> Result<Self, String> {
+        let elf = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let file = object::File::parse(&*elf).map_err(|e| format!("{}: {e}", path.display()))?;
+        let symbol = |name: &str| {
+            file.symbols()
+                .find(|s| s.name() == Ok(name))
+                .map(|s| (u32::try_from(s.address()).unwrap_or(0), s.size()))
+                .ok_or_else(|| format!("{}: no symbol {name}", path.display()))
+        };
+        let (settings, _) = symbol("__psmpa_settings")?;
+        let stack = (symbol("_stack_end")?.0, symbol("_stack_start")?.0);
+        let (health, health_size) = symbol("PSMPA_HEALTH")?;
+        let symbols = Symbols {
+            rtt: symbol("_SEGGER_RTT")?.0,
+            health,
+            test_panic: symbol("psmpa_test_panic")?.0,
+            test_hang: symbol("psmpa_test_hang")?.0,
+        };
+        let settings_at = usize::try_from(settings - FLASH).map_err(|e| e.to_string())?;
+        let mut flash = vec![0xff; settings_at + RECORD_WORDS * 4];
+        for (at, data) in load_segments(&file)? {
+            let Some(offset) = at.checked_sub(FLASH).map(|o| o as usize) else {
+                continue;
+            };
+            if offset + data.len() > settings_at {
+                return Err(format!(
+                    "{}: a segment at {at:#x} runs into the calibration record",
+                    path.display()
+                ));
+            }
+            flash[offset..offset + data.len()].copy_from_slice(data);
+        }
+        let loaded = psmpa_drivers::robot::mission().map_err(|e| e.to_string())?;
+        let id = |part: Part| {
+            loaded
+                .bindings
+                .sensor_id(&part)
+                .map(|id| id.index())
+                .ok_or_else(|| format!("the mission has no {part:?}"))
+        };
+        let ids = [
+            id(Part::Sonar)?,
+            id(Part::Bumper)?,
+            id(Part::Camera)?,
+            id(Part::Handle)?,
+        ];
+        Ok(Self {
+            elf,
+            flash,
+            symbols,
+            health_words: u32::try_from(health_size / 4).unwrap_or(0),
+            settings_at,
+            ids,
+            stack,
+        })
+    }
+
+    /// The flash image with `settings`' calibration record.
+    fn image(&self, settings: &Settings) -> Vec<u8> {
+        let mut flash = self.flash.clone();
+        let record: Vec<u8> = settings
+            .to_record()
+            .iter()
+            .flat_map(|w| w.to_le_bytes())
+            .collect();
+        flash[self.settings_at..self.settings_at + record.len()].copy_from_slice(&record);
+        flash
+    }
+}
+
+/// The bytes the ELF's loadable segments put at their load (physical) addresses: `.data`'s
+/// initial values live in flash, where the program headers say.
+fn load_segments<'a>(file: &object::File<'a>) -> Result<Vec<(u32, &'a [u8])>, String> {
+    use object::read::elf::ProgramHeader;
+    let object::File::Elf32(elf) = file else {
+        return Err("the firmware is not a 32-bit ELF".to_owned());
+    };
+    let endian = elf.endian();
+    let data = elf.data();
+    elf.elf_program_headers()
+        .iter()
+        .filter(|h| h.p_type(endian) == object::elf::PT_LOAD && h.p_filesz(endian) > 0)
+        .map(|h| {
+            let bytes = h
+                .data(endian, data)
+                .map_err(|()| "a program header points outside the ELF".to_owned())?;
+            Ok((h.p_paddr(endian), bytes))
+        })
+        .collect()
+}
+
+/// A line of the firmware's log.
+#[derive(Clone, Debug, Serialize)]
+pub struct LogLine {
+    /// The firmware's timestamp (s since boot), as it prints it.
+    pub at: String,
+    /// Its level.
+    pub level: String,
+    /// The message.
+    pub text: String,
+    /// The emulated instant the harness read it, ns.
+    #[serde(skip)]
+    pub ns: u64,
+}
+
+/// What one run found.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// The scenario's name.
+    pub scenario: String,
+    /// The file played.
+    pub file: String,
+    /// The fault, for a fault scenario.
+    pub fault: Option<String>,
+    /// Interferences in the scenario.
+    pub interferences: u32,
+    /// Detected by the robot's sensors.
+    pub detected: u32,
+    /// Touched unregistered.
+    pub collisions: u32,
+    /// Whether the robot reached the kitchen door.
+    pub reached_door: bool,
+    /// The longest gap between two delivered samples while the sensor stayed on, ms.
+    pub sample_gap_max_ms: BTreeMap<String, Option<f64>>,
+    /// The worst reaction measured per sensor, from the pin edge that showed the obstacle to
+    /// the motors stopping, cycles at 125 MHz.
+    pub reactions_cycles: BTreeMap<String, Option<u64>>,
+    /// The response-time bound per sensor, cycles at 125 MHz.
+    pub bound_cycles: BTreeMap<String, Option<u64>>,
+    /// `psmpa-sim run --arch psmpa` of the same scenario (none for a fault scenario).
+    pub host: Option<HostOutcome>,
+    /// Resets by the watchdog.
+    pub watchdog_resets: u32,
+    /// Emulated time, s.
+    pub emulated_s: f64,
+    /// Wall time, s.
+    pub wall_s: f64,
+    /// The sensing side's cycles per delivered sample (all of its activations, mean).
+    pub sensing_cycles_per_sample: Option<u64>,
+    /// The step costs measured, cycles.
+    pub costs: bound::Costs,
+    /// The stack's high-water mark at the end, bytes (after a reset: the new boot's).
+    pub stack_bytes: u64,
+    /// Hash of every pin edge, duty and input level with its instant.
+    pub pin_log_hash: String,
+    /// The checks that failed (none: passed).
+    pub failures: Vec<String>,
+    /// Where the bench differs from psmpa-sim for a reason of the robot's body (see
+    /// `compare_with_host`).
+    pub differences: Vec<String>,
+    /// The firmware's log.
+    #[serde(skip)]
+    pub log: Vec<LogLine>,
+}
+
+/// psmpa-sim's outcome of the same scenario.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct HostOutcome {
+    /// Detected.
+    pub detected: u32,
+    /// Collisions.
+    pub collisions: u32,
+    /// Reached the door.
+    pub reached_door: bool,
+}
+
+/// One run's record of pins and events, for the picture and the hash.
+#[derive(Default)]
+pub struct PinLog {
+    /// (ns, what, value): output edges, duties, inputs set.
+    pub entries: Vec<(u64, String, i64)>,
+    /// The world's events: (ms, position µm, event).
+    pub world: Vec<(u64, i64, psmpa_sim::world::WorldEvent)>,
+}
+
+impl PinLog {
+    fn push(&mut self, ns: u64, what: impl Into<String>, value: i64) {
+        self.entries.push((ns, what.into(), value));
+    }
+
+    fn hash(&self) -> u64 {
+        let mut h = TraceHash::new();
+        for (ns, what, value) in &self.entries {
+            h.write(&ns.to_le_bytes());
+            h.write(what.as_bytes());
+            h.write(&value.to_le_bytes());
+        }
+        h.value()
+    }
+}
+
+/// Plays `play` on the image of `fw`; `out` is where its files go.
+fn play(fw: &Firmware, play: &Play, out: &Path) -> Result<(Report, PinLog), String> {
+    let sc = &play.scenario;
+    let settings = settings_for(sc);
+    let image = out.join(format!("{}.bin", file_name(&play.name())));
+    std::fs::write(&image, fw.image(&settings)).map_err(|e| format!("{}: {e}", image.display()))?;
+    let inputs: BTreeMap<u8, u8> = BenchWorld::initial_inputs()
+        .iter()
+        .map(|&(p, l)| (p, u8::from(l)))
+        .collect();
+    let boot = Boot {
+        flash: image,
+        symbols: fw.symbols,
+        health_words: fw.health_words,
+        outputs: vec![
+            pin::TRIGGER,
+            pin::STBY,
+            pin::LEFT[0],
+            pin::LEFT[1],
+            pin::RIGHT[0],
+            pin::RIGHT[1],
+        ],
+        pwm: vec![pin::LEFT[2], pin::RIGHT[2]],
+        inputs,
+    };
+    let mut harness = Harness::start(&boot)?;
+    let table = defmt_decoder::Table::parse(&fw.elf)
+        .map_err(|e| format!("the firmware's defmt table: {e}"))?
+        .ok_or("the firmware has no defmt table")?;
+    let wall = WallClock::now();
+    let limit = Duration::from_millis(sc.max_ms) + Duration::from_secs(2);
+    let run = psmpa_sim::backend::simulate(
+        co_simulate(fw, play, &settings, &mut harness, &table),
+        limit,
+    )
+    .map_err(|e| format!("{}: {e}", play.name()))?
+    .output?;
+    let (mut report, pins, obstacles) = run;
+    report.wall_s = wall.elapsed().as_secs_f64();
+    if play.fault.is_none() {
+        compare_with_host(sc, &mut report, &pins, &obstacles);
+    }
+    Ok((report, pins))
+}
+
+fn file_name(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Moves the world's clock to `ns` of emulated time (its millisecond).
+async fn clock_to(ns: u64) {
+    let at = Instant::from_millis(ns / 1_000_000);
+    if at > Instant::now() {
+        Timer::at(at).await;
+    }
+}
+
+/// The pins a fault plays, from a fault scenario.
+fn pin_fault(fault: Option<&Fault>) -> Option<PinFault> {
+    match fault? {
+        f @ Fault::NoEcho { .. } => Some(PinFault::NoEcho { at_ns: f.at_ns() }),
+        f @ Fault::EchoStuckHigh { .. } => Some(PinFault::EchoStuck { at_ns: f.at_ns() }),
+        f @ Fault::BumperChatter {
+            for_s, every_us, ..
+        } => Some(PinFault::Chatter {
+            at_ns: f.at_ns(),
+            until_ns: f.at_ns() + (for_s * 1e9) as u64,
+            every_ns: every_us * 1_000,
+        }),
+        Fault::Hang { .. } | Fault::Panic { .. } => None,
+    }
+}
+
+/// What a run collects besides the world.
+#[derive(Default)]
+struct Collected {
+    log: Vec<LogLine>,
+    resets: Vec<u64>,
+    pins: PinLog,
+    /// When the firmware said how its task ended (or that it was reset), ns.
+    done: Option<u64>,
+    /// When a fault struck: the injection, the sensor's failure, ns.
+    struck: Option<u64>,
+    /// The motors started to drive after the fault struck, ns.
+    drove_after: Option<u64>,
+    /// Whether the motors drove at the last motor event.
+    driving: bool,
+    /// After a panic's injection: when the motors went off, and when the log first spoke.
+    off_at: Option<u64>,
+    spoke_at: Option<u64>,
+}
+
+async fn co_simulate(
+    fw: &Firmware,
+    play: &Play,
+    settings: &Settings,
+    harness: &mut Harness,
+    table: &defmt_decoder::Table,
+) -> Result<(Report, PinLog, Vec<ObstacleReport>), String> {
+    let sc = &play.scenario;
+    let fault = play.fault.as_ref().map(|f| f.fault);
+    let walk = settings.walk_permille.unsigned_abs();
+    let mut bw = BenchWorld::new(sc, walk, fw.ids, pin_fault(fault.as_ref()));
+    let mut decoder = table.new_stream_decoder();
+    let mut c = Collected::default();
+    let end_ns = sc.max_ms.saturating_mul(1_000_000);
+    let inject = fault.filter(|f| matches!(f, Fault::Hang { .. } | Fault::Panic { .. }));
+    let mut injected = false;
+    let mut now = 0u64;
+    let send = |harness: &mut Harness, pins: &mut PinLog, sets: Vec<world::Set>| {
+        for (p, level, at) in sets {
+            pins.push(at, format!("in{p}"), i64::from(level));
+            harness.set(p, level, at)?;
+        }
+        Ok::<(), String>(())
+    };
+    send(harness, &mut c.pins, bw.chatter())?;
+    loop {
+        let finish = c
+            .done
+            .map_or(end_ns, |d| d.saturating_add(GRACE_NS).min(end_ns));
+        if now >= finish {
+            break;
+        }
+        let mut stop = finish;
+        if let Some(t) = bw.next_event_ns() {
+            stop = stop.min(t.max((now / 1_000_000 + 1) * 1_000_000));
+        }
+        if let Some(f) = inject.filter(|_| !injected) {
+            stop = stop.min(f.at_ns().max(now + 1));
+        }
+        for event in harness.run(stop)? {
+            match event {
+                Event::Pin { pin, level, ns } => {
+                    clock_to(ns).await;
+                    c.pins.push(ns, format!("out{pin}"), i64::from(level));
+                    let sets = bw.output(pin, level == 1, ns);
+                    send(harness, &mut c.pins, sets)?;
+                    motors(&bw, &mut c, ns);
+                }
+                Event::Duty { pin, permille, ns } => {
+                    clock_to(ns).await;
+                    c.pins.push(ns, format!("duty{pin}"), i64::from(permille));
+                    let sets = bw.duty(pin, permille, ns);
+                    send(harness, &mut c.pins, sets)?;
+                    motors(&bw, &mut c, ns);
+                }
+                Event::Health { words, ns } => {
+                    clock_to(ns).await;
+                    let failed = (0..2).any(|i| world::Health::of(&words, fw.ids[i]).failed > 0);
+                    if failed && c.struck.is_none() && fault.is_some() {
+                        c.struck = Some(ns);
+                    }
+                    let sets = bw.health_report(&words, ns);
+                    send(harness, &mut c.pins, sets)?;
+                }
+                Event::Rtt { data, ns } => {
+                    c.spoke_at.get_or_insert(ns);
+                    decode(&mut *decoder, &data, ns, &mut c)?;
+                }
+                Event::Reset { ns, .. } => {
+                    c.resets.push(ns);
+                    c.pins.push(ns, "reset", 0);
+                    c.struck.get_or_insert(ns);
+                }
+                Event::At { ns } => now = ns,
+                Event::Error { message } => return Err(message),
+            }
+        }
+        clock_to(now).await;
+        let mut sets = Vec::new();
+        bw.inputs_now(now, &mut sets);
+        send(harness, &mut c.pins, sets)?;
+        if let Some(f) = inject.filter(|f| !injected && now >= f.at_ns()) {
+            harness.inject(f.name())?;
+            injected = true;
+            c.struck = Some(now);
+            c.spoke_at = None;
+            c.pins.push(now, format!("inject-{}", f.name()), 0);
+        }
+    }
+    bw.finish();
+    let stats = harness.stats()?;
+    let stack = harness.stack(fw.stack.0, fw.stack.1)?;
+    let (mut report, mut pins) = report(fw, play, &bw, c, &stats, now);
+    report.stack_bytes = stack;
+    let obstacles = bw.world().obstacles().to_vec();
+    pins.world = bw.into_events();
+    Ok((report, pins, obstacles))
+}
+
+/// Notes when the motors start to drive or go off, for the fault checks.
+fn motors(bw: &BenchWorld, c: &mut Collected, ns: u64) {
+    let started = bw.driving() && !c.driving;
+    c.driving = bw.driving();
+    if let Some(struck) = c.struck {
+        if started && ns > struck {
+            c.drove_after.get_or_insert(ns);
+        }
+        if !bw.driving() && c.off_at.is_none() && ns >= struck {
+            c.off_at = Some(ns);
+        }
+    }
+}
+
+/// Decodes log bytes; notes the firmware's outcome.
+fn decode(
+    decoder: &mut dyn defmt_decoder::StreamDecoder,
+    hex: &str,
+    ns: u64,
+    c: &mut Collected,
+) -> Result<(), String> {
+    let bytes: Vec<u8> = (0..hex.len() / 2)
+        .filter_map(|i| u8::from_str_radix(hex.get(2 * i..2 * i + 2)?, 16).ok())
+        .collect();
+    decoder.received(&bytes);
+    loop {
+        match decoder.decode() {
+            Ok(frame) => {
+                let text = frame.display_message().to_string();
+                let line = LogLine {
+                    at: frame
+                        .display_timestamp()
+                        .map_or(String::new(), |t| t.to_string()),
+                    level: frame.level().map_or("", |l| l.as_str()).to_uppercase(),
+                    text,
+                    ns,
+                };
+                let ends = [
+                    "Fetch Tea: goal reached",
+                    "Fetch Tea failed",
+                    "the watchdog reset the board",
+                    "the mission does not load",
+                ];
+                if ends.iter().any(|e| line.text.contains(e)) {
+                    c.done.get_or_insert(ns);
+                }
+                c.log.push(line);
+            }
+            Err(defmt_decoder::DecodeError::UnexpectedEof) => return Ok(()),
+            Err(defmt_decoder::DecodeError::Malformed) => {
+                return Err("the firmware's log is malformed (RTT bytes lost?)".to_owned());
+            }
+        }
+    }
+}
+
+/// The run's report and its checks.
+fn report(
+    fw: &Firmware,
+    play: &Play,
+    bw: &BenchWorld,
+    c: Collected,
+    stats: &Stats,
+    now: u64,
+) -> (Report, PinLog) {
+    let sc = &play.scenario;
+    let tally: Tally = bw.world().tally();
+    let names = ["sonar", "bumper"];
+    let mut failures = Vec::new();
+    let costs = bound::Costs::of(stats);
+    let periods = [sc.sonar.period_ms, sc.bumper_period_ms];
+    let bounds = bound::bounds(&costs, periods);
+    let mut sample_gap_max_ms = BTreeMap::new();
+    let mut reactions_cycles = BTreeMap::new();
+    let mut bound_cycles = BTreeMap::new();
+    for (i, name) in names.iter().enumerate() {
+        let h = bw.health(i);
+        let gap = (h.delivered >= 2 && h.max_gap_us > 0).then(|| f64::from(h.max_gap_us) / 1e3);
+        sample_gap_max_ms.insert((*name).to_owned(), gap);
+        let r = bw.reactions[i].worst_cycles;
+        reactions_cycles.insert((*name).to_owned(), r);
+        let b = bounds.as_ref().ok().map(|b| b[i]);
+        bound_cycles.insert((*name).to_owned(), b);
+        if let (Some(r), Some(b)) = (r, b)
+            && r > b
+        {
+            failures.push(format!(
+                "a {name} reaction of {r} cycles exceeds its bound of {b} cycles"
+            ));
+        }
+    }
+    if let Err(e) = &bounds {
+        failures.push(format!("no response-time bound: {e}"));
+    }
+    for (i, edge) in &bw.unanswered {
+        failures.push(format!(
+            "the robot drove on after its {} showed an obstacle at {:.3} s",
+            names.get(*i).unwrap_or(&"?"),
+            *edge as f64 / 1e9
+        ));
+    }
+    if let Some(f) = &play.fault {
+        expectations(&f.expect, &tally, &c, &sample_gap_max_ms, &mut failures);
+    } else if c.done.is_none() {
+        failures.push("the firmware never said how its task ended".to_owned());
+    }
+    let delivered: u64 = (0..4).map(|i| u64::from(bw.health(i).delivered)).sum();
+    let sensing = stats
+        .handlers
+        .get(&bound::EXC_SENSING)
+        .map_or(0, |h| h.total);
+    let report = Report {
+        scenario: sc.name.as_str().to_owned(),
+        file: play.file.display().to_string(),
+        fault: play.fault.as_ref().map(|f| f.fault.name().to_owned()),
+        interferences: tally.interferences,
+        detected: tally.detected,
+        collisions: tally.collisions,
+        reached_door: tally.reached_door,
+        sample_gap_max_ms,
+        reactions_cycles,
+        bound_cycles,
+        host: None,
+        watchdog_resets: c.resets.len() as u32,
+        emulated_s: now as f64 / 1e9,
+        wall_s: 0.0,
+        sensing_cycles_per_sample: sensing.checked_div(delivered),
+        costs,
+        stack_bytes: 0,
+        pin_log_hash: format!("{:016x}", c.pins.hash()),
+        failures,
+        differences: Vec::new(),
+        log: c.log,
+    };
+    let _ = fw;
+    (report, c.pins)
+}
+
+/// psmpa-sim's outcome of the same scenario beside the bench's, obstacle by obstacle. They
+/// must agree on reaching the door, and on every obstacle but where the bodies differ: the
+/// wheeled robot waits for a blocked path where the NAO steps around, so an obstacle the NAO
+/// meets later may be taken away before the wheeled robot moves again (unmet on the bench,
+/// accepted when the robot stood still all the while it was there), and a walking obstacle
+/// may reach one robot and not the other (a collision on psmpa-sim only is accepted; one on
+/// the bench only is not).
+fn compare_with_host(sc: &Scenario, r: &mut Report, pins: &PinLog, bench: &[ObstacleReport]) {
+    let s = match run_summary(sc, Arch::PSmpa) {
+        Ok(s) => s,
+        Err(e) => return r.failures.push(format!("psmpa-sim: {e}")),
+    };
+    r.host = Some(HostOutcome {
+        detected: s.tally.detected,
+        collisions: s.tally.collisions,
+        reached_door: s.tally.reached_door,
+    });
+    if s.tally.reached_door != r.reached_door {
+        r.failures.push(format!(
+            "psmpa-sim's robot reached the door: {}; the bench's: {}",
+            s.tally.reached_door, r.reached_door
+        ));
+    }
+    for (i, (host, bench)) in s.obstacles.iter().zip(bench).enumerate() {
+        let kind = sc.interferences.get(i).map_or("?", |x| match x.kind {
+            psmpa_sim::scenario::Kind::Box => "box",
+            psmpa_sim::scenario::Kind::Ball => "ball",
+        });
+        match (host.fate, bench.fate) {
+            (Fate::Collided, Fate::Collided)
+            | (Fate::Detected(_), Fate::Detected(_))
+            | (Fate::Unmet, Fate::Unmet) => {}
+            (_, Fate::Collided) => r.failures.push(format!(
+                "#{} {kind}: a collision on the bench, psmpa-sim's robot {}",
+                i + 1,
+                fate(host.fate)
+            )),
+            (Fate::Detected(_), Fate::Unmet) if waited(pins, i) => r.differences.push(format!(
+                "#{} {kind}: psmpa-sim's robot {} after stepping around an earlier obstacle; the bench's waited for that one, and this was taken away before it moved",
+                i + 1,
+                fate(host.fate)
+            )),
+            (host_fate, bench_fate) => {
+                let what = format!(
+                    "#{} {kind}: psmpa-sim's robot {}, the bench's {}",
+                    i + 1,
+                    fate(host_fate),
+                    fate(bench_fate)
+                );
+                if matches!(host_fate, Fate::Collided) {
+                    r.differences.push(what);
+                } else {
+                    r.failures.push(what);
+                }
+            }
+        }
+    }
+}
+
+/// An obstacle's fate in words.
+fn fate(f: Fate) -> String {
+    match f {
+        Fate::Unmet => "never met it".to_owned(),
+        Fate::Detected(d) => format!("detected it with its {}", d.name()),
+        Fate::Collided => "collided with it".to_owned(),
+    }
+}
+
+/// Whether the robot stood still all the while obstacle `i` was there (from its appearance to
+/// its removal, by the world's events).
+fn waited(pins: &PinLog, i: usize) -> bool {
+    let index = u8::try_from(i).unwrap_or(u8::MAX);
+    let mut walking = false;
+    let mut present = false;
+    for (_, _, e) in &pins.world {
+        match e {
+            WorldEvent::Walk => {
+                if present {
+                    return false;
+                }
+                walking = true;
+            }
+            WorldEvent::Stop => walking = false,
+            WorldEvent::Appeared { index: j, .. } if *j == index => {
+                if walking {
+                    return false;
+                }
+                present = true;
+            }
+            WorldEvent::Removed(j) if *j == index => return present,
+            _ => {}
+        }
+    }
+    false
+}
+
+/// A fault scenario's expectations, checked.
+fn expectations(
+    e: &Expect,
+    tally: &Tally,
+    c: &Collected,
+    gaps: &BTreeMap<String, Option<f64>>,
+    failures: &mut Vec<String>,
+) {
+    let mut check = |ok: bool, what: String| {
+        if !ok {
+            failures.push(what);
+        }
+    };
+    if let Some(want) = e.reached_door {
+        check(
+            tally.reached_door == want,
+            format!("expected reached_door {want}, got {}", tally.reached_door),
+        );
+    }
+    if let Some(want) = e.collisions {
+        check(
+            tally.collisions == want,
+            format!("expected {want} collisions, got {}", tally.collisions),
+        );
+    }
+    if let Some(want) = e.watchdog_resets {
+        check(
+            c.resets.len() as u32 == want,
+            format!("expected {want} watchdog resets, got {}", c.resets.len()),
+        );
+    }
+    if e.still {
+        check(c.struck.is_some(), "the fault never struck".to_owned());
+        if let Some(at) = c.drove_after {
+            check(
+                false,
+                format!(
+                    "the motors drove at {:.3} s, after the fault",
+                    at as f64 / 1e9
+                ),
+            );
+        }
+    }
+    if e.motors_off_first {
+        match (c.off_at, c.spoke_at) {
+            (Some(off), Some(spoke)) => check(
+                off <= spoke,
+                format!("the log spoke at {spoke} ns, before the motors went off at {off} ns"),
+            ),
+            (None, _) => check(false, "the motors never went off".to_owned()),
+            (Some(_), None) => {}
+        }
+    }
+    for want in &e.log {
+        check(
+            c.log.iter().any(|l| l.text.contains(want.as_str())),
+            format!("the log never said {want:?}"),
+        );
+    }
+    for (sensor, max) in &e.sample_gap_max_ms {
+        match gaps.get(sensor).copied().flatten() {
+            Some(g) => check(
+                g <= *max,
+                format!("{sensor}'s samples lay {g} ms apart, more than {max} ms"),
+            ),
+            None => check(false, format!("{sensor} delivered fewer than two samples")),
+        }
+    }
+}
+
+/// The boards' README shows log lines of a bench run of `sonar-6`: each must be a line of this
+/// run's log (timestamps included), so that the README never shows lines written by hand.
+fn readme_log(reports: &[(Report, PinLog)]) -> Vec<String> {
+    let path = firmware::root().join("boards/README.md");
+    let Ok(readme) = std::fs::read_to_string(&path) else {
+        return vec![format!("{}: cannot read it", path.display())];
+    };
+    let Some((_, block)) = readme.split_once("```text\n") else {
+        return vec![format!("{}: no log block", path.display())];
+    };
+    let block = block.split("```").next().unwrap_or("");
+    let Some((run, _)) = reports
+        .iter()
+        .find(|(r, _)| r.scenario == "sonar-6" && r.fault.is_none())
+    else {
+        return vec!["no run of sonar-6 to check the boards' README against".to_owned()];
+    };
+    let lines: Vec<String> = run
+        .log
+        .iter()
+        .map(|l| format!("{} {:<5} {}", l.at, l.level, l.text))
+        .collect();
+    block
+        .lines()
+        .filter(|l| *l != "...")
+        .filter(|l| !lines.iter().any(|x| x == l))
+        .map(|l| format!("boards/README.md shows a log line this bench run did not write: {l}"))
+        .collect()
+}
+
+/// One run's report and pin log, or why it could not run.
+type Played = Result<(Report, PinLog), String>;
+
+/// The deepest stack the last bench run measured, bytes (`target/hil/stack.json`).
+pub fn stack_high_water() -> Option<u64> {
+    let at = firmware::root().join("target/hil/stack.json");
+    let text = std::fs::read(at).ok()?;
+    serde_json::from_slice::<serde_json::Value>(&text).ok()?["stack_bytes"].as_u64()
+}
+
+/// `cargo xtask hil [FILE ...] [--json]`.
+pub fn run(files: &[PathBuf], json: bool) -> Ending {
+    let (plays, defaults) = match plays(files) {
+        Ok(p) => p,
+        Err(e) => return Ending::BadInput(e),
+    };
+    if let Err(e) = harness::check_tools() {
+        return Ending::Failed(e);
+    }
+    let fw = match build().and_then(|elf| Firmware::read(&elf)) {
+        Ok(fw) => fw,
+        Err(e) => return Ending::Failed(e),
+    };
+    let out = firmware::root().join("target/hil");
+    if let Err(e) = std::fs::create_dir_all(&out) {
+        return Ending::Failed(format!("{}: {e}", out.display()));
+    }
+    let wall = WallClock::now();
+    // Two at a time: each run is one Node process and one thread here.
+    // Two at a time: each run is one Node process and one thread here.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<Played>>> =
+        plays.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..2 {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let (Some(p), Some(slot)) = (plays.get(i), slots.get(i)) else {
+                        break;
+                    };
+                    let result = play(&fw, p, &out);
+                    if let Ok(mut slot) = slot.lock() {
+                        *slot = Some(result);
+                    }
+                }
+            });
+        }
+    });
+    let results: Vec<Played> = slots
+        .into_iter()
+        .map(|m| {
+            m.into_inner()
+                .ok()
+                .flatten()
+                .unwrap_or_else(|| Err("a run did not finish".to_owned()))
+        })
+        .collect();
+    let mut failed = Vec::new();
+    let mut reports = Vec::new();
+    for (p, result) in plays.iter().zip(results) {
+        match result {
+            Ok((report, pins)) => {
+                if !report.failures.is_empty() {
+                    failed.push(p.name());
+                }
+                let stem = file_name(&p.name());
+                let svg = out.join(format!("{stem}.svg"));
+                if let Err(e) = svg::write(&svg, &report, &pins) {
+                    eprintln!("{}: {e}", svg.display());
+                }
+                let events = out.join(format!("{stem}.txt"));
+                if let Err(e) = std::fs::write(&events, timeline(&report, &pins)) {
+                    eprintln!("{}: {e}", events.display());
+                }
+                if json {
+                    println!("{}", serde_json::to_string(&report).unwrap_or_default());
+                } else {
+                    print!("{}", text(&report));
+                }
+                reports.push((report, pins));
+            }
+            Err(e) => {
+                failed.push(p.name());
+                eprintln!("{}: {e}", p.name());
+            }
+        }
+    }
+    // The same scenario, the same pin log: the first one again.
+    if defaults && let (Some(p), Some((first, _))) = (plays.first(), reports.first()) {
+        match play(&fw, p, &out) {
+            Ok((again, _)) if again.pin_log_hash == first.pin_log_hash => {
+                if !json {
+                    println!(
+                        "determinism: {} played twice, the same pin log ({})",
+                        first.scenario, first.pin_log_hash
+                    );
+                }
+            }
+            Ok((again, _)) => failed.push(format!(
+                "{} played twice gave two pin logs ({} and {})",
+                first.scenario, first.pin_log_hash, again.pin_log_hash
+            )),
+            Err(e) => failed.push(e),
+        }
+    }
+    if defaults {
+        failed.extend(readme_log(&reports));
+    }
+    // The deepest stack of the runs, for `cargo xtask stack`'s check of its bound.
+    if let Some(deepest) = reports.iter().map(|(r, _)| r.stack_bytes).max() {
+        let at = out.join("stack.json");
+        let text = serde_json::json!({ "image": "psmpa-pico", "stack_bytes": deepest }).to_string();
+        if let Err(e) = std::fs::write(&at, text) {
+            eprintln!("{}: {e}", at.display());
+        }
+    }
+    if !json {
+        let emulated: f64 = reports.iter().map(|(r, _)| r.emulated_s).sum();
+        println!(
+            "\n{} runs, {:.1} s emulated in {:.1} s ({:.1} emulated s a wall s, two at a time); pictures in {}",
+            reports.len(),
+            emulated,
+            wall.elapsed().as_secs_f64(),
+            emulated / wall.elapsed().as_secs_f64().max(1e-9),
+            out.display()
+        );
+    }
+    if failed.is_empty() {
+        Ending::Passed
+    } else {
+        Ending::Failed(format!("the bench's checks failed: {}", failed.join(", ")))
+    }
+}
+
+/// A run's timeline: the world's events and the firmware's log, in time order.
+fn timeline(r: &Report, pins: &PinLog) -> String {
+    let mut lines: Vec<(u64, String)> = pins
+        .world
+        .iter()
+        .map(|(ms, pos, e)| {
+            (
+                ms * 1_000_000,
+                format!(
+                    "{:>10.3} world    {:>7.3} m  {e:?}",
+                    *ms as f64 / 1e3,
+                    *pos as f64 / 1e6
+                ),
+            )
+        })
+        .collect();
+    lines.extend(r.log.iter().map(|l| {
+        (
+            l.ns,
+            format!(
+                "{:>10.3} firmware {:>9} {:<5} {}",
+                l.ns as f64 / 1e9,
+                l.at,
+                l.level,
+                l.text
+            ),
+        )
+    }));
+    lines.extend(
+        pins.entries
+            .iter()
+            .filter(|(_, w, _)| w == "reset" || w.starts_with("inject"))
+            .map(|(ns, w, _)| (*ns, format!("{:>10.3} bench    {w}", *ns as f64 / 1e9))),
+    );
+    lines.sort_by_key(|(t, _)| *t);
+    lines.into_iter().map(|(_, l)| l + "\n").collect()
+}
+
+/// A run as text: its log, its outcome beside psmpa-sim's, its reactions beside their bounds.
+fn text(r: &Report) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "\n== {}{} ({}): {:.1} s emulated in {:.1} s",
+        r.scenario,
+        r.fault
+            .as_ref()
+            .map_or(String::new(), |f| format!(", fault {f}")),
+        r.file,
+        r.emulated_s,
+        r.wall_s
+    );
+    for l in &r.log {
+        let _ = writeln!(s, "  {:>10} {:<5} {}", l.at, l.level, l.text);
+    }
+    let host = r.host.map_or(String::new(), |h| {
+        format!(
+            " (psmpa-sim: {}, {}, {})",
+            h.detected, h.collisions, h.reached_door
+        )
+    });
+    let _ = writeln!(
+        s,
+        "  detected {} of {}, collisions {}, reached the door {}{host}; watchdog resets {}",
+        r.detected, r.interferences, r.collisions, r.reached_door, r.watchdog_resets
+    );
+    for name in ["sonar", "bumper"] {
+        let gap = r.sample_gap_max_ms.get(name).copied().flatten();
+        let re = r.reactions_cycles.get(name).copied().flatten();
+        let b = r.bound_cycles.get(name).copied().flatten();
+        let _ = writeln!(
+            s,
+            "  {name:<6}: longest sample gap {}, worst reaction {} (bound {})",
+            gap.map_or("-".to_owned(), |g| format!("{g:.3} ms")),
+            re.map_or("-".to_owned(), |c| format!("{c} cycles")),
+            b.map_or("-".to_owned(), |c| format!("{c} cycles")),
+        );
+    }
+    for d in &r.differences {
+        let _ = writeln!(s, "  differs (the body): {d}");
+    }
+    if r.failures.is_empty() {
+        let _ = writeln!(s, "  checks held");
+    }
+    for f in &r.failures {
+        let _ = writeln!(s, "  FAILED: {f}");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_robot_is_calibrated_to_its_scenario() {
+        let sc = psmpa_sim::load::parse(
+            Path::new("t.json"),
+            br#"{"name": "t", "door_m": 1.5, "robot": {"speed_mps": 0.15, "plan_us": 50000},
+                 "sonar": {"period_ms": 50, "threshold_m": 0.4}, "bumper": {"period_ms": 10},
+                 "interferences": []}"#,
+        )
+        .unwrap();
+        let s = settings_for(&sc);
+        // It stops for a reading below the threshold, as the world registers one.
+        assert_eq!(s.clearance_mm, 399);
+        assert_eq!((s.walk_mm, s.walk_mm_s), (1_500, 150));
+        assert_eq!(s.plan.as_micros(), 50_000);
+        assert_eq!(s.sonar_period.map(|p| p.as_millis()), Some(50));
+        assert_eq!(s.bumper_period.map(|p| p.as_millis()), Some(10));
+        assert_eq!(Settings::from_record(&s.to_record()), Ok(s));
+    }
+}
