@@ -280,7 +280,7 @@ class Bench {
   }
 
   run(until) {
-    const { core } = this;
+    let core = this.core;
     let n = 0;
     let wasWaiting = core.waiting;
     while (this.now < until && this.events.length === 0) {
@@ -289,8 +289,9 @@ class Bench {
         this.inputs.set(pin, level);
         this.mcu.gpio[pin].setInputValue(level === 1);
       }
-      if (this.injection !== undefined && core.IPSR === 0) {
-        // Thread mode calls the test point now, abandoning what it was doing.
+      if (this.injection !== undefined && core.IPSR === 0 && !core.PM) {
+        // Thread mode calls the test point now, abandoning what it was doing (never inside a
+        // critical section: a behaviour stuck in a loop leaves interrupts on).
         core.PC = this.injection & ~1;
         core.waiting = false;
         this.injection = undefined;
@@ -299,8 +300,10 @@ class Bench {
         const clock = this.sim.clock;
         let step = until - this.now;
         if (this.schedule.length) step = Math.min(step, this.schedule[0].at - this.now);
-        const alarm = clock.nanosToNextAlarm;
-        if (alarm > 0) step = Math.min(step, alarm);
+        // To the next alarm (rp2040js keeps them in a list; one due now is a step of 0), so
+        // that the core runs as soon as an alarm's interrupt wakes it.
+        const next = clock.nextAlarm;
+        if (next) step = Math.min(step, next.nanos - clock.nanos);
         clock.tick(Math.max(step, 0));
       } else {
         this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
@@ -317,6 +320,8 @@ class Bench {
         this.resetRequested = false;
         this.readRtt();
         this.boot(true);
+        core = this.core;
+        wasWaiting = core.waiting;
         this.events.push({ ev: 'reset', cause: 'watchdog', ns: this.now });
       }
     }
