@@ -70,7 +70,7 @@ cargo xtask qemu
 step "the check can fail: a deliberately broken scenario must be caught (mps2-an386)"
 cargo xtask qemu --inject-fault --expect-failure
 
-step "firmware size: flash, static RAM, stack high-water against budget and snapshot (the QEMU images and the Pico 2 board)"
+step "firmware size: flash, static RAM, stack high-water against budget and snapshot (the QEMU images and both boards)"
 cargo xtask size
 
 step "the bench: the Pico's firmware on an emulated RP2040 (rp2040js) against the project's world, every scenario and fault, checked against psmpa-sim and its response-time bounds"
