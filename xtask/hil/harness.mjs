@@ -28,7 +28,8 @@
 //   {"ev":"reset","cause":"watchdog"}   the watchdog fired: the chip was reset, the world kept
 //   {"ev":"at"}                         the run stopped here (after its events)
 //
-// rp2040js's pitfalls, and what this file does about them (docs in boards/README.md):
+// rp2040js's pitfalls, and what this file does about them (boards/README.md, "What the bench
+// verifies"):
 // * SEV is a no-op: embassy's thread executor needs it, so the logger's "SEV" message sets
 //   the core's event flag.
 // * A watchdog that fired fires again at the same instant for ever: the harness stops it and

@@ -327,6 +327,6 @@ async fn main(spawner: Spawner) {
             Instant::now().as_millis(),
             report.plans_started
         ),
-        Err(e) => error!("Fetch Tea failed: {}", e),
+        Err(e) => error!("Fetch Tea failed: {}", log::Named(&Log(&loaded.mission), e)),
     }
 }

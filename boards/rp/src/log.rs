@@ -21,7 +21,11 @@
 use defmt::{debug, info, trace, warn};
 use embassy_time::Instant;
 use portable_atomic::{AtomicU32, Ordering};
-use psmpa_core::{ActionId, MissionOf, SensorId, TraceEvent, TraceSink, Value};
+use psmpa_core::plan::{MAX_PLANS, PlanSet};
+use psmpa_core::{
+    ActionId, ControlError, Failure, MissionOf, PlanId, SensorId, SensorSet, TraceEvent, TraceSink,
+    Value,
+};
 use psmpa_drivers::robot::FetchTeaCaps;
 
 /// Sensors whose health is kept: the mission's first four (Fetch Tea has four).
@@ -144,7 +148,124 @@ type Mission = MissionOf<'static, FetchTeaCaps>;
 /// Writes each trace event to the defmt log with the mission's names.
 pub struct Log(pub &'static Mission);
 
+/// A failure, or the control loop's error, with the mission's names (`go to door`, `sonar`,
+/// `GetIn Kitchen`, `{path_clear}`) rather than ids.
+pub struct Named<'l, T>(pub &'l Log, pub T);
+
+impl defmt::Format for Named<'_, Failure> {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        let (log, d) = (self.0, &self.0.0.domain);
+        match self.1 {
+            Failure::ActionFailed { action } => {
+                defmt::write!(f, "{=str} failed", log.action(action))
+            }
+            Failure::ActionInterrupted { action } => {
+                defmt::write!(f, "{=str} was interrupted", log.action(action))
+            }
+            Failure::PreconditionUnmet { action, missing } => defmt::write!(
+                f,
+                "{=str} could not start: {} false",
+                log.action(action),
+                d.names(missing)
+            ),
+            Failure::PreconditionViolated { action, missing } => defmt::write!(
+                f,
+                "{=str} stopped: {} false for too long",
+                log.action(action),
+                d.names(missing)
+            ),
+            Failure::SensorUnavailable { sensor } => {
+                defmt::write!(f, "{=str} is out of service", log.sensor(sensor))
+            }
+            Failure::SensorFault { sensor, fault } => {
+                defmt::write!(f, "{=str} failed: {}", log.sensor(sensor), fault)
+            }
+            other => defmt::write!(f, "{}", other),
+        }
+    }
+}
+
+impl defmt::Format for Named<'_, ControlError> {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        let (log, d) = (self.0, &self.0.0.domain);
+        let event = |e| d.event_name(e).unwrap_or("?");
+        match self.1 {
+            ControlError::NoApplicablePlan { event: e, beliefs } => defmt::write!(
+                f,
+                "no plan for {=str} applies under {}",
+                event(e),
+                d.names(beliefs)
+            ),
+            ControlError::Exhausted {
+                event: e,
+                failed,
+                beliefs,
+                faulty,
+            } => defmt::write!(
+                f,
+                "every plan for {=str} failed ({}); beliefs {}; out of service: {}",
+                event(e),
+                Plans(log, failed),
+                d.names(beliefs),
+                Sensors(log, faulty)
+            ),
+            ControlError::TooManyFailures { failures, last } => defmt::write!(
+                f,
+                "{=u16} plans failed, the last because {}",
+                failures,
+                Named(log, last)
+            ),
+            ControlError::InitialModel { failure } => defmt::write!(
+                f,
+                "the initial model could not be established: {}",
+                Named(log, failure)
+            ),
+            other => defmt::write!(f, "{}", other),
+        }
+    }
+}
+
+/// A set of plans by name.
+struct Plans<'l>(&'l Log, PlanSet);
+
+impl defmt::Format for Plans<'_> {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        let mut first = true;
+        for p in (0..MAX_PLANS).filter_map(PlanId::new) {
+            if self.1.contains(p) {
+                let sep = if first { "" } else { ", " };
+                defmt::write!(f, "{=str}{=str}", sep, self.0.plan(p));
+                first = false;
+            }
+        }
+        if first {
+            defmt::write!(f, "none");
+        }
+    }
+}
+
+/// A set of sensors by name.
+struct Sensors<'l>(&'l Log, SensorSet);
+
+impl defmt::Format for Sensors<'_> {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        let mut first = true;
+        for s in self.1.iter() {
+            let sep = if first { "" } else { ", " };
+            defmt::write!(f, "{=str}{=str}", sep, self.0.sensor(s));
+            first = false;
+        }
+        if first {
+            defmt::write!(f, "none");
+        }
+    }
+}
+
 impl Log {
+    fn plan(&self, id: PlanId) -> &'static str {
+        self.0.library.get(id).map_or("generated plan", |p| p.name)
+    }
+
     fn sensor(&self, id: SensorId) -> &'static str {
         self.0.domain.sensor(id).map_or("?", |s| s.name)
     }
@@ -180,7 +301,7 @@ impl TraceSink for Log {
             ),
             TraceEvent::PlanSucceeded { plan: p } => info!("plan {=str} succeeded", plan(p)),
             TraceEvent::PlanFailed { plan: p, reason } => {
-                warn!("plan {=str} failed: {}", plan(p), reason)
+                warn!("plan {=str} failed: {}", plan(p), Named(self, reason))
             }
             TraceEvent::StateEntered { action, .. } => info!("{=str} started", self.action(action)),
             TraceEvent::StateLeft {

@@ -143,10 +143,10 @@ pub fn dir() -> PathBuf {
 pub fn check_tools() -> Result<(), String> {
     let node = Command::new("node").arg("--version").output();
     if !node.is_ok_and(|o| o.status.success()) {
-        return Err("node is not installed: the bench runs rp2040js under Node.js (bash scripts/install-tools.sh installs what is missing)".to_owned());
+        return Err("node is not installed: the bench runs rp2040js under Node.js (bash scripts/install-tools.sh bench installs what is missing)".to_owned());
     }
     if !dir().join("node_modules/rp2040js/package.json").exists() {
-        return Err("rp2040js is not installed: run `npm ci --prefix xtask/hil` (bash scripts/install-tools.sh does)".to_owned());
+        return Err("rp2040js is not installed: run `bash scripts/install-tools.sh bench` (it runs `npm ci --prefix xtask/hil`)".to_owned());
     }
     Ok(())
 }

@@ -73,6 +73,20 @@ impl Play {
             None => self.scenario.name.as_str().to_owned(),
         }
     }
+
+    /// The stem of its output files in `target/hil`: the file's own (`fault-` before a fault
+    /// scenario's).
+    fn stem(&self) -> String {
+        let stem = self
+            .file
+            .file_stem()
+            .map_or_else(|| self.name(), |s| s.to_string_lossy().into_owned());
+        let stem = file_name(&stem);
+        match &self.fault {
+            Some(_) => format!("fault-{stem}"),
+            None => stem,
+        }
+    }
 }
 
 /// Reads what to play: the files given, or every shipped scenario and fault scenario.
@@ -92,7 +106,8 @@ fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
             .map_err(|e| format!("{}: cannot read the file: {e}", file.display()))?;
         if fault::is_fault_file(&bytes) {
             let f = fault::load(&file, &bytes)?;
-            let scenario = psmpa_sim::load::load(&f.scenario).map_err(|e| e.to_string())?;
+            let scenario = psmpa_sim::load::load(&f.scenario)
+                .map_err(|e| format!("{}: its scenario: {e}", file.display()))?;
             plays.push(Play {
                 file,
                 scenario,
@@ -290,6 +305,8 @@ pub struct Report {
     pub bound_cycles: BTreeMap<String, Option<u64>>,
     /// `psmpa-sim run --arch psmpa` of the same scenario (none for a fault scenario).
     pub host: Option<HostOutcome>,
+    /// How the firmware said its task ended (its log's last word on it), if it did.
+    pub mission: Option<String>,
     /// Resets by the watchdog.
     pub watchdog_resets: u32,
     /// Emulated time, s.
@@ -354,7 +371,7 @@ impl PinLog {
 fn play(fw: &Firmware, play: &Play, out: &Path) -> Result<(Report, PinLog), String> {
     let sc = &play.scenario;
     let settings = settings_for(sc);
-    let image = out.join(format!("{}.bin", file_name(&play.name())));
+    let image = out.join(format!("{}.bin", play.stem()));
     std::fs::write(&image, fw.image(&settings)).map_err(|e| format!("{}: {e}", image.display()))?;
     let inputs: BTreeMap<u8, u8> = BenchWorld::initial_inputs()
         .iter()
@@ -387,6 +404,8 @@ fn play(fw: &Firmware, play: &Play, out: &Path) -> Result<(Report, PinLog), Stri
     )
     .map_err(|e| format!("{}: {e}", play.name()))?
     .output?;
+    // The image is 2 MiB of flash, mostly empty: not kept.
+    let _ = std::fs::remove_file(&boot.flash);
     let (mut report, pins, obstacles) = run;
     report.wall_s = wall.elapsed().as_secs_f64();
     if play.fault.is_none() {
@@ -439,6 +458,8 @@ struct Collected {
     pins: PinLog,
     /// When the firmware said how its task ended (or that it was reset), ns.
     done: Option<u64>,
+    /// What it said.
+    ending: Option<String>,
     /// When a fault struck: the injection, the sensor's failure, ns.
     struck: Option<u64>,
     /// The motors started to drive after the fault struck, ns.
@@ -594,6 +615,7 @@ fn decode(
                 ];
                 if ends.iter().any(|e| line.text.contains(e)) {
                     c.done.get_or_insert(ns);
+                    c.ending.get_or_insert_with(|| line.text.clone());
                 }
                 c.log.push(line);
             }
@@ -684,6 +706,7 @@ fn report(
         reactions_cycles,
         bound_cycles,
         host: None,
+        mission: c.ending.clone(),
         watchdog_resets: c.resets.len() as u32,
         emulated_s: now as f64 / 1e9,
         wall_s: 0.0,
@@ -927,6 +950,7 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
     if let Err(e) = harness::check_tools() {
         return Ending::Failed(e);
     }
+    eprintln!("xtask hil: building the Pico's image (boards/pico; a few minutes the first time)");
     let fw = match build().and_then(|elf| Firmware::read(&elf)) {
         Ok(fw) => fw,
         Err(e) => return Ending::Failed(e),
@@ -974,7 +998,7 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
                 if !report.failures.is_empty() {
                     failed.push(p.name());
                 }
-                let stem = file_name(&p.name());
+                let stem = p.stem();
                 let svg = out.join(format!("{stem}.svg"));
                 if let Err(e) = svg::write(&svg, &report, &pins) {
                     eprintln!("{}: {e}", svg.display());
@@ -1078,7 +1102,12 @@ fn timeline(r: &Report, pins: &PinLog) -> String {
             .map(|(ns, w, _)| (*ns, format!("{:>10.3} bench    {w}", *ns as f64 / 1e9))),
     );
     lines.sort_by_key(|(t, _)| *t);
-    lines.into_iter().map(|(_, l)| l + "\n").collect()
+    let header = "# time (s)  source   then: the robot's position (m) and the world's event, or the\n\
+                  # firmware's own timestamp, level and log line. World events: Appeared/Removed\n\
+                  # (an obstacle by index from 0, where), Detected(i, sensor), Collided(i),\n\
+                  # Reacted(i, ms from certain to stopped), Walk/Stop, Speed(thousandths of the\n\
+                  # scenario's speed, the wheels' mean), Sample(device, reading).\n";
+    header.to_owned() + &lines.into_iter().map(|(_, l)| l + "\n").collect::<String>()
 }
 
 /// A run as text: its log, its outcome beside psmpa-sim's, its reactions beside their bounds.
@@ -1108,6 +1137,13 @@ fn text(r: &Report) -> String {
         s,
         "  detected {} of {}, collisions {}, reached the door {}{host}; watchdog resets {}",
         r.detected, r.interferences, r.collisions, r.reached_door, r.watchdog_resets
+    );
+    let _ = writeln!(
+        s,
+        "  mission: {}",
+        r.mission
+            .as_deref()
+            .unwrap_or("the firmware never said how it ended")
     );
     for name in ["sonar", "bumper"] {
         let gap = r.sample_gap_max_ms.get(name).copied().flatten();

@@ -12,10 +12,11 @@ use super::{PinLog, Report};
 
 const WIDTH: f64 = 1400.0;
 const LEFT: f64 = 110.0;
+const RIGHT: f64 = 40.0;
 const LANE: f64 = 26.0;
 
 /// The lanes: a label and the pin log's name for it.
-const LANES: [(&str, &str); 11] = [
+const LANES: [(&str, &str); 12] = [
     ("trigger GP2", "out2"),
     ("echo GP3", "in3"),
     ("bumper GP4", "in4"),
@@ -26,14 +27,15 @@ const LANES: [(&str, &str); 11] = [
     ("left IN2", "out11"),
     ("left duty", "duty12"),
     ("right IN1", "out13"),
+    ("right IN2", "out14"),
     ("right duty", "duty15"),
 ];
 
 /// Writes `report`'s run as an SVG to `path`.
 pub fn write(path: &Path, report: &Report, pins: &PinLog) -> Result<(), String> {
     let end_ns = (report.emulated_s * 1e9).max(1.0);
-    let x = |ns: u64| LEFT + (WIDTH - LEFT - 10.0) * (ns as f64 / end_ns);
-    let height = 60.0 + LANE * (LANES.len() as f64 + 2.0);
+    let x = |ns: u64| LEFT + (WIDTH - LEFT - RIGHT) * (ns as f64 / end_ns);
+    let height = 80.0 + LANE * (LANES.len() as f64 + 3.0);
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -83,6 +85,9 @@ pub fn write(path: &Path, report: &Report, pins: &PinLog) -> Result<(), String> 
     }
     let top = 40.0 + LANE * LANES.len() as f64;
     let _ = writeln!(s, r#"<text x="10" y="{}">world</text>"#, top + 15.0);
+    // Labels of events close together alternate between two rows.
+    let mut last_x = f64::NEG_INFINITY;
+    let mut row = 0.0;
     for (ms, _, event) in &pins.world {
         let (colour, what) = match event {
             WorldEvent::Appeared { index, .. } => ("#080", format!("+{}", index + 1)),
@@ -93,11 +98,13 @@ pub fn write(path: &Path, report: &Report, pins: &PinLog) -> Result<(), String> 
             _ => continue,
         };
         let at = x(ms * 1_000_000);
+        row = if at - last_x < 24.0 { 13.0 - row } else { 0.0 };
+        last_x = at;
         let _ = writeln!(
             s,
             r#"<line x1="{at:.2}" y1="40" x2="{at:.2}" y2="{:.2}" stroke="{colour}" stroke-opacity="0.35"/><text x="{at:.2}" y="{:.2}" fill="{colour}">{what}</text>"#,
             top + 4.0,
-            top + 15.0
+            top + 15.0 + row
         );
     }
     for (ns, what, _) in pins
@@ -113,7 +120,12 @@ pub fn write(path: &Path, report: &Report, pins: &PinLog) -> Result<(), String> 
             top + LANE + 12.0
         );
     }
-    let axis = top + LANE + 24.0;
+    let axis = top + LANE + 28.0;
+    let _ = writeln!(
+        s,
+        r##"<text x="10" y="{:.2}" fill="#444">world: +n obstacle n put down, -n taken away, dn detected, Xn collided with; door: the robot at the kitchen door. Blue: a pin high; red: a duty, its height the fraction.</text>"##,
+        axis + 20.0
+    );
     for tick in 0..=10 {
         let ns = (end_ns / 10.0 * f64::from(tick)) as u64;
         let _ = writeln!(
