@@ -23,7 +23,7 @@ cargo test -p psmpa-core --features defmt,defmt/unstable-test --lib text::tests
 step "docs (warnings are errors)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 
-step "psmpa-core builds for microcontrollers"
+step "psmpa-core (and psmpa-model beneath it) builds for microcontrollers"
 for target in thumbv7em-none-eabihf thumbv6m-none-eabi riscv32imac-unknown-none-elf; do
   cargo build -p psmpa-core --target "$target" --release
   cargo build -p psmpa-core --target "$target" --release --features defmt
@@ -85,11 +85,11 @@ cargo xtask timing
 step "the analysis can fail: at 250 kHz the same jobs need more than the processor"
 cargo xtask timing --clock-hz 250000 --expect-failure
 
-step "psmpa-core uses no allocator"
+step "psmpa-core and psmpa-model use no allocator"
 # `extern crate std/alloc` is allowed only right under `#[cfg(test)]`.
 awk 'FNR == 1 { prev = "" }
      /extern crate (alloc|std)/ && prev !~ /cfg\(test\)/ { print FILENAME ":" FNR ": " $0; bad = 1 }
      { prev = $0 }
-     END { exit bad }' core/src/*.rs || { echo "core must not use alloc or std outside tests" >&2; exit 1; }
+     END { exit bad }' core/src/*.rs model/src/*.rs || { echo "core and model must not use alloc or std outside tests" >&2; exit 1; }
 
 printf '\nall checks passed\n'

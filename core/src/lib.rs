@@ -47,16 +47,13 @@ extern crate std;
 
 pub(crate) mod fmt;
 
-pub mod action;
+// The model layer (psmpa-model): facts, actions, domains, plans, tasks, the mission format.
+pub use psmpa_model::{action, domain, facts, mission, plan, planner};
+
 pub mod control;
-pub mod domain;
 pub mod exec;
-pub mod facts;
 pub mod fsm;
-pub mod mission;
 pub mod model;
-pub mod plan;
-pub mod planner;
 pub mod platform;
 pub mod runtime;
 pub mod sense;
@@ -85,5 +82,5 @@ pub use platform::{
 };
 pub use runtime::{BindingsOf, Capacity, Caps, LoadedOf, MissionOf, Runtime};
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
-pub use text::{Described, FactNames};
+pub use text::{Describe, Described, FactNames};
 pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};

@@ -1,21 +1,10 @@
 //! The world model `M = <ω, φ, Π>` (paper §4.2) and the task `Π = <Δ, τ0, τG>`.
 
+pub use psmpa_model::task::Task;
+
 use crate::action::SensorId;
-use crate::domain::EventId;
 use crate::facts::FactSetOf;
 use crate::store::Entry;
-
-/// A task `Π = <Δ, τ0, τG>`; the domain `Δ` is the mission's [`Domain`](crate::domain::Domain).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Task<const W: usize = 1> {
-    /// The event posted to the plan library until the goal holds (for example "fetch tea").
-    pub event: EventId,
-    /// `τ0`: the initial state.
-    pub init: FactSetOf<W>,
-    /// `τG`: the goal; reached when `τG ⊆ τ`.
-    pub goal: FactSetOf<W>,
-}
 
 /// A snapshot of the world model `M = <ω, φ, Π>` of a runtime with `NS` sensors and fact sets
 /// of `W` words.

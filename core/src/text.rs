@@ -1,100 +1,19 @@
-//! Names instead of indices: display adapters that print fact sets, failures and trace events
-//! with the names of a domain or a mission. No allocation: they write into the formatter.
-//!
-//! ```
-//! # use psmpa_core::{Domain, FactSet};
-//! let mut d: Domain<'_, 1, 1> = Domain::new();
-//! let clear = d.add_fact("path_clear").unwrap();
-//! let door = d.add_fact("at_door").unwrap();
-//! let set = FactSet::single(clear).with(door);
-//! assert_eq!(format!("{}", d.names(set)), "{path_clear, at_door}");
-//! ```
+//! Names instead of indices: display adapters that print failures and trace events with the
+//! names of a mission ([`Describe`]), as [`FactNames`] prints a fact set with a domain's. No
+//! allocation: they write into the formatter.
 
 use core::fmt;
 
+pub use psmpa_model::names::FactNames;
+
 use crate::action::SensorSet;
 use crate::control::ControlError;
-use crate::domain::Domain;
 use crate::exec::Failure;
-use crate::facts::FactSetOf;
 use crate::mission::Mission;
 use crate::plan::{MAX_PLANS, PlanId, PlanSet};
 use crate::trace::TraceEvent;
 
-/// A fact set printed with its facts' names ([`Domain::names`]); `Debug` prints the same, and
-/// so does `defmt::Format` (feature `defmt`).
-#[derive(Clone, Copy)]
-pub struct FactNames<
-    'd,
-    'a,
-    const NS: usize,
-    const NA: usize,
-    const W: usize = 1,
-    const NF: usize = 64,
-> {
-    domain: &'d Domain<'a, NS, NA, W, NF>,
-    set: FactSetOf<W>,
-}
-
-impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
-    Domain<'a, NS, NA, W, NF>
-{
-    /// `set` with the names of its facts: `{path_clear, at_door}`. A fact the domain does not
-    /// declare prints as its index.
-    pub fn names(&self, set: FactSetOf<W>) -> FactNames<'_, 'a, NS, NA, W, NF> {
-        FactNames { domain: self, set }
-    }
-}
-
-impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> fmt::Display
-    for FactNames<'_, '_, NS, NA, W, NF>
-{
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("{")?;
-        for (i, fact) in self.set.iter().enumerate() {
-            if i > 0 {
-                f.write_str(", ")?;
-            }
-            match self.domain.fact_name(fact) {
-                Some(name) => f.write_str(name)?,
-                None => write!(f, "#{}", fact.index())?,
-            }
-        }
-        f.write_str("}")
-    }
-}
-
-impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> fmt::Debug
-    for FactNames<'_, '_, NS, NA, W, NF>
-{
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt::Display::fmt(self, f)
-    }
-}
-
-/// The same text in a defmt log, with no `core::fmt`: each name goes out as a string the host
-/// prints (`info!("missing {}", domain.names(set))`).
-#[cfg(feature = "defmt")]
-impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> defmt::Format
-    for FactNames<'_, '_, NS, NA, W, NF>
-{
-    fn format(&self, f: defmt::Formatter<'_>) {
-        defmt::write!(f, "{{");
-        for (i, fact) in self.set.iter().enumerate() {
-            if i > 0 {
-                defmt::write!(f, ", ");
-            }
-            match self.domain.fact_name(fact) {
-                Some(name) => defmt::write!(f, "{=str}", name),
-                None => defmt::write!(f, "#{=usize}", fact.index()),
-            }
-        }
-        defmt::write!(f, "}}");
-    }
-}
-
-/// A failure or trace event printed with a mission's names ([`Mission::describe`],
-/// [`Mission::describe_failure`]).
+/// A failure or trace event printed with a mission's names ([`Describe`]).
 pub struct Described<
     'm,
     'a,
@@ -110,6 +29,39 @@ pub struct Described<
     what: T,
 }
 
+/// What the runtime says, in words, with a mission's names: `use psmpa_core::Describe;` then
+/// `mission.describe(event)`.
+pub trait Describe<
+    'a,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>
+{
+    /// A trace event in words, with this mission's names: "state entered: go to door with
+    /// [sonar bumper]", "precondition of go to door violated: {path_clear}".
+    fn describe(
+        &self,
+        event: TraceEvent<W>,
+    ) -> Described<'_, 'a, TraceEvent<W>, NS, NA, NP, L, W, NF>;
+
+    /// Why the control loop stopped, in words, with this mission's names: "no plan for
+    /// fetch_tea could start: passed over GetIn Kitchen; known false {path_clear}".
+    fn describe_error(
+        &self,
+        error: ControlError<W>,
+    ) -> Described<'_, 'a, ControlError<W>, NS, NA, NP, L, W, NF>;
+
+    /// A failure in words, with this mission's names.
+    fn describe_failure(
+        &self,
+        failure: Failure<W>,
+    ) -> Described<'_, 'a, Failure<W>, NS, NA, NP, L, W, NF>;
+}
+
 impl<
     'a,
     const NS: usize,
@@ -118,11 +70,9 @@ impl<
     const L: usize,
     const W: usize,
     const NF: usize,
-> Mission<'a, NS, NA, NP, L, W, NF>
+> Describe<'a, NS, NA, NP, L, W, NF> for Mission<'a, NS, NA, NP, L, W, NF>
 {
-    /// A trace event in words, with this mission's names: "state entered: go to door with
-    /// [sonar bumper]", "precondition of go to door violated: {path_clear}".
-    pub fn describe(
+    fn describe(
         &self,
         event: TraceEvent<W>,
     ) -> Described<'_, 'a, TraceEvent<W>, NS, NA, NP, L, W, NF> {
@@ -132,9 +82,7 @@ impl<
         }
     }
 
-    /// Why the control loop stopped, in words, with this mission's names: "no plan for
-    /// fetch_tea could start: passed over GetIn Kitchen; known false {path_clear}".
-    pub fn describe_error(
+    fn describe_error(
         &self,
         error: ControlError<W>,
     ) -> Described<'_, 'a, ControlError<W>, NS, NA, NP, L, W, NF> {
@@ -144,8 +92,7 @@ impl<
         }
     }
 
-    /// A failure in words, with this mission's names.
-    pub fn describe_failure(
+    fn describe_failure(
         &self,
         failure: Failure<W>,
     ) -> Described<'_, 'a, Failure<W>, NS, NA, NP, L, W, NF> {
@@ -420,7 +367,7 @@ mod tests {
     use std::format;
 
     use crate::mission::{AnyBehaviour, Loaded, load};
-    use crate::{FactSet, Failure, Reading, TraceEvent, Value};
+    use crate::{Describe, FactSet, Failure, Reading, TraceEvent, Value};
 
     const MISSION: &str = r#"{"name": "m", "facts": ["clear", "done"], "events": ["go"],
         "sensors": [{"name": "sonar", "per": ["clear"], "mode": "cyclic", "period_ms": 50}],

@@ -2,7 +2,7 @@
 
 use embassy_time::{Duration, Instant};
 use psmpa_core::{
-    ControlError, DataStore, Failure, Policy, SensorSet, StoreAccess, TraceEvent, Value,
+    ControlError, DataStore, Describe, Failure, Policy, SensorSet, StoreAccess, TraceEvent, Value,
 };
 use psmpa_testkit::simulate_split;
 use psmpa_tests::tiny::{self, Ids, Note, SMPA, TinyWorld};

@@ -7,9 +7,9 @@
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Domain, FactId, FactSetOf, Mission,
-    Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor, SensorAction, SensorFault,
-    SensorId, SensorMode, Task, TraceEvent, TraceHash, Value,
+    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Describe, Domain, FactId,
+    FactSetOf, Mission, Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor,
+    SensorAction, SensorFault, SensorId, SensorMode, Task, TraceEvent, TraceHash, Value,
 };
 use psmpa_testkit::simulate_split;
 use psmpa_tests::Recorder;

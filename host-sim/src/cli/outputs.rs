@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use embassy_time::Instant;
 
 use plotters::prelude::*;
-use psmpa_core::{Phase, TraceEvent, TraceSink};
+use psmpa_core::{Describe, Phase, TraceEvent, TraceSink};
 use serde_json::json;
 
 use crate::cli::files::Output;

@@ -8,6 +8,7 @@ use crate::robot::Arch;
 use crate::run::{Ending, Summary};
 use crate::scenario::Scenario;
 use crate::world::{Device, Fate};
+use psmpa_core::Describe;
 
 /// Sensor on-time, seconds.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -173,7 +173,7 @@ pub enum SensorMode {
     /// Sampled once when switched on (a camera taking one image).
     OneShot,
     /// Sampled only when the running behaviour asks for it
-    /// ([`ActionIo::request`](crate::exec::ActionIo::request)).
+    /// (`ActionIo::request` in psmpa-core).
     OnDemand,
 }
 
@@ -189,7 +189,7 @@ pub struct SensorAction<'a, const W: usize = 1> {
     pub per: FactSetOf<W>,
     /// Cyclic, one-shot or on demand.
     pub mode: SensorMode,
-    /// A sample that takes longer than this is a [`SensorFault::Timeout`](crate::platform::SensorFault).
+    /// A sample that takes longer than this is a `SensorFault::Timeout` (psmpa-core).
     pub timeout: Duration,
 }
 
@@ -242,7 +242,7 @@ pub struct ActuatorAction<'a, const W: usize = 1> {
     /// `del(a)`: facts the action makes false.
     pub del: FactSetOf<W>,
     /// How long `pre(a)` may stay false while the action runs before the runtime stops it;
-    /// `None`: the runtime's [`Config::max_violation`](crate::exec::Config::max_violation).
+    /// `None`: the runtime's `Config::max_violation` (psmpa-core).
     /// A robot at a cliff's edge stops at once (zero); one before a box may wait for it.
     /// Zero fails the action at its start when a fact of `pre(a)` that only an on-demand
     /// sensor perceives is still believed false, before the behaviour could ask for it.

@@ -43,8 +43,8 @@ use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor
 use crate::action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode};
 use crate::domain::{Domain, DomainError, EventId, Table};
 use crate::facts::{FactId, FactSetOf};
-use crate::model::Task;
 use crate::plan::{Plan, PlanError, PlanLibrary};
+use crate::task::Task;
 
 /// The domain (facts, events, sensor-based and actuator-based actions), the plan library and
 /// the task of one robot, with room for `NS` sensors, `NA` actions, `NP` plans of at most `L`
@@ -1046,7 +1046,7 @@ fn too_deep(json: &[u8], limit: usize) -> bool {
 /// deeper than [`MAX_DEPTH`].
 ///
 /// ```
-/// use psmpa_core::mission::{AnyBehaviour, Loaded, load};
+/// use psmpa_model::mission::{AnyBehaviour, Loaded, load};
 ///
 /// let json = br#"{ "name": "hello", "facts": ["clear", "there"], "events": ["go"],
 ///   "sensors": [{ "name": "bumper", "per": ["clear"], "mode": "cyclic", "period_ms": 20 }],
