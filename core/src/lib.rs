@@ -47,6 +47,36 @@ extern crate std;
 
 pub(crate) mod fmt;
 
+/// Compiles a mission file into a module of typed names, capacities, a runtime type and the
+/// mission itself, checked when the robot is built: see [`psmpa_macros::include_mission`].
+pub use psmpa_macros::include_mission;
+
+/// What `include_mission!` generates needs: `defmt::Format` for a generated enum, printing its
+/// name, when this crate's `defmt` feature is on (nothing otherwise).
+#[doc(hidden)]
+#[cfg(feature = "defmt")]
+#[macro_export]
+macro_rules! __format_as_name {
+    ($ty:ty) => {
+        impl $crate::__defmt::Format for $ty {
+            fn format(&self, f: $crate::__defmt::Formatter<'_>) {
+                $crate::__defmt::Format::format(&self.name(), f)
+            }
+        }
+    };
+}
+
+#[doc(hidden)]
+#[cfg(not(feature = "defmt"))]
+#[macro_export]
+macro_rules! __format_as_name {
+    ($ty:ty) => {};
+}
+
+#[doc(hidden)]
+#[cfg(feature = "defmt")]
+pub use defmt as __defmt;
+
 // The model layer (psmpa-model): facts, actions, domains, plans, tasks, the mission format.
 pub use psmpa_model::{action, domain, facts, mission, plan, planner};
 

@@ -11,7 +11,7 @@ pub use psmpa_testkit::sim as backend;
 #[cfg(feature = "std")]
 pub mod cli;
 #[cfg(feature = "std")]
-pub mod json;
+pub use psmpa_model::json;
 #[cfg(feature = "std")]
 pub mod load;
 #[cfg(feature = "std")]

@@ -16,6 +16,19 @@ pub const MAX_SENSORS: usize = 32;
 pub struct SensorId(u8);
 
 impl SensorId {
+    /// The sensor of index `I`, checked when the program is built: an index out of range
+    /// fails the build, never a run (the ids of a mission compiled in with `include_mission!`).
+    pub const fn of<const I: usize>() -> Self {
+        const {
+            // Evaluated at compile time only.
+            #[allow(clippy::panic)]
+            match Self::new(I) {
+                Some(id) => id,
+                None => panic!("sensor index out of range"),
+            }
+        }
+    }
+
     /// The sensor with index `index`, or `None` when `index >= MAX_SENSORS`.
     pub const fn new(index: usize) -> Option<Self> {
         if index < MAX_SENSORS {
@@ -40,6 +53,19 @@ pub const MAX_ACTIONS: usize = 1 << 16;
 pub struct ActionId(u16);
 
 impl ActionId {
+    /// The action of index `I`, checked when the program is built: an index out of range
+    /// fails the build, never a run (the ids of a mission compiled in with `include_mission!`).
+    pub const fn of<const I: usize>() -> Self {
+        const {
+            // Evaluated at compile time only.
+            #[allow(clippy::panic)]
+            match Self::new(I) {
+                Some(id) => id,
+                None => panic!("action index out of range"),
+            }
+        }
+    }
+
     /// The action with index `index`, or `None` when `index >= MAX_ACTIONS`.
     pub const fn new(index: usize) -> Option<Self> {
         if index < MAX_ACTIONS {

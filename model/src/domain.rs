@@ -21,6 +21,19 @@ pub const MAX_EVENTS: usize = 16;
 pub struct EventId(u8);
 
 impl EventId {
+    /// The event of index `I`, checked when the program is built: an index out of range
+    /// fails the build, never a run (the ids of a mission compiled in with `include_mission!`).
+    pub const fn of<const I: usize>() -> Self {
+        const {
+            // Evaluated at compile time only.
+            #[allow(clippy::panic)]
+            match Self::new(I) {
+                Some(id) => id,
+                None => panic!("event index out of range"),
+            }
+        }
+    }
+
     /// The first event of a domain.
     pub const FIRST: Self = Self(0);
 
@@ -79,7 +92,7 @@ pub enum DomainError {
 /// The planning domain `Δ` with room for `NS` sensor-based and `NA` actuator-based actions
 /// and `NF` facts in fact sets of `W` words (one word and 64 facts by default; `NF` is at
 /// most `64 · W`, else the domain does not compile).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Domain<
     'a,
     const NS: usize,
@@ -147,6 +160,35 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
             events: Vec::new(),
             sensors: Vec::new(),
             actions: Vec::new(),
+        }
+    }
+
+    /// A domain from its tables, built at compile time: what `include_mission!` generates for
+    /// a mission it has loaded and checked. Nothing is checked here (unique names, ids within
+    /// the tables): use [`new`](Self::new) and the `add_` methods, or [`mission::load`](crate::mission::load),
+    /// for a domain built at run time. More entries than a capacity does not compile.
+    pub const fn from_tables<const F: usize, const E: usize, const S: usize, const A: usize>(
+        facts: [&'a str; F],
+        events: [&'a str; E],
+        sensors: [SensorAction<'a, W>; S],
+        actions: [ActuatorAction<'a, W>; A],
+    ) -> Self {
+        const {
+            assert!(
+                NA <= crate::action::MAX_ACTIONS,
+                "a domain indexes at most MAX_ACTIONS (65,536) actions"
+            );
+            assert!(
+                NF <= FactSetOf::<W>::CAPACITY,
+                "a domain names at most 64 facts a word of its fact sets"
+            );
+            assert!(E <= MAX_EVENTS, "a domain names at most MAX_EVENTS events");
+        }
+        Self {
+            facts: Vec::from_array(facts),
+            events: Vec::from_array(events),
+            sensors: Vec::from_array(sensors),
+            actions: Vec::from_array(actions),
         }
     }
 

@@ -23,6 +23,19 @@ pub const MAX_WORDS: usize = 64;
 pub struct FactId(u16);
 
 impl FactId {
+    /// The fact of index `I`, checked when the program is built: an index out of range
+    /// fails the build, never a run (the ids of a mission compiled in with `include_mission!`).
+    pub const fn of<const I: usize>() -> Self {
+        const {
+            // Evaluated at compile time only.
+            #[allow(clippy::panic)]
+            match Self::within(I, MAX_WORDS * 64) {
+                Some(id) => id,
+                None => panic!("fact index out of range"),
+            }
+        }
+    }
+
     /// The first fact of a domain.
     pub const FIRST: Self = Self(0);
 

@@ -35,10 +35,20 @@
 
 #[cfg(test)]
 extern crate std;
+// Host tools only: strict JSON and the checks of a mission file (feature `std`).
+#[cfg(all(feature = "std", not(test)))]
+extern crate std;
 
 pub mod action;
+#[cfg(feature = "std")]
+pub mod check;
 pub mod domain;
 pub mod facts;
+// Host-only position arithmetic (line and column counts within a file held in memory); the
+// no-overflow rule is for what runs on the robot.
+#[cfg(feature = "std")]
+#[allow(clippy::arithmetic_side_effects)]
+pub mod json;
 pub mod mission;
 pub mod names;
 pub mod plan;

@@ -49,7 +49,7 @@ use crate::task::Task;
 /// The domain (facts, events, sensor-based and actuator-based actions), the plan library and
 /// the task of one robot, with room for `NS` sensors, `NA` actions, `NP` plans of at most `L`
 /// actions each.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Mission<
     'a,
     const NS: usize,

@@ -21,6 +21,19 @@ pub const MAX_PLANS: usize = 32;
 pub struct PlanId(u8);
 
 impl PlanId {
+    /// The plan of index `I`, checked when the program is built: an index out of range
+    /// fails the build, never a run (the ids of a mission compiled in with `include_mission!`).
+    pub const fn of<const I: usize>() -> Self {
+        const {
+            // Evaluated at compile time only.
+            #[allow(clippy::panic)]
+            match Self::new(I) {
+                Some(id) => id,
+                None => panic!("plan index out of range"),
+            }
+        }
+    }
+
     /// The id of a plan the planner generated (not in the library).
     pub const GENERATED: Self = Self(u8::MAX);
 
@@ -145,6 +158,25 @@ impl<'a, const L: usize, const W: usize> Plan<'a, L, W> {
         })
     }
 
+    /// A plan from its parts, built at compile time (`include_mission!`). Nothing is checked
+    /// here (a body of at least one action of the domain); a body longer than `L` does not
+    /// compile.
+    pub const fn from_parts<const M: usize>(
+        name: &'a str,
+        trigger: EventId,
+        context: FactSetOf<W>,
+        context_not: FactSetOf<W>,
+        body: [ActionId; M],
+    ) -> Self {
+        Self {
+            name,
+            trigger,
+            context,
+            context_not,
+            body: Vec::from_array(body),
+        }
+    }
+
     /// The same plan, applicable only while none of `facts` holds.
     #[must_use]
     pub fn with_context_not(mut self, facts: FactSetOf<W>) -> Self {
@@ -162,7 +194,7 @@ impl<'a, const L: usize, const W: usize> Plan<'a, L, W> {
 }
 
 /// The plan library `P`: at most `NP` plans of at most `L` actions each.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct PlanLibrary<'a, const NP: usize, const L: usize, const W: usize = 1> {
     plans: Vec<Plan<'a, L, W>, NP>,
 }
@@ -171,6 +203,14 @@ impl<'a, const NP: usize, const L: usize, const W: usize> PlanLibrary<'a, NP, L,
     /// An empty library.
     pub const fn new() -> Self {
         Self { plans: Vec::new() }
+    }
+
+    /// A library of `plans`, built at compile time (`include_mission!`). Nothing is checked
+    /// here; more plans than the capacity does not compile.
+    pub const fn from_plans<const M: usize>(plans: [Plan<'a, L, W>; M]) -> Self {
+        Self {
+            plans: Vec::from_array(plans),
+        }
     }
 
     /// Empties the library in place.

@@ -32,3 +32,26 @@ fn the_kit_runs_a_mission_at_the_crates_own_tick_rate() {
         "{seen:?}"
     );
 }
+
+#[test]
+fn a_mission_compiled_in_is_the_loaded_one_at_this_tick_rate() {
+    use outside::dock;
+    // Durations are ticks of 1/32,768 s here: the compiled periods and timeouts round as the
+    // loader's do.
+    use psmpa_core::mission::{AnyBehaviour, Loaded, load};
+    let loaded: Loaded<
+        '_,
+        (),
+        (),
+        { dock::NS },
+        { dock::NA },
+        { dock::NP },
+        { dock::L },
+        { dock::W },
+        { dock::NF },
+    > = load(psmpa_dock::MISSION.as_bytes(), &AnyBehaviour).unwrap();
+    assert_eq!(loaded.mission, dock::MISSION);
+    let tof = dock::Sensor::Tof;
+    let spec = dock::MISSION.domain.sensor(tof.id()).unwrap();
+    assert_eq!(spec.name, "tof");
+}

@@ -4,33 +4,18 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use psmpa_core::action::ActuatorAction;
-use psmpa_core::mission::{self, AnyBehaviour, JsonError, LoadError, Problem};
+use psmpa_core::mission::{self, AnyBehaviour};
 use psmpa_core::planner::{Planner, PlanningError, Strategy};
 use psmpa_core::{Fsm, Mission, PlanId, SensorSet, Target};
 
 use crate::json;
 use crate::robot::{self, NaoAction, NaoRegistry, NaoSensor};
 
-/// Capacities used when the mission is checked without this robot: the largest the core
-/// supports in a fact set, a sensor set and a plan set.
-type Large<'a> = Mission<'a, 32, 64, 32, 16>;
+pub use psmpa_model::check::{error_line, unreachable_goal};
 
-/// A mission that failed to load, as one line naming the file and what is wrong. The bytes
-/// were strict JSON ([`json::strict`]), so a syntax error from `serde-json-core` can only be a
-/// number it cannot read as a whole number (`1e30`, `1.5`), the only values a mission holds
-/// besides names.
-pub fn error_line(file: &Path, e: &LoadError<'_>) -> String {
-    let e = match e.problem {
-        Problem::Json(JsonError::Syntax) => LoadError {
-            problem: Problem::Json(JsonError::Number),
-            ..*e
-        },
-        _ => *e,
-    };
-    // Names borrow from the file: keep any control character escaped.
-    format!("{}: {}", file.display(), json::printable(&e.to_string()))
-}
+/// Capacities used when the mission is checked without this robot: the largest the core
+/// supports in a sensor set and a plan set.
+type Large<'a> = psmpa_model::check::Large<'a>;
 
 fn names<const NS: usize, const NA: usize>(
     d: &psmpa_core::Domain<'_, NS, NA>,
@@ -207,37 +192,6 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
         }
     }
     (out, dot)
-}
-
-/// Why the task's goal can never hold, if it cannot: no sequence of actions reaches it from
-/// the initial state even when every fact a sensor can perceive holds whenever it is needed
-/// (perceivable facts are never deleted). That relaxation only helps the planner, so no plan
-/// in it means no plan at all, whatever the sensors report.
-pub fn unreachable_goal<const NS: usize, const NA: usize, const NP: usize, const L: usize>(
-    m: &Mission<'_, NS, NA, NP, L>,
-) -> Option<String> {
-    let d = &m.domain;
-    let perceivable = d.perception_of(SensorSet::from_bits(u32::MAX));
-    let relaxed: Vec<ActuatorAction<'_>> = d
-        .actions()
-        .iter()
-        .map(|a| ActuatorAction {
-            del: a.del.difference(perceivable),
-            ..*a
-        })
-        .collect();
-    let result = Planner::<4096>::new(Strategy::BreadthFirst).plan::<64>(
-        &relaxed,
-        m.task.init.union(perceivable),
-        m.task.goal,
-    );
-    match result {
-        Err(PlanningError::Unsolvable { expanded }) => Some(format!(
-            "task.goal: no sequence of actions reaches {} from task.init, even with every percept holding ({expanded} states searched)",
-            names(d, m.task.goal)
-        )),
-        _ => None,
-    }
 }
 
 /// The description of a loaded mission, or the one line saying its goal is unreachable.

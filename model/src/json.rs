@@ -1,4 +1,5 @@
-//! Strict JSON for the command line's input files.
+//! Strict JSON for host tools' input files (feature `std`): `psmpa-sim`'s scenarios and
+//! missions, and the mission files `include_mission!` reads when a robot is built.
 //!
 //! The scenario and mission loaders use `serde-json-core`, which is lenient where a host tool
 //! should not be (a leading `+`, raw control characters and invalid UTF-8 in strings, duplicate
@@ -7,8 +8,12 @@
 //! stand for ordinary characters, so the loaders downstream see the real text.
 
 use std::borrow::Cow;
+use std::borrow::ToOwned;
 use std::collections::HashSet;
 use std::fmt;
+use std::format;
+use std::string::{String, ToString};
+use std::vec::Vec;
 
 use serde::de::{self, DeserializeSeed, MapAccess, SeqAccess, Visitor};
 

@@ -1,0 +1,138 @@
+//! The checks of a mission file that host tools make before a robot runs it (feature `std`):
+//! `psmpa-sim check`, and `include_mission!` when the robot is built. One implementation, so
+//! that a file one accepts the other accepts, with the same one-line errors.
+//!
+//! * The file is strict JSON ([`json::strict`]: no duplicate key, no raw control character, ...).
+//! * It loads ([`mission::load`]) at the largest capacities the core supports in a sensor set
+//!   and a plan set (32 sensors, 32 plans; 64 actions, bodies of 16), every name resolved.
+//! * Its goal is reachable ([`unreachable_goal`]).
+
+use std::format;
+use std::path::Path;
+use std::string::{String, ToString};
+use std::vec::Vec;
+
+use crate::action::{ActuatorAction, SensorSet};
+use crate::json;
+use crate::mission::{self, AnyBehaviour, JsonError, LoadError, Mission, Problem};
+use crate::planner::{Planner, PlanningError, Strategy};
+
+/// The capacities a mission is checked at: 32 sensors, 64 actions, 32 plans of at most 16
+/// actions; `NF` facts in fact sets of `W` words.
+pub type Large<'a, const W: usize = 1, const NF: usize = 64> = Mission<'a, 32, 64, 32, 16, W, NF>;
+
+/// A mission that failed to load, as one line naming the file and what is wrong. The bytes
+/// were strict JSON ([`json::strict`]), so a syntax error from `serde-json-core` can only be a
+/// number it cannot read as a whole number (`1e30`, `1.5`), the only values a mission holds
+/// besides names.
+pub fn error_line(file: &Path, e: &LoadError<'_>) -> String {
+    let e = match e.problem {
+        Problem::Json(JsonError::Syntax) => LoadError {
+            problem: Problem::Json(JsonError::Number),
+            ..*e
+        },
+        _ => *e,
+    };
+    // Names borrow from the file: keep any control character escaped.
+    format!("{}: {}", file.display(), json::printable(&e.to_string()))
+}
+
+/// Why the task's goal can never hold, if it cannot: no sequence of actions reaches it from
+/// the initial state even when every fact a sensor can perceive holds whenever it is needed
+/// (perceivable facts are never deleted). That relaxation only helps the planner, so no plan
+/// in it means no plan at all, whatever the sensors report.
+pub fn unreachable_goal<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>(
+    m: &Mission<'_, NS, NA, NP, L, W, NF>,
+) -> Option<String> {
+    let d = &m.domain;
+    let perceivable = d.perception_of(SensorSet::from_bits(u32::MAX));
+    let relaxed: Vec<ActuatorAction<'_, W>> = d
+        .actions()
+        .iter()
+        .map(|a| ActuatorAction {
+            del: a.del.difference(perceivable),
+            ..*a
+        })
+        .collect();
+    let result = Planner::<4096, W>::new(Strategy::BreadthFirst).plan::<64>(
+        &relaxed,
+        m.task.init.union(perceivable),
+        m.task.goal,
+    );
+    match result {
+        Err(PlanningError::Unsolvable { expanded }) => Some(format!(
+            "task.goal: no sequence of actions reaches {} from task.init, even with every percept holding ({expanded} states searched)",
+            d.names(m.task.goal)
+        )),
+        _ => None,
+    }
+}
+
+/// Checks the mission file `file` (its `bytes`) for any platform and hands the mission to
+/// `then`; one line naming the file and what is wrong otherwise.
+pub fn check<R, const W: usize, const NF: usize>(
+    file: &Path,
+    bytes: &[u8],
+    then: impl FnOnce(&Large<'_, W, NF>) -> R,
+) -> Result<R, String> {
+    let doc = json::strict_file(file, bytes)?;
+    let loaded: mission::Loaded<'_, (), (), 32, 64, 32, 16, W, NF> =
+        mission::load(&doc, &AnyBehaviour).map_err(|e| error_line(file, &e))?;
+    let m = &loaded.mission;
+    if let Some(why) = unreachable_goal(m) {
+        return Err(format!("{}: {why}", file.display()));
+    }
+    Ok(then(m))
+}
+
+/// [`check`]'s errors keep the file's text printable: a name with a control character shows it
+/// escaped (`json::printable`), as `psmpa-sim` prints every name.
+pub fn printable(text: &str) -> String {
+    json::printable(text).into_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const OK: &str = r#"{ "name": "hello", "facts": ["clear", "there"], "events": ["go"],
+      "sensors": [{ "name": "bumper", "per": ["clear"], "mode": "cyclic", "period_ms": 20 }],
+      "actions": [{ "name": "drive", "pre": ["clear"], "add": ["there"] }],
+      "plans": [{ "name": "go there", "trigger": "go", "context": [], "body": ["drive"] }],
+      "task": { "event": "go", "init": [], "goal": ["there"] } }"#;
+
+    fn checked(text: &str) -> Result<usize, String> {
+        check::<_, 1, 64>(Path::new("m.json"), text.as_bytes(), |m| {
+            m.domain.actions().len()
+        })
+    }
+
+    #[test]
+    fn a_valid_mission_reaches_the_caller() {
+        assert_eq!(checked(OK), Ok(1));
+    }
+
+    #[test]
+    fn each_check_names_the_file_and_what_is_wrong() {
+        let fly = OK.replace(r#""body": ["drive"]"#, r#""body": ["fly"]"#);
+        let e = checked(&fly).unwrap_err();
+        assert!(e.starts_with("m.json: plans[0].body"), "{e}");
+        assert!(e.contains("fly"), "{e}");
+        let twice = OK.replace(
+            r#""name": "hello","#,
+            r#""name": "hello", "name": "again","#,
+        );
+        assert!(checked(&twice).unwrap_err().contains("appears twice"));
+        let unreachable = OK.replace(r#""add": ["there"]"#, r#""add": []"#);
+        assert!(checked(&unreachable).unwrap_err().contains("task.goal"));
+        let number = OK.replace("\"period_ms\": 20", "\"period_ms\": 2.5");
+        assert!(checked(&number).unwrap_err().contains("whole number"));
+    }
+}
