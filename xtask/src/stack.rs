@@ -229,7 +229,7 @@ const PICO2_MAIN_TASK: Task = Task {
     // Main's body, or, inlined into the poll, the mission it loads.
     calls: &[
         "psmpa_board_rp::____embassy_main_task",
-        "psmpa_core::mission::",
+        "psmpa_model::mission::",
     ],
 };
 
