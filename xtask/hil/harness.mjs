@@ -47,6 +47,7 @@ const WATCHDOG = 0x40058; // its peripheral slot (address >> 12)
 const WATCHDOG_REASON_TIMER = 1;
 const SIO_SPINLOCK31 = 0x17c; // embassy-rp's critical section takes spinlock 31
 const VECTOR_TABLE = 0x10000100; // after the 256 B second-stage bootloader
+const EXC_HARDFAULT = 3;
 
 const out = (event) => process.stdout.write(JSON.stringify(event) + '\n');
 
@@ -100,6 +101,12 @@ class Bench {
       },
       warn() {},
       error: (component, message) => this.events.push({ ev: 'error', component, message }),
+    };
+    // UDF and BKPT: rp2040js calls this hook (for a debugger) and runs on; a chip with no
+    // debugger attached takes a HardFault, as the panic handler's `udf` expects.
+    this.faulted = false;
+    mcu.onBreak = () => {
+      this.faulted = true;
     };
     const watchdog = mcu.peripherals[WATCHDOG];
     if (afterWatchdog) watchdog.reason = WATCHDOG_REASON_TIMER;
@@ -308,6 +315,17 @@ class Bench {
         clock.tick(Math.max(step, 0));
       } else {
         this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
+        if (this.faulted) {
+          this.faulted = false;
+          if (core.IPSR === EXC_HARDFAULT) {
+            // A fault in the HardFault handler locks a Cortex-M0+ up.
+            this.events.push({ ev: 'error', message: 'lockup: a UDF or BKPT in the HardFault handler' });
+          } else {
+            // The stacked return address is the instruction's own, as on the chip.
+            core.PC -= core.breakRewind;
+            core.exceptionEntry(EXC_HARDFAULT);
+          }
+        }
         if ((++n & 255) === 0) {
           this.readRtt();
           this.pollHealth();
