@@ -75,6 +75,8 @@ pub struct Platform {
 }
 
 impl Sensor for Platform {
+    type Id = SensorId;
+
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -93,6 +95,8 @@ impl psmpa_core::Platform for Platform {
 }
 
 impl Actuator for Platform {
+    type Id = ActionId;
+
     async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
         let Some(sonar) = SensorId::new(0) else {
             return Outcome::Failure;

@@ -19,8 +19,11 @@ use crate::fmt::{info, warning};
 use crate::fsm::{Fsm, FsmError};
 use crate::plan::{FailureMemory, Plan, PlanId, PlanSet};
 use crate::planner::{Found, Planner, PlanningError, Search};
-use crate::platform::{Actuator, Platform, Sensor};
+use crate::platform::{Actuator, FromId, Platform, Sensor};
 use crate::trace::{TraceEvent, TraceSink};
+use core::convert::Infallible;
+
+use embassy_futures::select::{Either, select};
 use embassy_futures::yield_now;
 
 /// How a mission that reached its goal went (fact sets of `W` words).
@@ -33,6 +36,17 @@ pub struct Report<const W: usize = 1> {
     pub plans_failed: u16,
     /// The beliefs at the end.
     pub beliefs: FactSetOf<W>,
+}
+
+/// `run` with `sensing` beside it, sensing polled first; ends when `run` does.
+async fn beside_sensing<R>(
+    sensing: impl Future<Output = Infallible>,
+    run: impl Future<Output = R>,
+) -> R {
+    match select(sensing, run).await {
+        Either::First(never) => match never {},
+        Either::Second(result) => result,
+    }
 }
 
 /// Why the control loop stopped before the goal held (fact sets of `W` words).
@@ -110,6 +124,14 @@ pub enum ControlError<const W: usize = 1> {
         /// What went wrong.
         failure: Failure<W>,
     },
+    /// The platform names no sensor or no action of an id of the mission: its
+    /// [`Sensor::Id`] or [`Actuator::Id`] is another mission's (checked before anything runs).
+    Unbound {
+        /// The first sensor the platform has no name for.
+        sensor: Option<SensorId>,
+        /// The first action the platform has no name for.
+        action: Option<ActionId>,
+    },
 }
 
 impl<
@@ -125,6 +147,23 @@ impl<
     const NF: usize,
 > Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
 {
+    /// Every sensor and action of the mission has a name on the platform ([`Sensor::Id`],
+    /// [`Actuator::Id`]): a platform written for another mission is an error before anything
+    /// runs, not a sensor fault or a failed action halfway through.
+    fn bound(&self) -> Result<(), ControlError<W>> {
+        let domain = &self.mission.domain;
+        let sensor = (0..domain.sensors().len())
+            .filter_map(SensorId::new)
+            .find(|s| <P as Sensor<W>>::Id::from_id(*s).is_none());
+        let action = (0..domain.actions().len())
+            .filter_map(ActionId::new)
+            .find(|a| <P as Actuator<W>>::Id::from_id(*a).is_none());
+        match (sensor, action) {
+            (None, None) => Ok(()),
+            (sensor, action) => Err(ControlError::Unbound { sensor, action }),
+        }
+    }
+
     /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor in service
     /// whose `pre(s)` holds is switched on, sampled once and switched off again, all at once.
     pub async fn establish_initial_model(&self) -> Result<FactSetOf<W>, ControlError<W>> {
@@ -174,6 +213,25 @@ impl<
         space: &mut Search<N, W>,
     ) -> Result<Report<W>, ControlError<W>> {
         self.control((planner, space)).await
+    }
+
+    /// Both sides on the executor that polls this future: the sensing side
+    /// ([`Engine::sensing`], polled first at every wake, so a due sample is taken before the
+    /// deciding side's turn) beside [`Engine::run`]. Ends with the control loop's result. For
+    /// a robot with one executor; with an interrupt executor, spawn [`Engine::sensing`] on it
+    /// and [`Engine::run`] below it instead.
+    pub async fn run_with_sensing(&self) -> Result<Report<W>, ControlError<W>> {
+        beside_sensing(self.sensing(), self.run()).await
+    }
+
+    /// [`Engine::run_planning`] beside the sensing side, as [`Engine::run_with_sensing`] runs
+    /// [`Engine::run`].
+    pub async fn run_planning_with_sensing<const N: usize>(
+        &self,
+        planner: &Planner<N, W>,
+        space: &mut Search<N, W>,
+    ) -> Result<Report<W>, ControlError<W>> {
+        beside_sensing(self.sensing(), self.run_planning(planner, space)).await
     }
 
     /// The actions with the preconditions the planner must satisfy from the beliefs: facts
@@ -321,6 +379,7 @@ impl<
     /// option lives in the future's state, where the compiler cannot see that it stays `None`).
     async fn control<G: Fallback<W>>(&self, mut planner: G) -> Result<Report<W>, ControlError<W>> {
         let task = self.mission.task;
+        self.bound()?;
         self.establish_initial_model().await?;
         let mut memory = FailureMemory::new();
         let mut generated_failed: Option<FactSetOf<W>> = None;

@@ -44,7 +44,7 @@ use crate::fmt::debug;
 use crate::fsm::{BehaviourState, Edge, Fsm, Target};
 use crate::mission::Mission;
 use crate::model::WorldModel;
-use crate::platform::{Actuator, Outcome, Platform, Sensor, SensorFault};
+use crate::platform::{Actuator, FromId, Outcome, Platform, Sensor, SensorFault};
 use crate::store::{DataStore, Entry, Key, MutualStore, StoreFull, Value};
 use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};
 
@@ -830,6 +830,7 @@ impl<
     async fn run_parallel(
         &self,
         action: ActionId,
+        name: <P as Actuator<W>>::Id,
         spec: &ActuatorAction<'r, W>,
         sensors: SensorSet,
         io: &ActionIo<'_, W>,
@@ -841,10 +842,10 @@ impl<
             self.check_precondition();
             // The watch first: a failure reported at this instant stops the behaviour before
             // it takes another step.
-            let behaviour = self.platform.run(action, io);
+            let behaviour = self.platform.run(name, io);
             match select(self.watch(epoch, action), behaviour).await {
                 Either::First(failure) => {
-                    self.platform.halt(action);
+                    self.platform.halt(name);
                     Err(failure)
                 }
                 Either::Second(outcome) => Ok(outcome),
@@ -882,31 +883,31 @@ impl<
     async fn run_alternating(
         &self,
         action: ActionId,
+        name: <P as Actuator<W>>::Id,
         spec: &ActuatorAction<'r, W>,
         sensors: SensorSet,
         io: &ActionIo<'_, W>,
-        sense: Duration,
-        act: Duration,
+        (sense, act): (Duration, Duration),
     ) -> Result<Outcome, Failure<W>> {
         // A phase of no time would alternate forever at one instant.
         let (sense, act) = (
             sense.max(Duration::from_ticks(1)),
             act.max(Duration::from_ticks(1)),
         );
-        let mut behaviour = pin!(self.platform.run(action, io));
+        let mut behaviour = pin!(self.platform.run(name, io));
         let mut first = true;
         loop {
             self.trace(TraceEvent::PhaseStarted {
                 action,
                 phase: Phase::Sense,
             });
-            self.platform.hold(action, true);
+            self.platform.hold(name, true);
             let until = Instant::now().saturating_add(sense);
             let sensed = self.sense_phase(action, spec, sensors, until, first).await;
             first = false;
-            self.platform.hold(action, false);
+            self.platform.hold(name, false);
             if let Err(failure) = sensed {
-                self.platform.halt(action);
+                self.platform.halt(name);
                 return Err(failure);
             }
             self.trace(TraceEvent::PhaseStarted {
@@ -1001,13 +1002,17 @@ impl<
             action.index(),
             sensors.bits()
         );
+        // The platform's name of the action (`Actuator::Id`); none: it cannot run it.
+        let Some(name) = <P as Actuator<W>>::Id::from_id(action) else {
+            return Ok(Outcome::Failure);
+        };
         if sensors.is_empty() {
-            return Ok(self.platform.run(action, &io).await);
+            return Ok(self.platform.run(name, &io).await);
         }
         match self.config.policy {
-            Policy::PSmpa => self.run_parallel(action, spec, sensors, &io).await,
+            Policy::PSmpa => self.run_parallel(action, name, spec, sensors, &io).await,
             Policy::Smpa { sense, act } => {
-                self.run_alternating(action, spec, sensors, &io, sense, act)
+                self.run_alternating(action, name, spec, sensors, &io, (sense, act))
                     .await
             }
         }

@@ -77,6 +77,52 @@ macro_rules! __format_as_name {
 #[cfg(feature = "defmt")]
 pub use defmt as __defmt;
 
+/// Makes a robot crate's build compile the whole runtime for its platform. A library's
+/// generic code is only type-checked until a non-generic function uses it; this macro adds
+/// one, public but hidden and never called, that polls [`Engine::run_with_sensing`] of
+/// `runtime`, the robot's runtime type (`dock::Runtime<'static, Dock>`, or an alias of it).
+/// `cargo build --target thumbv7em-none-eabihf` on the robot's crate then compiles the
+/// runtime's futures for its platform, as its firmware will; a firmware that does not call
+/// it does not link it.
+///
+/// Invoke it once, at the crate's root (a function in a private module is dead code, which
+/// the compiler does not build).
+///
+/// ```
+/// # use psmpa_core::{ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, SensorId};
+/// # struct Robot;
+/// # impl Sensor for Robot {
+/// #     type Id = SensorId;
+/// #     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> { Ok(()) }
+/// #     async fn switch_off(&self, _: SensorId) {}
+/// #     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> { Ok(None) }
+/// # }
+/// # impl Actuator for Robot {
+/// #     type Id = ActionId;
+/// #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
+/// # }
+/// # impl Platform for Robot { type Mutex = psmpa_core::embassy_sync::blocking_mutex::raw::NoopRawMutex; }
+/// type RobotRuntime<'r> = psmpa_core::Runtime<'r, Robot, psmpa_core::Caps<2, 3, 1, 3, 4>>;
+///
+/// psmpa_core::compile_runtime!(RobotRuntime<'_>);
+/// # fn main() {}
+/// ```
+#[macro_export]
+macro_rules! compile_runtime {
+    ($runtime:ty) => {
+        /// Compiles the runtime for this crate's platform (`psmpa_core::compile_runtime!`):
+        /// never called.
+        #[doc(hidden)]
+        pub fn __psmpa_compile_runtime(
+            runtime: &$runtime,
+            cx: &mut ::core::task::Context<'_>,
+        ) -> ::core::task::Poll<()> {
+            let run = ::core::pin::pin!(runtime.run_with_sensing());
+            ::core::future::Future::poll(run, cx).map(|_| ())
+        }
+    };
+}
+
 // The model layer (psmpa-model): facts, actions, domains, plans, tasks, the mission format.
 pub use psmpa_model::{action, domain, facts, mission, plan, planner};
 

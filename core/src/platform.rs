@@ -111,6 +111,9 @@ pub enum SensorFault {
     Silent,
     /// The device reported an error (platform-specific code).
     Device(u8),
+    /// The platform has no sensor of this id: its [`Sensor::Id`] names another mission's
+    /// sensors (set by the runtime).
+    Unbound,
 }
 
 /// How an actuator behaviour ended.
@@ -142,17 +145,24 @@ pub enum Outcome {
 ///   with that instant, and delivers them when the call returns.
 ///
 /// `W` is the width of the runtime's fact sets in words (1, up to 64 facts, by default).
+///
+/// Which sensor a call is for is [`Self::Id`]: the `Sensor` enum of a mission compiled in with
+/// [`include_mission!`](crate::include_mission) (`type Id = dock::Sensor;`), whose exhaustive
+/// `match` the compiler checks, or [`SensorId`] for a mission loaded at run time.
 #[allow(async_fn_in_trait)] // Runs on single-threaded executors: no `Send` bound wanted.
 pub trait Sensor<const W: usize = 1> {
+    /// How a call names its sensor: a compiled mission's `Sensor` enum, or [`SensorId`].
+    type Id: FromId<SensorId>;
+
     /// Powers the sensor up. Called when a state that needs it starts (least commitment).
-    async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault>;
+    async fn switch_on(&self, sensor: Self::Id) -> Result<(), SensorFault>;
     /// Powers the sensor down. Called when the action it serves ends.
-    async fn switch_off(&self, sensor: SensorId);
+    async fn switch_off(&self, sensor: Self::Id);
     /// Takes one sample. The runtime bounds it with the sensor's timeout. `Ok(None)` means this
     /// sample was lost (an echo that never came back); the runtime keeps the previous belief
     /// and fails the state after [`Config::max_lost`](crate::exec::Config::max_lost) losses in
     /// a row.
-    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading<W>>, SensorFault>;
+    async fn sample(&self, sensor: Self::Id) -> Result<Option<Reading<W>>, SensorFault>;
 
     /// Completes when something makes a cyclic sensor's next sample due before its period
     /// ends: a bump switch's edge, a data-ready interrupt. The sampler then samples at once and
@@ -161,34 +171,59 @@ pub trait Sensor<const W: usize = 1> {
     ///
     /// It should complete once per event (await the edge, not the level): a future that is
     /// always ready makes the sensor sample as fast as it can answer.
-    async fn wake(&self, sensor: SensorId) {
+    async fn wake(&self, sensor: Self::Id) {
         let _ = sensor;
         core::future::pending::<()>().await;
     }
 }
 
 /// The actuator behaviours of a platform (the acting side of the deliberative controller), in
-/// a runtime whose fact sets have `W` words (1 by default).
+/// a runtime whose fact sets have `W` words (1 by default). Which action a call is for is
+/// [`Self::Id`], as for [`Sensor`]: a compiled mission's `Action` enum, or [`ActionId`].
 #[allow(async_fn_in_trait)] // Runs on single-threaded executors: no `Send` bound wanted.
 pub trait Actuator<const W: usize = 1> {
+    /// How a call names its action: a compiled mission's `Action` enum, or [`ActionId`].
+    type Id: FromId<ActionId>;
+
     /// Runs actuator-based action `action` until it succeeds, fails or gives up.
     ///
     /// `io` gives the mutual data store (the latest samples of the sensors running beside the
     /// action), the precondition status, and a way to await the next change. When a percept
     /// makes the precondition false the behaviour is told at once ([`ActionIo::violation`]) and
     /// may stop, avoid, or return [`Outcome::Interrupted`].
-    async fn run(&self, action: ActionId, io: &ActionIo<'_, W>) -> Outcome;
+    async fn run(&self, action: Self::Id, io: &ActionIo<'_, W>) -> Outcome;
 
     /// SMPA only: `true` at the start of a sense phase (the robot must stand still while the
     /// behaviour is not polled), `false` when acting resumes.
-    fn hold(&self, action: ActionId, held: bool) {
+    fn hold(&self, action: Self::Id, held: bool) {
         let _ = (action, held);
     }
 
     /// The runtime cancelled the behaviour (a sensor fault, or the precondition stayed false):
     /// bring the actuators to a safe stop.
-    fn halt(&self, action: ActionId) {
+    fn halt(&self, action: Self::Id) {
         let _ = action;
+    }
+}
+
+/// How a platform names the sensors or actions a call is for ([`Sensor::Id`],
+/// [`Actuator::Id`]): from the runtime's id (`I`, a [`SensorId`] or an [`ActionId`]). The enums
+/// `include_mission!` generates implement it; so do the ids themselves.
+pub trait FromId<I>: Copy {
+    /// The one of id `id`, or `None` when the platform has none of that id (its enum is another
+    /// mission's).
+    fn from_id(id: I) -> Option<Self>;
+}
+
+impl FromId<SensorId> for SensorId {
+    fn from_id(id: SensorId) -> Option<Self> {
+        Some(id)
+    }
+}
+
+impl FromId<ActionId> for ActionId {
+    fn from_id(id: ActionId) -> Option<Self> {
+        Some(id)
     }
 }
 

@@ -7,11 +7,13 @@
 //!
 //! struct Dock;
 //! # impl Sensor for Dock {
+//! #     type Id = SensorId;
 //! #     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> { Ok(()) }
 //! #     async fn switch_off(&self, _: SensorId) {}
 //! #     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> { Ok(None) }
 //! # }
 //! # impl Actuator for Dock {
+//! #     type Id = ActionId;
 //! #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
 //! # }
 //! impl Platform for Dock {

@@ -44,7 +44,7 @@ use crate::action::{ActionId, SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::Domain;
 use crate::exec::{Engine, Failure, Mode, Shared, Violation, poll_shared};
 use crate::facts::FactSetOf;
-use crate::platform::{Actuator, Platform, Reading, Sensor, SensorFault};
+use crate::platform::{Actuator, FromId, Platform, Reading, Sensor, SensorFault};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
 use crate::trace::{TraceEvent, TraceSink};
 
@@ -136,6 +136,8 @@ impl<
             // A capacity the domain does not use.
             return pending().await;
         };
+        // The platform's name of the sensor (`Sensor::Id`); none: `SensorFault::Unbound`.
+        let name = <P as Sensor<W>>::Id::from_id(sensor);
         let mut served = None;
         loop {
             // A command that includes this sensor, and that it has not served yet.
@@ -150,18 +152,22 @@ impl<
             served = Some(epoch);
             self.shared
                 .lock(|s| s.active.set(s.active.get().with(sensor)));
-            let fault = match with_timeout(spec.timeout, self.platform.switch_on(sensor)).await {
-                Ok(Ok(())) => None,
-                Ok(Err(fault)) => Some(fault),
-                Err(_) => Some(SensorFault::Timeout),
+            let fault = match name {
+                Some(name) => match with_timeout(spec.timeout, self.platform.switch_on(name)).await
+                {
+                    Ok(Ok(())) => None,
+                    Ok(Err(fault)) => Some(fault),
+                    Err(_) => Some(SensorFault::Timeout),
+                },
+                None => Some(SensorFault::Unbound),
             };
-            if let Some(fault) = fault {
-                self.sensor_failed(sensor, fault, epoch);
+            let (Some(name), None) = (name, fault) else {
+                self.sensor_failed(sensor, fault.unwrap_or(SensorFault::Unbound), epoch);
                 self.shared
                     .lock(|s| s.active.set(s.active.get().without(sensor)));
                 self.notify();
                 continue;
-            }
+            };
             self.trace(TraceEvent::SensorOn { sensor });
             self.shared.lock(|s| {
                 s.running.set(s.running.get().with(sensor));
@@ -193,7 +199,7 @@ impl<
                     (mode, due) => {
                         let early = matches!(mode, SensorMode::Cyclic { .. }) && due.is_some();
                         let mut timer = due.map(Timer::at);
-                        let mut wake = pin!(self.platform.wake(sensor));
+                        let mut wake = pin!(self.platform.wake(name));
                         let wait = poll_fn(move |cx| {
                             let timed = timer
                                 .as_mut()
@@ -241,7 +247,7 @@ impl<
                 } else {
                     let limit = started.saturating_add(spec.timeout);
                     let read = match self
-                        .bounded(epoch, Some(limit), self.platform.sample(sensor))
+                        .bounded(epoch, Some(limit), self.platform.sample(name))
                         .await
                     {
                         Bound::Done(read) => Ok(read),
@@ -274,7 +280,7 @@ impl<
             }
             // A sensor that does not answer is traced and counted off: it is not used again
             // until it is switched on.
-            if with_timeout(spec.timeout, self.platform.switch_off(sensor))
+            if with_timeout(spec.timeout, self.platform.switch_off(name))
                 .await
                 .is_err()
             {

@@ -281,6 +281,17 @@ impl<
                 "the initial model could not be established: {}",
                 self.mission.describe_failure(failure)
             ),
+            E::Unbound { sensor, action } => {
+                f.write_str("the platform is written for another mission: it has no")?;
+                if let Some(sensor) = sensor {
+                    write!(f, " sensor {}", n.sensor(sensor))?;
+                }
+                if let Some(action) = action {
+                    let and = if sensor.is_some() { " and no" } else { "" };
+                    write!(f, "{and} action {}", n.action(action))?;
+                }
+                Ok(())
+            }
         }
     }
 }

@@ -274,6 +274,7 @@ impl TraceHash {
             SensorFault::Stuck => (2, 0),
             SensorFault::Device(code) => (3, code),
             SensorFault::Silent => (4, 0),
+            SensorFault::Unbound => (5, 0),
         }
     }
 

@@ -1,5 +1,7 @@
-//! The Fetch Tea robot of `missions/fetch-tea.json` ([`MISSION`]), on the drivers of this
-//! crate: the file to copy for a robot of your own.
+//! The Fetch Tea robot of `missions/fetch-tea.json` (compiled in as [`fetch_tea`]), on the
+//! drivers of this crate: the file to copy for a robot of your own. Its sensors and behaviours
+//! are a `match` on the mission's [`fetch_tea::Sensor`] and [`fetch_tea::Action`]: a mission
+//! that gains one does not compile until this file handles it.
 //!
 //! * `sonar` ([`Hcsr04`], cyclic, 100 ms): [`Value::Mm`] to the nearest obstacle, or
 //!   [`Value::NoEcho`] when nothing is in range; `path_clear` when nothing is within
@@ -17,8 +19,8 @@
 //!   [`Settings::walk_mm`] takes at that speed. It brakes as soon as its precondition is false
 //!   (the sonar sees something, the bumper is pressed) and drives on when it holds again;
 //!   braked time does not count. Accurate to the speed's calibration and the braking distance.
-//! * "open door", "open back door": asks for a `handle` reading (when the mission binds one),
-//!   stops if the door is locked, then pushes the door open: a timed drive.
+//! * "open door", "open back door": asks for a `handle` reading, stops if the door is locked,
+//!   then pushes the door open: a timed drive.
 //! * "enter kitchen", "enter by back door": a timed drive through the door.
 //!
 //! Each device sits behind its own mutex ([`CriticalSectionRawMutex`]): sensing runs on an
@@ -34,12 +36,11 @@
 //! use psmpa_drivers::hbridge::{Channel, Drive};
 //! use psmpa_drivers::hcsr04::Hcsr04;
 //! use psmpa_drivers::marker::Marker;
-//! use psmpa_drivers::robot::{Devices, FetchTea, FetchTeaRuntime, Settings, mission};
+//! use psmpa_drivers::robot::{Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
 //! use psmpa_drivers::switch::{DEBOUNCE, Switch};
 //! // On a Pico 2: embassy-rp's `Output`, `Input` and `PwmOutput`.
 //! use psmpa_testkit::pins::{RecordedPin as Output, RecordedPwm as Pwm, ScriptedPin as Input};
 //!
-//! let loaded = mission().unwrap();
 //! let motor = || Channel::new(Output::new(), Output::new(), Pwm::new(1_000));
 //! let robot = FetchTea::new(
 //!     Devices {
@@ -49,10 +50,9 @@
 //!         handle: Switch::new(Input::constant(false), Active::Low, DEBOUNCE),
 //!         wheels: Drive::with_standby(motor(), motor(), Output::new()),
 //!     },
-//!     loaded.bindings.clone(),
 //!     Settings::DEFAULT,
 //! );
-//! let runtime = FetchTeaRuntime::new(&loaded.mission, &robot, (), Config::default());
+//! let runtime = FetchTeaRuntime::new(&fetch_tea::MISSION, &robot, (), Config::default());
 //! // On the board: `runtime.sensing()` in a task on an interrupt executor, `runtime.run()`
 //! // in a task on the thread-mode one.
 //! # let _ = runtime;
@@ -66,11 +66,7 @@ use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant, Timer};
 use embedded_hal::digital::{InputPin, OutputPin};
 use embedded_hal_async::digital::Wait;
-use psmpa_core::mission::{LoadError, load};
-use psmpa_core::{
-    ActionId, ActionIo, Actuator, Bindings, Caps, LoadedOf, Outcome, Platform, Reading, Registry,
-    Runtime, Sensor, SensorFault, SensorId, Value,
-};
+use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, Value};
 
 use crate::PinError;
 use crate::hbridge::{Drive, FULL, Motor};
@@ -78,78 +74,18 @@ use crate::hcsr04::{Hcsr04, Hcsr04Error, Range};
 use crate::marker::Marker;
 use crate::switch::Switch;
 
-/// The mission, as JSON.
-pub const MISSION: &str = include_str!("../../missions/fetch-tea.json");
+psmpa_core::include_mission!(
+    /// The Fetch Tea mission, compiled in: checked when the crate builds, a `static` with
+    /// no parsing at boot. 4 keys per data store (a reading and its pairs).
+    pub mod fetch_tea = "../missions/fetch-tea.json",
+    keys = 4
+);
 
-/// Capacities: 4 sensors, 8 actions, 4 plans of at most 6 actions, 4 keys per data store.
-pub type FetchTeaCaps = Caps<4, 8, 4, 6, 4>;
-/// Which [`Part`] and [`Motion`] each id of the mission is.
-pub type Parts = Bindings<Part, Motion, 4, 8>;
 /// The runtime of robot `P` (a [`FetchTea`]), tracing into `T`.
-pub type FetchTeaRuntime<'r, P, T = ()> = Runtime<'r, P, FetchTeaCaps, T>;
+pub type FetchTeaRuntime<'r, P, T = ()> = fetch_tea::Runtime<'r, P, T>;
 
-/// [`SensorFault::Device`] code: a sensor id the mission does not bind.
-pub const UNBOUND: u8 = 0;
 /// [`SensorFault::Device`] code: a pin reported an error.
 pub const PIN_FAULT: u8 = 1;
-
-/// The sensors a mission may name.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Part {
-    /// The ultrasonic ranger.
-    Sonar,
-    /// The bump switch.
-    Bumper,
-    /// The marker sensor (the camera's stand-in).
-    Camera,
-    /// The limit switch the arm presses on the handle.
-    Handle,
-}
-
-/// The behaviours a mission may name.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Motion {
-    /// Walk to a door.
-    Walk,
-    /// Open a door.
-    OpenDoor,
-    /// Go through an open door.
-    Enter,
-}
-
-/// Binds the mission's names to [`Part`] and [`Motion`].
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Names;
-
-impl Registry for Names {
-    type Sensor = Part;
-    type Action = Motion;
-    fn sensor(&self, name: &str) -> Option<Part> {
-        Some(match name {
-            "sonar" => Part::Sonar,
-            "bumper" => Part::Bumper,
-            "camera" => Part::Camera,
-            "handle" => Part::Handle,
-            _ => return None,
-        })
-    }
-    fn action(&self, name: &str) -> Option<Motion> {
-        Some(match name {
-            "go to door" | "go to back door" => Motion::Walk,
-            "open door" | "open back door" => Motion::OpenDoor,
-            "enter kitchen" | "enter by back door" => Motion::Enter,
-            _ => return None,
-        })
-    }
-}
-
-/// [`MISSION`], loaded and bound to [`Names`]. The result is large: on a microcontroller,
-/// [`load_into`](psmpa_core::mission::load_into) statics instead.
-pub fn mission() -> Result<LoadedOf<'static, Names, FetchTeaCaps>, LoadError<'static>> {
-    load(MISSION.as_bytes(), &Names)
-}
 
 /// The robot's measurements and timings. A board keeps them in a calibration record in
 /// flash ([`Settings::to_record`], [`Settings::from_record`]), so that a robot is calibrated
@@ -418,11 +354,10 @@ pub struct Devices<So, Bu, Ca, Ha, Wh> {
     pub wheels: Wh,
 }
 
-/// The Fetch Tea robot: its devices, bound to a mission's ids. Implements [`Sensor`],
+/// The Fetch Tea robot: its devices. Implements [`Sensor`],
 /// [`Actuator`] and [`Platform`] when the devices are this crate's drivers:
 /// `FetchTea<Hcsr04<_, _>, Switch<_>, Marker<_>, Switch<_>, Drive<_, _, _>>`.
 pub struct FetchTea<So, Bu, Ca, Ha, Wh, Pc = ()> {
-    parts: Parts,
     settings: Settings,
     sonar: Mutex<CriticalSectionRawMutex, So>,
     bumper: Mutex<CriticalSectionRawMutex, Bu>,
@@ -447,9 +382,8 @@ impl Compute for () {
 }
 
 impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
-    /// The robot with `devices`, bound to a mission's ids by `parts` (from [`load`] or
-    /// [`load_into`](psmpa_core::mission::load_into) with [`Names`]).
-    pub fn new(devices: Devices<So, Bu, Ca, Ha, Wh>, parts: Parts, settings: Settings) -> Self {
+    /// The robot with `devices` and `settings`.
+    pub fn new(devices: Devices<So, Bu, Ca, Ha, Wh>, settings: Settings) -> Self {
         let Devices {
             sonar,
             bumper,
@@ -458,7 +392,6 @@ impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
             wheels,
         } = devices;
         Self {
-            parts,
             settings,
             sonar: Mutex::new(sonar),
             bumper: Mutex::new(bumper),
@@ -475,7 +408,6 @@ impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
     /// no time.
     pub fn with_compute<Pc: Compute>(self, compute: Pc) -> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
         FetchTea {
-            parts: self.parts,
             settings: self.settings,
             sonar: self.sonar,
             bumper: self.bumper,
@@ -503,29 +435,29 @@ where
     C: InputPin,
     H: InputPin + Wait,
 {
-    async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+    type Id = fetch_tea::Sensor;
+
+    async fn switch_on(&self, _: fetch_tea::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
 
-    async fn switch_off(&self, _: SensorId) {}
+    async fn switch_off(&self, _: fetch_tea::Sensor) {}
 
-    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
+    async fn sample(&self, sensor: fetch_tea::Sensor) -> Result<Option<Reading>, SensorFault> {
+        use fetch_tea::Sensor::{Bumper, Camera, Handle, Sonar};
         let pin = |_: PinError| SensorFault::Device(PIN_FAULT);
-        let reading = match self.parts.sensor(sensor) {
-            Some(Part::Sonar) => {
+        let reading = match sensor {
+            Sonar => {
                 let read = self.sonar.lock().await.measure().await;
                 return sonar_reading(read, self.settings.clearance_mm);
             }
-            Some(Part::Bumper) => {
+            Bumper => {
                 let pressed = self.bumper.lock().await.pressed().await.map_err(pin)?;
                 Reading::of(Value::Bool(pressed), !pressed)
             }
-            Some(Part::Camera) => Reading::flag(self.camera.lock().await.seen().map_err(pin)?),
+            Camera => Reading::flag(self.camera.lock().await.seen().map_err(pin)?),
             // Read on demand, once: a bounce must not pass for the state.
-            Some(Part::Handle) => {
-                Reading::flag(self.handle.lock().await.settled().await.map_err(pin)?)
-            }
-            None => return Err(SensorFault::Device(UNBOUND)),
+            Handle => Reading::flag(self.handle.lock().await.settled().await.map_err(pin)?),
         };
         Ok(Some(reading))
     }
@@ -536,10 +468,8 @@ where
     /// a noisy wire cannot flood the sensing side. The runtime drops this future before it
     /// samples, so the lock it holds never keeps a read waiting. A pin error never wakes (the
     /// periodic reads report it).
-    async fn wake(&self, sensor: SensorId) {
-        if self.parts.sensor(sensor) == Some(Part::Bumper)
-            && self.bumper.lock().await.edge().await.is_ok()
-        {
+    async fn wake(&self, sensor: fetch_tea::Sensor) {
+        if sensor == fetch_tea::Sensor::Bumper && self.bumper.lock().await.edge().await.is_ok() {
             return;
         }
         core::future::pending().await
@@ -624,17 +554,16 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
     /// Asks the handle's limit switch whether the handle gave (an on-demand `handle` reading,
     /// taken once it settles) and pushes the door open if it did.
     async fn open_door(&self, io: &ActionIo<'_>) -> Outcome {
-        if let Some(handle) = self.parts.sensor_id(&Part::Handle) {
-            let asked = Instant::now();
-            io.request(handle);
-            let mut version = io.version();
-            while io.sample(handle).is_none_or(|e| e.at < asked) {
-                version = io.changed(version).await;
-            }
-            // Locked (or the marker is not in view): the precondition says which.
-            if io.violation().is_some() {
-                return Outcome::Interrupted;
-            }
+        let handle = fetch_tea::Sensor::Handle.id();
+        let asked = Instant::now();
+        io.request(handle);
+        let mut version = io.version();
+        while io.sample(handle).is_none_or(|e| e.at < asked) {
+            version = io.changed(version).await;
+        }
+        // Locked (or the marker is not in view): the precondition says which.
+        if io.violation().is_some() {
+            return Outcome::Interrupted;
         }
         self.timed(self.settings.push_permille, self.settings.push)
             .await
@@ -644,19 +573,23 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
 impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator
     for FetchTea<So, Bu, Ca, Ha, Drive<L, R, S>, Pc>
 {
-    async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
-        match self.parts.action(action) {
-            Some(Motion::Walk) => self.walk(io).await,
-            Some(Motion::OpenDoor) => self.open_door(io).await,
-            Some(Motion::Enter) => {
+    type Id = fetch_tea::Action;
+
+    async fn run(&self, action: fetch_tea::Action, io: &ActionIo<'_>) -> Outcome {
+        use fetch_tea::Action::{
+            EnterByBackDoor, EnterKitchen, GoToBackDoor, GoToDoor, OpenBackDoor, OpenDoor,
+        };
+        match action {
+            GoToDoor | GoToBackDoor => self.walk(io).await,
+            OpenDoor | OpenBackDoor => self.open_door(io).await,
+            EnterKitchen | EnterByBackDoor => {
                 let s = &self.settings;
                 self.timed(s.enter_permille, s.enter).await
             }
-            None => Outcome::Failure,
         }
     }
 
-    fn halt(&self, _: ActionId) {
+    fn halt(&self, _: fetch_tea::Action) {
         // Nothing more to do if even braking fails.
         let _ = self.wheels(Drive::brake);
     }

@@ -360,8 +360,10 @@ fn a_stuck_echo_line_is_the_drivers_stuck_fault_within_the_sonars_timeout() {
         .collect();
     assert_eq!(faults.first(), Some(&SensorFault::Stuck), "{faults:?}");
     // Trigger (one 1 ms tick here), the module's delay, the pulse limit: inside the timeout.
-    let mission = psmpa_drivers::robot::mission().expect("the mission loads");
-    let timeout = mission.mission.domain.sensor(sonar).map(|s| s.timeout);
+    let timeout = psmpa_drivers::robot::fetch_tea::MISSION
+        .domain
+        .sensor(sonar)
+        .map(|s| s.timeout);
     let read = Duration::from_millis(1) + common::ECHO_DELAY + PULSE_LIMIT;
     assert!(
         timeout.is_some_and(|t| read < t),

@@ -592,6 +592,8 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
 }
 
 impl<L: WorldLog, M: RawMutex> Sensor for Nao<'_, '_, L, M> {
+    type Id = SensorId;
+
     async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault> {
         let device = self.device(sensor).ok_or(SensorFault::Device(1))?;
         if device == Device::Sonar {
@@ -734,6 +736,8 @@ impl<L: WorldLog, M: RawMutex> Nao<'_, '_, L, M> {
 }
 
 impl<L: WorldLog, M: RawMutex> Actuator for Nao<'_, '_, L, M> {
+    type Id = ActionId;
+
     async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
         let Some(behaviour) = self.bindings.action(action) else {
             return Outcome::Failure;

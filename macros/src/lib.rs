@@ -17,7 +17,7 @@ use psmpa_model::check::{self, Large};
 use psmpa_model::facts::FactSetOf;
 use quote::{format_ident, quote};
 use syn::parse::{Parse, ParseStream};
-use syn::{Ident, LitInt, LitStr, Token, Visibility};
+use syn::{Attribute, Ident, LitInt, LitStr, Token, Visibility};
 
 /// The widest fact sets a compiled mission may have: 4 words, 256 facts (what the checks load).
 const MAX_WORDS: usize = 4;
@@ -26,6 +26,8 @@ const MAX_FACTS: usize = 64 * MAX_WORDS;
 
 /// `VIS mod NAME = "PATH"` and, optionally, `, keys = N`.
 struct Input {
+    /// The module's attributes (its documentation, a `cfg`).
+    attrs: Vec<Attribute>,
     vis: Visibility,
     name: Ident,
     path: LitStr,
@@ -34,6 +36,7 @@ struct Input {
 
 impl Parse for Input {
     fn parse(input: ParseStream<'_>) -> syn::Result<Self> {
+        let attrs = input.call(Attribute::parse_outer)?;
         let vis = input.parse()?;
         input.parse::<Token![mod]>()?;
         let name = input.parse()?;
@@ -53,6 +56,7 @@ impl Parse for Input {
             input.parse::<Option<Token![,]>>()?;
         }
         Ok(Self {
+            attrs,
             vis,
             name,
             path,
@@ -80,6 +84,11 @@ impl Parse for Input {
 /// * `Mission`, its type, and `MISSION`, a `static` built at compile time;
 /// * `Runtime<'r, P, T = ()>`, the runtime of platform `P` for this mission, a type with its
 ///   constructor: `dock::Runtime::new(&dock::MISSION, &robot, (), config)`.
+///
+/// A robot names its sensors and actions by the enums (`type Id = dock::Sensor;` in its
+/// `Sensor` implementation, `type Id = dock::Action;` in its `Actuator`), so its `match` is
+/// checked to be exhaustive. Attributes before `mod` (`///` documentation, a `#[cfg(..)]`)
+/// go on the module.
 #[proc_macro]
 pub fn include_mission(input: TokenStream) -> TokenStream {
     let input = syn::parse_macro_input!(input as Input);
@@ -225,6 +234,12 @@ fn names_enum(
                     #( #index => ::core::option::Option::Some(Self::#variants), )*
                     _ => ::core::option::Option::None,
                 }
+            }
+        }
+
+        impl ::psmpa_core::platform::FromId<#id> for #ty {
+            fn from_id(id: #id) -> ::core::option::Option<Self> {
+                Self::from_id(id)
             }
         }
 
@@ -376,7 +391,9 @@ fn generate(
         input.path.value(),
         event_names.len()
     );
+    let attrs = &input.attrs;
     Ok(quote! {
+        #(#attrs)*
         #[doc = #doc]
         #vis mod #module {
             // The file: the crate builds again when it changes.

@@ -1,23 +1,37 @@
-//! The README's quickstart is `tests/quickstart.rs`, word for word: the test that runs is the
-//! text a reader copies.
+//! The README's quickstart is `tests/hello.json` and `tests/quickstart.rs`, word for word: the
+//! test that runs is the text a reader copies.
+
+/// The one fenced block of language `lang` between the README's `<!-- {marker}:start -->` and
+/// `<!-- {marker}:end -->`.
+fn block(readme: &str, marker: &str, lang: &str) -> String {
+    let (_, after) = readme
+        .split_once(&format!("<!-- {marker}:start -->"))
+        .unwrap();
+    let (block, _) = after.split_once(&format!("<!-- {marker}:end -->")).unwrap();
+    block
+        .trim()
+        .strip_prefix(&format!("```{lang}"))
+        .and_then(|b| b.strip_suffix("```"))
+        .unwrap_or_else(|| panic!("{marker} is one ```{lang} block"))
+        .trim()
+        .to_owned()
+}
 
 #[test]
-fn the_readme_quickstart_is_the_compiled_test() {
+fn the_readme_quickstart_is_the_compiled_test_and_its_mission() {
     let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
     let readme = std::fs::read_to_string(format!("{root}/README.md")).unwrap();
-    let test = std::fs::read_to_string(format!("{root}/testkit/tests/quickstart.rs")).unwrap();
-    let (_, after) = readme.split_once("<!-- quickstart:start -->").unwrap();
-    let (block, _) = after.split_once("<!-- quickstart:end -->").unwrap();
-    let code = block
-        .trim()
-        .strip_prefix("```rust")
-        .and_then(|b| b.strip_suffix("```"))
-        .expect("the quickstart is one ```rust block");
-    assert_eq!(
-        code.trim(),
-        test.trim(),
-        "README.md's quickstart differs from testkit/tests/quickstart.rs: copy the file in"
-    );
+    for (marker, lang, file) in [
+        ("quickstart-mission", "json", "testkit/tests/hello.json"),
+        ("quickstart", "rust", "testkit/tests/quickstart.rs"),
+    ] {
+        let text = std::fs::read_to_string(format!("{root}/{file}")).unwrap();
+        assert_eq!(
+            block(&readme, marker, lang),
+            text.trim(),
+            "README.md's {marker} block differs from {file}: copy the file in"
+        );
+    }
 }
 
 /// The crates a reader must add to run the quickstart: every crate the test `use`s is in the

@@ -235,6 +235,8 @@ impl TinyWorld {
 }
 
 impl Sensor for TinyWorld {
+    type Id = SensorId;
+
     async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault> {
         self.advance();
         if let Some(on) = self.state.borrow_mut().on.get_mut(sensor.index()) {
@@ -285,6 +287,8 @@ impl Platform for TinyWorld {
 }
 
 impl Actuator for TinyWorld {
+    type Id = ActionId;
+
     async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
         if action == self.ids.walk || action == self.ids.stumble {
             self.walk(io, action == self.ids.stumble).await

@@ -66,3 +66,85 @@ fn names_are_enums_with_the_missions_names_and_ids() {
     assert_eq!(Plan::GetInKitchen.name(), "GetIn Kitchen");
     assert_eq!(Sensor::from_id(psmpa_core::SensorId::new(9).unwrap()), None);
 }
+
+/// A platform written for the dock mission: its ids are `dock`'s enums.
+struct DockOnly;
+
+impl psmpa_core::Sensor for DockOnly {
+    type Id = dock::Sensor;
+
+    async fn switch_on(&self, _: dock::Sensor) -> Result<(), psmpa_core::SensorFault> {
+        Ok(())
+    }
+    async fn switch_off(&self, _: dock::Sensor) {}
+    async fn sample(
+        &self,
+        _: dock::Sensor,
+    ) -> Result<Option<psmpa_core::Reading>, psmpa_core::SensorFault> {
+        Ok(Some(psmpa_core::Reading::flag(true)))
+    }
+}
+
+impl psmpa_core::Actuator for DockOnly {
+    type Id = dock::Action;
+
+    async fn run(&self, _: dock::Action, _: &psmpa_core::ActionIo<'_>) -> psmpa_core::Outcome {
+        psmpa_core::Outcome::Success
+    }
+}
+
+impl psmpa_core::Platform for DockOnly {
+    type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
+}
+
+#[test]
+fn a_platform_written_for_another_mission_is_an_error_before_anything_runs() {
+    use fetch_tea::{K, L, NA, NF, NP, NS, W};
+    // Fetch Tea has six actions, the dock's enum four: the fifth has no name on the platform.
+    let rt: psmpa_core::Engine<'_, DockOnly, psmpa_testkit::Recorder, NS, NA, NP, L, K, W, NF> =
+        psmpa_core::Engine::new(
+            &fetch_tea::MISSION,
+            &DockOnly,
+            psmpa_testkit::Recorder::default(),
+            psmpa_core::Config::default(),
+        );
+    let done = psmpa_testkit::simulate(rt.run_with_sensing(), embassy_time::Duration::from_secs(1))
+        .unwrap();
+    let error = done.output.unwrap_err();
+    assert_eq!(
+        error,
+        psmpa_core::ControlError::Unbound {
+            sensor: None,
+            action: Some(fetch_tea::Action::ALL[4].id()),
+        }
+    );
+    use psmpa_core::Describe;
+    assert_eq!(
+        fetch_tea::MISSION.describe_error(error).to_string(),
+        format!(
+            "the platform is written for another mission: it has no action {}",
+            fetch_tea::Action::ALL[4]
+        )
+    );
+    // Nothing ran: no sensor switched on, no state entered, at no time.
+    assert_eq!(done.elapsed, embassy_time::Duration::from_ticks(0));
+    assert!(rt.into_sink().0.is_empty());
+}
+
+#[test]
+fn a_compiled_runtime_is_named_by_its_module_and_built_by_inference() {
+    // `dock::Runtime::new` infers the platform and the sink from its arguments.
+    let rt = dock::Runtime::new(
+        &dock::MISSION,
+        &DockOnly,
+        psmpa_testkit::Recorder::default(),
+        psmpa_core::Config::default(),
+    );
+    let done =
+        psmpa_testkit::simulate(rt.run_with_sensing(), embassy_time::Duration::from_secs(10))
+            .unwrap();
+    // Every sensor says all it perceives holds: "drive in" runs to the goal.
+    let report = done.output.unwrap();
+    assert!(report.beliefs.contains(dock::Fact::Docked.id()));
+    assert_eq!(rt.into_sink().plans_selected(), [dock::Plan::DriveIn.id()]);
+}

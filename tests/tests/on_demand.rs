@@ -26,6 +26,8 @@ type PickCaps = Caps<1, 1, 1, 1, 4>;
 struct Picker;
 
 impl Sensor for Picker {
+    type Id = SensorId;
+
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -39,6 +41,8 @@ impl Sensor for Picker {
 }
 
 impl Actuator for Picker {
+    type Id = ActionId;
+
     async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
         let Some(camera) = SensorId::new(0) else {
             return Outcome::Failure;

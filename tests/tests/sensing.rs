@@ -205,6 +205,8 @@ impl Robot {
 }
 
 impl Sensor for Robot {
+    type Id = SensorId;
+
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -252,6 +254,8 @@ impl Robot {
 }
 
 impl Actuator for Robot {
+    type Id = ActionId;
+
     async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
         self.started.borrow_mut().push(self.look(io));
         Timer::after(self.drive).await;
@@ -487,6 +491,8 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
     /// A platform whose state would live in atomics or critical-section mutexes.
     struct Stateless;
     impl Sensor for Stateless {
+        type Id = SensorId;
+
         async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
             Ok(())
         }
@@ -497,6 +503,8 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
         }
     }
     impl Actuator for Stateless {
+        type Id = ActionId;
+
         async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome {
             Outcome::Success
         }

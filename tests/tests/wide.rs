@@ -86,6 +86,8 @@ fn mission() -> (WideMission, Facts) {
 struct Robot;
 
 impl Sensor<W> for Robot {
+    type Id = SensorId;
+
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -100,6 +102,8 @@ impl Sensor<W> for Robot {
 }
 
 impl Actuator<W> for Robot {
+    type Id = ActionId;
+
     /// Drives for `DRIVE_MS` of clear way: waits while the precondition is violated.
     async fn run(&self, _: ActionId, io: &ActionIo<'_, W>) -> Outcome {
         let mut driven = 0;
@@ -217,4 +221,121 @@ fn the_trace_hash_covers_every_word_of_a_fact_set() {
         words.value(),
         "a second word is hashed even when 0"
     );
+}
+
+// 200 facts in four words, compiled in: the same robot, its sensor and action named by the
+// mission's enums.
+psmpa_core::include_mission!(mod wide200 = "missions/wide-200.json");
+
+/// The robot of the 200-fact mission: the same box, the same drive.
+struct Typed;
+
+impl Sensor<{ wide200::W }> for Typed {
+    type Id = wide200::Sensor;
+
+    async fn switch_on(&self, _: wide200::Sensor) -> Result<(), SensorFault> {
+        Ok(())
+    }
+
+    async fn switch_off(&self, _: wide200::Sensor) {}
+
+    async fn sample(
+        &self,
+        sensor: wide200::Sensor,
+    ) -> Result<Option<Reading<{ wide200::W }>>, SensorFault> {
+        match sensor {
+            wide200::Sensor::Ranger => {
+                let now = Instant::now().as_millis();
+                let blocked = (BOX.0..BOX.1).contains(&now);
+                Ok(Some(Reading::of(Value::Bool(blocked), !blocked)))
+            }
+        }
+    }
+}
+
+impl Actuator<{ wide200::W }> for Typed {
+    type Id = wide200::Action;
+
+    async fn run(&self, action: wide200::Action, io: &ActionIo<'_, { wide200::W }>) -> Outcome {
+        match action {
+            wide200::Action::Drive => {
+                let mut driven = 0;
+                let mut version = io.version();
+                while driven < DRIVE_MS {
+                    if io.violation().is_some() {
+                        version = io.changed(version).await;
+                        continue;
+                    }
+                    let step = Instant::now();
+                    if let Some(v) = io.changed_within(version, Duration::from_millis(10)).await {
+                        version = v;
+                    }
+                    driven += Instant::now().as_millis() - step.as_millis();
+                }
+                Outcome::Success
+            }
+        }
+    }
+}
+
+impl Platform for Typed {
+    type Mutex = NoopRawMutex;
+}
+
+#[test]
+fn a_compiled_mission_of_200_facts_runs_end_to_end_in_four_words() {
+    use wide200::Fact;
+    assert_eq!((wide200::NF, wide200::W), (200, 4));
+    assert_eq!(
+        (Fact::Clear.id().index(), Fact::Arrived.id().index()),
+        (150, 199)
+    );
+    let run = || {
+        let rt = wide200::Runtime::new(
+            &wide200::MISSION,
+            &Typed,
+            Recorder::<{ wide200::W }>::default(),
+            Config::default(),
+        );
+        let done = simulate_split(rt.sensing(), rt.run(), Duration::from_secs(10)).unwrap();
+        let report = done.output.unwrap();
+        let hash = rt.trace_hash();
+        (report, rt.into_sink().0, hash)
+    };
+    let (report, trace, hash) = run();
+    // The goal, in the fourth word, holds.
+    assert!(report.beliefs.contains(Fact::Arrived.id()));
+    // The box makes `clear` (third word) false from the first sample that sees it until the
+    // first that does not.
+    let clear = FactSetOf::<{ wide200::W }>::single(Fact::Clear.id());
+    let at = |matching: fn(&TraceEvent<{ wide200::W }>) -> bool| -> Vec<u64> {
+        trace
+            .iter()
+            .filter(|(_, e)| matching(e))
+            .map(|(t, _)| t.as_millis())
+            .collect()
+    };
+    assert_eq!(
+        at(|e| matches!(e, TraceEvent::PreconditionViolated { .. })),
+        [BOX.0]
+    );
+    assert!(trace.iter().any(|(_, e)| matches!(
+        e,
+        TraceEvent::PreconditionViolated { missing, .. } if *missing == clear
+    )));
+    assert_eq!(
+        at(|e| matches!(e, TraceEvent::PreconditionRestored { .. })),
+        [BOX.1]
+    );
+    // The drive's second of clear way, after the box's 400 ms, from the first sample's end.
+    let goal = at(|e| matches!(e, TraceEvent::GoalReached { .. }));
+    assert_eq!(goal, [DRIVE_MS + (BOX.1 - BOX.0)]);
+    // The same run, the same trace; and the same mission loaded from the file at run time.
+    assert_eq!(run().2, hash);
+    let loaded: psmpa_core::Loaded<'_, (), (), 1, 1, 1, 1, 4, 200> = psmpa_core::mission::load(
+        include_bytes!("../missions/wide-200.json"),
+        &psmpa_core::mission::AnyBehaviour,
+    )
+    .unwrap();
+    assert_eq!(loaded.mission, wide200::MISSION);
 }

@@ -58,7 +58,8 @@ const FORMATTER_OUTPUT: OnlyTo = (
      Monitor::user, at the same slot of another vtable, and through it the trace)",
 );
 
-/// The mission loader's JSON recursion, in both images.
+/// The mission loader's JSON recursion, in the simulator-carrying image (which loads its
+/// scenarios' missions; the boards and the product have theirs compiled in).
 const MISSION_DEPTH: Recursion = (
     "deserialize_ignored_any",
     psmpa_core::mission::MAX_DEPTH as u64,
@@ -188,7 +189,6 @@ const LEVELS: &[Level] = &[
 
 /// The Pico 2 board's bounded cycles. Its panic handler is its own (`boards/pico2`'s `panic`).
 const PICO2_RECURSION: &[Recursion] = &[
-    MISSION_DEPTH,
     (
         "core::panicking::panic_fmt",
         2,
@@ -226,10 +226,11 @@ const PICO2_ONLY_FROM: &[OnlyFrom] = &[
 /// The task `main` runs (`#[embassy_executor::main]`): its poll function polls main's body.
 const PICO2_MAIN_TASK: Task = Task {
     name: "embassy_executor::raw::TaskStorage<",
-    // Main's body, or, inlined into the poll, the mission it loads.
+    // Main's body, or, inlined into the poll, the behaviours its control loop runs (only the
+    // deciding side runs an action).
     calls: &[
         "psmpa_board_rp::____embassy_main_task",
-        "psmpa_model::mission::",
+        " as psmpa_core::platform::Actuator>::run",
     ],
 };
 

@@ -43,14 +43,12 @@ use embassy_rp::pwm::{self, Pwm};
 use embassy_rp::watchdog::{ResetReason, Watchdog};
 use embassy_time::{Duration, Instant, Timer};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
-use psmpa_core::{Config, LoadedOf, SensorMode};
+use psmpa_core::{Config, SensorMode};
 use psmpa_drivers::Active;
 use psmpa_drivers::hbridge::{Channel, Drive};
 use psmpa_drivers::hcsr04::Hcsr04;
 use psmpa_drivers::marker::Marker;
-use psmpa_drivers::robot::{
-    Compute, Devices, FetchTea, FetchTeaCaps, FetchTeaRuntime, Names, Part, Settings, mission,
-};
+use psmpa_drivers::robot::{Compute, Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
 use psmpa_drivers::switch::{DEBOUNCE, Switch};
 use static_cell::StaticCell;
 
@@ -227,34 +225,29 @@ async fn main(spawner: Spawner) {
         }
     };
 
-    static MISSION: StaticCell<LoadedOf<'static, Names, FetchTeaCaps>> = StaticCell::new();
-    let loaded = match mission() {
-        Ok(loaded) => MISSION.init(loaded),
-        Err(e) => {
-            error!("the mission does not load: {}", e);
-            return;
-        }
-    };
-    for (part, period) in [
-        (Part::Sonar, settings.sonar_period),
-        (Part::Bumper, settings.bumper_period),
+    // The compiled mission, copied to RAM: the calibration may set its sampling periods.
+    static MISSION: StaticCell<fetch_tea::Mission> = StaticCell::new();
+    let mission = MISSION.init(fetch_tea::MISSION.clone());
+    for (sensor, period) in [
+        (fetch_tea::Sensor::Sonar, settings.sonar_period),
+        (fetch_tea::Sensor::Bumper, settings.bumper_period),
     ] {
-        let (Some(id), Some(period)) = (loaded.bindings.sensor_id(&part), period) else {
+        let Some(period) = period else {
             continue;
         };
-        if let Err(e) = loaded
-            .mission
+        if let Err(e) = mission
             .domain
-            .set_sensor_mode(id, SensorMode::Cyclic { period })
+            .set_sensor_mode(sensor.id(), SensorMode::Cyclic { period })
         {
             error!(
                 "the {} period cannot be set: {}",
-                part,
+                sensor,
                 defmt::Debug2Format(&e)
             );
             return;
         }
     }
+    let mission: &'static fetch_tea::Mission = mission;
 
     // The pin table (README.md): GP2 trigger, GP3 echo, GP4 bumper, GP5 marker, GP6 handle,
     // GP9 STBY, GP10/11/12 left IN1/IN2/PWM (slice 6 A), GP13/14/15 right (slice 7 B).
@@ -300,12 +293,11 @@ async fn main(spawner: Spawner) {
 
     static ROBOT: StaticCell<Robot> = StaticCell::new();
     static RUNTIME: StaticCell<Runtime> = StaticCell::new();
-    let robot =
-        ROBOT.init(FetchTea::new(devices, loaded.bindings.clone(), settings).with_compute(Busy));
+    let robot = ROBOT.init(FetchTea::new(devices, settings).with_compute(Busy));
     let runtime: &'static Runtime = RUNTIME.init(Runtime::new(
-        &loaded.mission,
+        mission,
         robot,
-        Log(&loaded.mission),
+        Log(mission),
         Config::default(),
     ));
 
@@ -327,6 +319,6 @@ async fn main(spawner: Spawner) {
             Instant::now().as_millis(),
             report.plans_started
         ),
-        Err(e) => error!("Fetch Tea failed: {}", log::Named(&Log(&loaded.mission), e)),
+        Err(e) => error!("Fetch Tea failed: {}", log::Named(&Log(mission), e)),
     }
 }

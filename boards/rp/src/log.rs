@@ -23,13 +23,12 @@ use embassy_time::Instant;
 use portable_atomic::{AtomicU32, Ordering};
 use psmpa_core::plan::{MAX_PLANS, PlanSet};
 use psmpa_core::{
-    ActionId, ControlError, Failure, MissionOf, PlanId, SensorId, SensorSet, TraceEvent, TraceSink,
-    Value,
+    ActionId, ControlError, Failure, PlanId, SensorId, SensorSet, TraceEvent, TraceSink, Value,
 };
-use psmpa_drivers::robot::FetchTeaCaps;
+use psmpa_drivers::robot::fetch_tea;
 
-/// Sensors whose health is kept: the mission's first four (Fetch Tea has four).
-pub const SENSORS: usize = 4;
+/// Sensors whose health is kept: the mission's.
+pub const SENSORS: usize = fetch_tea::NS;
 
 /// One sensor's health since boot. Words, so that a debugger reads them as they are.
 #[repr(C)]
@@ -75,12 +74,7 @@ pub struct Health {
 #[unsafe(export_name = "PSMPA_HEALTH")]
 pub static HEALTH: Health = Health {
     changes: AtomicU32::new(0),
-    sensors: [
-        SensorHealth::new(),
-        SensorHealth::new(),
-        SensorHealth::new(),
-        SensorHealth::new(),
-    ],
+    sensors: [const { SensorHealth::new() }; SENSORS],
 };
 
 impl SensorHealth {
@@ -143,7 +137,7 @@ fn note(sensor: SensorId, at: Instant, event: &TraceEvent) -> bool {
 }
 
 /// The mission whose names the log shows.
-type Mission = MissionOf<'static, FetchTeaCaps>;
+type Mission = fetch_tea::Mission;
 
 /// Writes each trace event to the defmt log with the mission's names.
 pub struct Log(pub &'static Mission);

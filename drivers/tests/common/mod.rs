@@ -17,7 +17,7 @@ use psmpa_drivers::Active;
 use psmpa_drivers::hbridge::{Channel, Drive};
 use psmpa_drivers::hcsr04::Hcsr04;
 use psmpa_drivers::marker::Marker;
-use psmpa_drivers::robot::{Devices, FetchTea, FetchTeaRuntime, Settings, mission};
+use psmpa_drivers::robot::{Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
 use psmpa_drivers::switch::{DEBOUNCE, Switch};
 use psmpa_testkit::pins::{RecordedPin, RecordedPwm, ScriptedPin};
 use psmpa_testkit::{Recorder, simulate_split};
@@ -251,7 +251,6 @@ pub const LIMIT: Duration = Duration::from_secs(60);
 
 /// Runs the Fetch Tea mission on the robot in `world`.
 pub fn run(world: World) -> Run {
-    let loaded = mission().expect("the mission loads");
     let trigger = RecordedPin::new();
     let bumper = ScriptedPin::new(true, &world.bumper);
     let (left, right, standby) = (Wheel::new(), Wheel::new(), RecordedPin::new());
@@ -267,11 +266,10 @@ pub fn run(world: World) -> Run {
             ),
             wheels: Drive::with_standby(left.channel(), right.channel(), standby.clone()),
         },
-        loaded.bindings.clone(),
         Settings::DEFAULT,
     );
     let rt = FetchTeaRuntime::new(
-        &loaded.mission,
+        &fetch_tea::MISSION,
         &robot,
         Recorder::default(),
         Config::default(),
@@ -290,14 +288,15 @@ pub fn run(world: World) -> Run {
 
 /// The id of the mission's sensor `name`.
 pub fn sensor(name: &str) -> SensorId {
-    let loaded = mission().expect("the mission loads");
-    loaded.mission.domain.sensor_id(name).expect("a sensor")
+    fetch_tea::MISSION.domain.sensor_id(name).expect("a sensor")
 }
 
 /// The id of the mission's action `name`.
 pub fn action(name: &str) -> ActionId {
-    let loaded = mission().expect("the mission loads");
-    loaded.mission.domain.action_id(name).expect("an action")
+    fetch_tea::MISSION
+        .domain
+        .action_id(name)
+        .expect("an action")
 }
 
 impl Run {

@@ -1,6 +1,7 @@
 //! A differential-drive robot docking to its charger, on psmpa: the example to start a robot
-//! of your own from. Its mission is data ([`MISSION`]); this crate gives the mission's sensors
-//! and behaviours ([`Dock`]) and a small world for them to act in ([`Yard`]).
+//! of your own from. Its mission is data (`mission.json`, compiled in as [`dock`]); this crate
+//! gives the mission's sensors and behaviours ([`Dock`]) and a small world for them to act in
+//! ([`Yard`]).
 //!
 //! * `tof`, a time-of-flight ranger: cyclic every 100 ms, a read takes 30 ms; `path_clear`
 //!   when nothing is within 300 mm.
@@ -10,7 +11,7 @@
 //!   (context `battery_ok`) or "creep in" (context not `battery_ok`).
 //!
 //! On a board, [`Yard`] is replaced by the drivers (a VL53L0X, a GPIO, a UART camera, an ADC)
-//! and the motors; the mission, the registry and the behaviours stay as they are.
+//! and the motors; the mission and the behaviours stay as they are.
 #![no_std]
 #![deny(missing_docs)]
 
@@ -18,19 +19,17 @@ use core::cell::Cell;
 
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
-use psmpa_core::mission::{LoadError, Registry, load};
-use psmpa_core::{
-    ActionId, ActionIo, Actuator, BindingsOf, Caps, LoadedOf, Outcome, Platform, Reading, Runtime,
-    Sensor, SensorFault, SensorId, Value,
-};
+use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, Value};
 
-/// The mission, as JSON.
-pub const MISSION: &str = include_str!("../mission.json");
+// The mission, checked and built when the crate builds: its sensors, actions and plans as
+// enums, its capacities, its runtime type. 4 keys per data store (the readings' pairs).
+psmpa_core::include_mission!(pub mod dock = "mission.json", keys = 4);
 
-/// 4 sensors, 4 actions, 2 plans of at most 3 actions, 4 keys per data store.
-pub type DockCaps = Caps<4, 4, 2, 3, 4>;
 /// The dock robot's runtime, tracing into `T`.
-pub type DockRuntime<'r, T = ()> = Runtime<'r, Dock<'r>, DockCaps, T>;
+pub type DockRuntime<'r, T = ()> = dock::Runtime<'r, Dock<'r>, T>;
+
+// Building the crate for a microcontroller compiles the runtime for this robot.
+psmpa_core::compile_runtime!(DockRuntime<'_>);
 
 /// Where the charger is, mm from the start.
 pub const DOCK_MM: i32 = 3_000;
@@ -42,63 +41,6 @@ pub const TOF_LATENCY: Duration = Duration::from_millis(30);
 pub const DRIVE_MM_S: i32 = 300;
 /// Creeping speed, mm/s (a low battery).
 pub const CREEP_MM_S: i32 = 100;
-
-/// The mission's sensors.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Sense {
-    /// Time-of-flight ranger.
-    Tof,
-    /// Cliff sensor.
-    Cliff,
-    /// Camera.
-    Camera,
-    /// Battery check.
-    Battery,
-}
-
-/// The mission's behaviours.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Act {
-    /// Drive to the dock at full speed.
-    Drive,
-    /// Creep to the dock.
-    Creep,
-    /// Turn to face the charger's contacts.
-    Align,
-    /// Push onto the contacts.
-    Connect,
-}
-
-/// Binds the mission's names to this robot's sensors and behaviours.
-pub struct Names;
-
-impl Registry for Names {
-    type Sensor = Sense;
-    type Action = Act;
-    fn sensor(&self, name: &str) -> Option<Sense> {
-        Some(match name {
-            "tof" => Sense::Tof,
-            "cliff" => Sense::Cliff,
-            "camera" => Sense::Camera,
-            "battery" => Sense::Battery,
-            _ => return None,
-        })
-    }
-    fn action(&self, name: &str) -> Option<Act> {
-        Some(match name {
-            "drive" => Act::Drive,
-            "creep" => Act::Creep,
-            "align" => Act::Align,
-            "connect" => Act::Connect,
-            _ => return None,
-        })
-    }
-}
-
-/// The mission, loaded and bound to [`Names`].
-pub fn mission() -> Result<LoadedOf<'static, Names, DockCaps>, LoadError<'static>> {
-    load(MISSION.as_bytes(), &Names)
-}
 
 /// The robot's surroundings: a straight run to the charger, perhaps a box put in the way for a
 /// while, perhaps a drop in the floor. Positions in mm from the start.
@@ -193,38 +135,37 @@ impl Default for Yard {
     }
 }
 
-/// The dock robot: its sensors and behaviours in `yard`, bound to the mission's ids.
+/// The dock robot: its sensors and behaviours in `yard`.
 pub struct Dock<'y> {
     /// The world it senses and moves in.
     pub yard: &'y Yard,
-    /// Which sensor and behaviour each id of the mission is.
-    pub bindings: BindingsOf<Names, DockCaps>,
 }
 
 impl Sensor for Dock<'_> {
-    async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+    type Id = dock::Sensor;
+
+    async fn switch_on(&self, _: dock::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
 
-    async fn switch_off(&self, _: SensorId) {}
+    async fn switch_off(&self, _: dock::Sensor) {}
 
-    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
+    async fn sample(&self, sensor: dock::Sensor) -> Result<Option<Reading>, SensorFault> {
         let yard = self.yard;
         let start = Instant::now();
-        Ok(Some(match self.bindings.sensor(sensor) {
-            Some(Sense::Tof) => {
+        Ok(Some(match sensor {
+            dock::Sensor::Tof => {
                 // The distance as it was when the measurement started.
                 Timer::after(TOF_LATENCY).await;
                 let mm = if yard.blocked(start) { 250 } else { 2_000 };
                 Reading::of(Value::Mm(mm), mm > 300)
             }
-            Some(Sense::Cliff) => {
+            dock::Sensor::Cliff => {
                 let edge = yard.cliff_mm.is_some_and(|c| yard.position_mm() >= c);
                 Reading::flag(!edge)
             }
-            Some(Sense::Camera) => Reading::flag(yard.marker),
-            Some(Sense::Battery) => Reading::of(Value::Level(yard.battery), yard.battery >= 30),
-            None => return Err(SensorFault::Device(0)),
+            dock::Sensor::Camera => Reading::flag(yard.marker),
+            dock::Sensor::Battery => Reading::of(Value::Level(yard.battery), yard.battery >= 30),
         }))
     }
 }
@@ -259,23 +200,24 @@ impl Dock<'_> {
 }
 
 impl Actuator for Dock<'_> {
-    async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
-        match self.bindings.action(action) {
-            Some(Act::Drive) => self.approach(io, DRIVE_MM_S).await,
-            Some(Act::Creep) => self.approach(io, CREEP_MM_S).await,
-            Some(Act::Align) => {
+    type Id = dock::Action;
+
+    async fn run(&self, action: dock::Action, io: &ActionIo<'_>) -> Outcome {
+        match action {
+            dock::Action::Drive => self.approach(io, DRIVE_MM_S).await,
+            dock::Action::Creep => self.approach(io, CREEP_MM_S).await,
+            dock::Action::Align => {
                 Timer::after(Duration::from_millis(500)).await;
                 Outcome::Success
             }
-            Some(Act::Connect) => {
+            dock::Action::Connect => {
                 Timer::after(Duration::from_millis(300)).await;
                 Outcome::Success
             }
-            None => Outcome::Failure,
         }
     }
 
-    fn halt(&self, _: ActionId) {
+    fn halt(&self, _: dock::Action) {
         self.yard.set_speed(0);
     }
 }
@@ -284,16 +226,4 @@ impl Platform for Dock<'_> {
     // Sensing and deciding on one executor; `CriticalSectionRawMutex` when sensing runs on an
     // interrupt executor above deciding.
     type Mutex = NoopRawMutex;
-}
-
-/// Polls the runtime's two sides once each, sensing first, as an executor would: what a
-/// firmware's tasks do. A generic library built alone is only type-checked; this function is
-/// not generic, so building the crate for a microcontroller (`--target thumbv7em-none-eabihf`)
-/// compiles the whole runtime for this robot, its futures' code included. `true` once the
-/// mission has ended.
-pub fn poll_once(rt: &DockRuntime<'_>, cx: &mut core::task::Context<'_>) -> bool {
-    let sensing = core::pin::pin!(rt.sensing());
-    let _ = core::future::Future::poll(sensing, cx);
-    let run = core::pin::pin!(rt.run());
-    core::future::Future::poll(run, cx).is_ready()
 }

@@ -1,50 +1,33 @@
 //! The dock robot in virtual time, with the test kit.
 
 use embassy_time::Duration;
-use psmpa_core::{ActionId, Config, ControlError, PlanId, Report, SensorSet, TraceEvent};
-use psmpa_dock::{DOCK_MM, Dock, DockRuntime, NEAR_MM, TOF_LATENCY, Yard, mission};
-use psmpa_testkit::{Recorder, simulate_split};
+use psmpa_core::{Config, ControlError, Report, SensorSet, TraceEvent};
+use psmpa_dock::dock::{Action, MISSION, Plan, Sensor};
+use psmpa_dock::{DOCK_MM, Dock, DockRuntime, NEAR_MM, TOF_LATENCY, Yard};
+use psmpa_testkit::{Recorder, simulate};
 
 const LIMIT: Duration = Duration::from_secs(120);
 const TOF_PERIOD_MS: u64 = 100;
 
-/// Runs the mission in `yard`: how it ended, the trace, and the runtime's names.
+/// Runs the mission in `yard`: how it ended, and the trace.
 fn run(yard: &Yard) -> (Result<Report, ControlError>, Recorder) {
-    let loaded = mission().unwrap();
-    let dock = Dock {
-        yard,
-        bindings: loaded.bindings.clone(),
-    };
-    let rt = DockRuntime::new(
-        &loaded.mission,
-        &dock,
-        Recorder::default(),
-        Config::default(),
-    );
-    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
+    let dock = Dock { yard };
+    let rt = DockRuntime::new(&MISSION, &dock, Recorder::default(), Config::default());
+    let done = simulate(rt.run_with_sensing(), LIMIT).unwrap();
     (done.output, rt.into_sink())
 }
 
-fn action(name: &str) -> ActionId {
-    let loaded = mission().unwrap();
-    loaded.mission.domain.action_id(name).unwrap()
-}
-
-fn sensors(names: &[&str]) -> SensorSet {
-    let loaded = mission().unwrap();
-    names
-        .iter()
-        .map(|n| loaded.mission.domain.sensor_id(n).unwrap())
-        .collect()
+fn sensors(sensors: &[Sensor]) -> SensorSet {
+    sensors.iter().map(|s| s.id()).collect()
 }
 
 #[test]
 fn docks_driving_with_a_good_battery_and_creeping_with_a_low_one() {
-    for (battery, plan, mm_s) in [(90, 0, 300), (20, 1, 100)] {
+    for (battery, plan, mm_s) in [(90, Plan::DriveIn, 300), (20, Plan::CreepIn, 100)] {
         let yard = Yard::new().with_battery(battery);
         let (result, trace) = run(&yard);
         assert!(result.is_ok(), "{result:?}");
-        assert_eq!(trace.plans_selected(), [PlanId::new(plan).unwrap()]);
+        assert_eq!(trace.plans_selected(), [plan.id()]);
         // The approach takes its distance at its speed; aligning 0.5 s, connecting 0.3 s.
         let goal = trace.first(|e| matches!(e, TraceEvent::GoalReached { .. }));
         let approach_ms = ((DOCK_MM - NEAR_MM) as u64 * 1_000).div_ceil(mm_s);
@@ -64,7 +47,7 @@ fn a_box_stops_the_drive_within_one_ranger_period_and_the_robot_docks_after_it()
     let (result, trace) = run(&yard);
     assert!(result.is_ok(), "{result:?}");
     let violated = trace
-        .first(|e| matches!(e, TraceEvent::PreconditionViolated { action: a, .. } if *a == action("drive")))
+        .first(|e| matches!(e, TraceEvent::PreconditionViolated { action: a, .. } if *a == Action::Drive.id()))
         .unwrap()
         .as_millis();
     let restored = trace
@@ -114,7 +97,7 @@ fn a_cliff_stops_the_robot_at_the_edge_and_ends_the_mission_with_an_error() {
 fn each_state_runs_exactly_the_sensors_its_precondition_needs() {
     let (result, trace) = run(&Yard::new());
     assert!(result.is_ok());
-    let states: Vec<(ActionId, SensorSet)> = trace
+    let states: Vec<(psmpa_core::ActionId, SensorSet)> = trace
         .0
         .iter()
         .filter_map(|(_, e)| match *e {
@@ -127,9 +110,9 @@ fn each_state_runs_exactly_the_sensors_its_precondition_needs() {
     assert_eq!(
         states,
         [
-            (action("drive"), sensors(&["tof", "cliff"])),
-            (action("align"), sensors(&["camera"])),
-            (action("connect"), SensorSet::EMPTY),
+            (Action::Drive.id(), sensors(&[Sensor::Tof, Sensor::Cliff])),
+            (Action::Align.id(), sensors(&[Sensor::Camera])),
+            (Action::Connect.id(), SensorSet::EMPTY),
         ]
     );
     // After the initial model, a sensor is on only inside a state that needs it.

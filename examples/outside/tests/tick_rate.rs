@@ -2,25 +2,21 @@
 
 use embassy_time::Duration;
 use psmpa_core::{Config, TraceEvent};
-use psmpa_dock::{Dock, DockRuntime, Yard, mission};
-use psmpa_testkit::{Recorder, simulate_split};
+use psmpa_dock::{Dock, DockRuntime, Yard};
+use psmpa_testkit::{Recorder, simulate};
 
 #[test]
 fn the_kit_runs_a_mission_at_the_crates_own_tick_rate() {
     assert_eq!(embassy_time_driver::TICK_HZ, 32_768);
-    let loaded = mission().unwrap();
     let yard = Yard::new().with_box(2_000, 3_000);
-    let dock = Dock {
-        yard: &yard,
-        bindings: loaded.bindings.clone(),
-    };
+    let dock = Dock { yard: &yard };
     let rt = DockRuntime::new(
-        &loaded.mission,
+        &psmpa_dock::dock::MISSION,
         &dock,
         Recorder::default(),
         Config::default(),
     );
-    let done = simulate_split(rt.sensing(), rt.run(), Duration::from_secs(60)).unwrap();
+    let done = simulate(rt.run_with_sensing(), Duration::from_secs(60)).unwrap();
     assert!(done.output.is_ok(), "{:?}", done.output);
     let trace = rt.into_sink();
     let seen = trace
@@ -49,7 +45,7 @@ fn a_mission_compiled_in_is_the_loaded_one_at_this_tick_rate() {
         { dock::L },
         { dock::W },
         { dock::NF },
-    > = load(psmpa_dock::MISSION.as_bytes(), &AnyBehaviour).unwrap();
+    > = load(include_bytes!("../../dock/mission.json"), &AnyBehaviour).unwrap();
     assert_eq!(loaded.mission, dock::MISSION);
     let tof = dock::Sensor::Tof;
     let spec = dock::MISSION.domain.sensor(tof.id()).unwrap();

@@ -1,10 +1,11 @@
-//! The product-shaped firmware: what a robot's own firmware carries, with no simulated world
-//! and no scenario parser. The Fetch Tea mission is loaded from JSON at boot; a platform of
-//! stubs stands where the drivers go (each sensor read awaits its device, each action takes
-//! time); the sensing side runs on the interrupt executor above the deciding side, as on the
-//! simulator-carrying firmware. It runs the task once, logs the outcome, its longest poll and
-//! critical section and its stack, and leaves QEMU. `cargo xtask size` holds it to 8 KiB of RAM
-//! with the stack and to 32 KiB of flash.
+//! The product-shaped firmware: what a robot's own firmware carries, with no simulated world,
+//! no scenario parser and no JSON parser. The Fetch Tea mission is compiled in
+//! (`include_mission!`: checked when the firmware builds, a `static` built at compile time); a
+//! platform of stubs stands where the drivers go (each sensor read awaits its device, each
+//! action takes time), matching the mission's sensors and actions exhaustively; the sensing
+//! side runs on the interrupt executor above the deciding side, as on the simulator-carrying
+//! firmware. It runs the task once, logs the outcome, its longest poll and critical section
+//! and its stack, and leaves QEMU. `cargo xtask size` holds it to its budgets.
 //!
 //! It runs the mission's library plan (`Engine::run`, which links no search): re-planning with
 //! the planner (`Engine::run_planning`) would add the search's code and its 1 KiB search
@@ -28,97 +29,39 @@ mod product {
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_time::{Instant, Timer};
     use psmpa_core::{
-        ActionId, ActionIo, Actuator, Bindings, Capacity, Caps, Config, MissionOf, Outcome,
-        Platform, Reading, Registry, Runtime, Sensor, SensorFault, SensorId, Value,
+        ActionIo, Actuator, Config, Outcome, Platform, Reading, Sensor, SensorFault, Value,
     };
     use psmpa_firmware::board::{exit, fail, stack_high_water};
     use psmpa_firmware::executor;
 
-    /// `missions/fetch-tea.json`, whitespace removed at build time.
-    static FETCH_TEA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fetch-tea.json"));
+    psmpa_core::include_mission!(mod fetch_tea = "../missions/fetch-tea.json");
 
-    /// Capacities: 4 sensors, 8 actions, 4 plans of at most 6 actions, 4 keys per store.
-    type FetchTeaCaps = Caps<4, 8, 4, 6, 4>;
-    type FetchTea = MissionOf<'static, FetchTeaCaps>;
-    type Parts = <FetchTeaCaps as Capacity>::Bindings<Part, Motion>;
-    type ProductRuntime = Runtime<'static, Stubs, FetchTeaCaps>;
-
-    /// The sensors a mission may name, each a driver on a real board.
-    #[derive(Clone, Copy)]
-    enum Part {
-        /// Ultrasonic ranger: a read waits for the echo.
-        Sonar,
-        /// Foot bump switches.
-        Bumper,
-        /// Marker camera, one shot at the door.
-        Camera,
-        /// Limit switch the arm presses on the handle.
-        Handle,
-    }
-
-    /// The actuator behaviours a mission may name.
-    #[derive(Clone, Copy)]
-    enum Motion {
-        Walk,
-        OpenDoor,
-        Enter,
-    }
-
-    struct Board;
-
-    impl Registry for Board {
-        type Sensor = Part;
-        type Action = Motion;
-        fn sensor(&self, name: &str) -> Option<Part> {
-            Some(match name {
-                "sonar" => Part::Sonar,
-                "bumper" => Part::Bumper,
-                "camera" => Part::Camera,
-                "handle" => Part::Handle,
-                _ => return None,
-            })
-        }
-        fn action(&self, name: &str) -> Option<Motion> {
-            Some(match name {
-                "go to door" | "go to back door" => Motion::Walk,
-                "open door" | "open back door" => Motion::OpenDoor,
-                "enter kitchen" | "enter by back door" => Motion::Enter,
-                _ => return None,
-            })
-        }
-    }
+    type ProductRuntime = fetch_tea::Runtime<'static, Stubs>;
 
     /// The platform of stubs: a free path, a visible and unlocked door. Where a driver would
     /// await its device, a stub awaits a timer of the device's time.
-    struct Stubs {
-        mission: &'static FetchTea,
-        parts: &'static Parts,
-    }
+    struct Stubs;
 
     impl Sensor for Stubs {
-        async fn switch_on(&self, _sensor: SensorId) -> Result<(), SensorFault> {
+        type Id = fetch_tea::Sensor;
+
+        async fn switch_on(&self, _sensor: fetch_tea::Sensor) -> Result<(), SensorFault> {
             Ok(())
         }
 
-        async fn switch_off(&self, _sensor: SensorId) {}
+        async fn switch_off(&self, _sensor: fetch_tea::Sensor) {}
 
-        async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
-            let per = self
-                .mission
-                .domain
-                .sensor(sensor)
-                .ok_or(SensorFault::Device(0))?
-                .per;
+        async fn sample(&self, sensor: fetch_tea::Sensor) -> Result<Option<Reading>, SensorFault> {
+            use fetch_tea::Sensor::{Bumper, Camera, Handle, Sonar};
             // The device's time: an echo from 1 m (5.8 ms), a camera frame; the switches
-            // answer at once.
-            let (wait_us, value) = match self.parts.sensor(sensor) {
-                Some(Part::Sonar) => (5_800, Value::Mm(1_000)),
-                Some(Part::Camera) => (30_000, Value::Bool(true)),
-                Some(Part::Bumper | Part::Handle) => (0, Value::Bool(false)),
-                None => return Err(SensorFault::Device(0)),
+            // answer at once. Every fact the sensor perceives holds.
+            let (wait_us, value) = match sensor {
+                Sonar => (5_800, Value::Mm(1_000)),
+                Camera => (30_000, Value::Bool(true)),
+                Bumper | Handle => (0, Value::Bool(false)),
             };
             Timer::after_micros(wait_us).await;
-            Ok(Some(Reading::new(value, per)))
+            Ok(Some(Reading::of(value, true)))
         }
     }
 
@@ -127,12 +70,16 @@ mod product {
     }
 
     impl Actuator for Stubs {
-        async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
-            let steps = match self.parts.action(action) {
-                Some(Motion::Walk) => 20,
-                Some(Motion::OpenDoor) => 5,
-                Some(Motion::Enter) => 10,
-                None => return Outcome::Failure,
+        type Id = fetch_tea::Action;
+
+        async fn run(&self, action: fetch_tea::Action, io: &ActionIo<'_>) -> Outcome {
+            use fetch_tea::Action::{
+                EnterByBackDoor, EnterKitchen, GoToBackDoor, GoToDoor, OpenBackDoor, OpenDoor,
+            };
+            let steps = match action {
+                GoToDoor | GoToBackDoor => 20,
+                OpenDoor | OpenBackDoor => 5,
+                EnterKitchen | EnterByBackDoor => 10,
             };
             // 100 ms a step; a step does not start while the precondition is false.
             for _ in 0..steps {
@@ -177,11 +124,8 @@ mod product {
         // `#[entry]` makes these `&'static mut`, safely: main runs once. Uninitialised (`.bss`)
         // until written: no initial values in flash.
         static mut DECIDING: executor::Slot = MaybeUninit::uninit();
-        static mut MISSION: MaybeUninit<FetchTea> = MaybeUninit::uninit();
-        static mut PARTS: MaybeUninit<Parts> = MaybeUninit::uninit();
-        static mut STUBS: MaybeUninit<Stubs> = MaybeUninit::uninit();
         static mut RUNTIME: MaybeUninit<ProductRuntime> = MaybeUninit::uninit();
-        let runtime = init(MISSION, PARTS, STUBS, RUNTIME);
+        let runtime = init(RUNTIME);
         psmpa_firmware::time_driver::start();
         executor::run(DECIDING, |thread, interrupt| {
             match (deciding(runtime), sensing(runtime)) {
@@ -205,26 +149,18 @@ mod product {
         }
     }
 
-    /// Loads the mission and builds the runtime in their statics, out of line: the frames
-    /// that build them (the runtime is built on the stack, then moved) end before the
-    /// executors start, instead of staying under them for good.
+    /// Builds the runtime in its static, out of line: the frame that builds it (on the stack,
+    /// then moved) ends before the executors start, instead of staying under them for good.
     #[inline(never)]
-    fn init(
-        mission: &'static mut MaybeUninit<FetchTea>,
-        parts: &'static mut MaybeUninit<Parts>,
-        stubs: &'static mut MaybeUninit<Stubs>,
-        runtime: &'static mut MaybeUninit<ProductRuntime>,
-    ) -> &'static ProductRuntime {
+    fn init(runtime: &'static mut MaybeUninit<ProductRuntime>) -> &'static ProductRuntime {
         if cfg!(feature = "inject-fault") {
             overflow(u32::MAX);
         }
-        let mission = mission.write(FetchTea::empty());
-        let parts = parts.write(Bindings::new());
-        if psmpa_core::mission::load_into(FETCH_TEA, &Board, mission, parts).is_err() {
-            fail("the Fetch Tea mission does not load");
-        }
-        let (mission, parts) = (&*mission, &*parts);
-        let stubs = &*stubs.write(Stubs { mission, parts });
-        runtime.write(ProductRuntime::new(mission, stubs, (), Config::default()))
+        runtime.write(ProductRuntime::new(
+            &fetch_tea::MISSION,
+            &Stubs,
+            (),
+            Config::default(),
+        ))
     }
 }

@@ -29,7 +29,8 @@ use std::time::Instant as WallClock;
 use embassy_time::{Duration, Instant, Timer};
 use object::{Object, ObjectSymbol};
 use psmpa_core::TraceHash;
-use psmpa_drivers::robot::{Part, RECORD_WORDS, Settings};
+use psmpa_drivers::robot::fetch_tea::Sensor::{Bumper, Camera, Handle, Sonar};
+use psmpa_drivers::robot::{RECORD_WORDS, Settings};
 use psmpa_drivers::switch::DEBOUNCE;
 use psmpa_sim::robot::Arch;
 use psmpa_sim::scenario::{FaultKind, Scenario, to_mm};
@@ -206,20 +207,7 @@ impl Firmware {
             }
             flash[offset..offset + data.len()].copy_from_slice(data);
         }
-        let loaded = psmpa_drivers::robot::mission().map_err(|e| e.to_string())?;
-        let id = |part: Part| {
-            loaded
-                .bindings
-                .sensor_id(&part)
-                .map(|id| id.index())
-                .ok_or_else(|| format!("the mission has no {part:?}"))
-        };
-        let ids = [
-            id(Part::Sonar)?,
-            id(Part::Bumper)?,
-            id(Part::Camera)?,
-            id(Part::Handle)?,
-        ];
+        let ids = [Sonar, Bumper, Camera, Handle].map(|s| s.id().index());
         Ok(Self {
             elf,
             flash,
