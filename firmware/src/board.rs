@@ -114,6 +114,41 @@ pub fn stack_high_water() -> (u32, u32) {
     )
 }
 
+/// Makes a stack overflow fault instead of running on: flip-link puts the stack at the bottom
+/// of RAM, but QEMU's mps2 machines map the addresses below it to a reserved region that
+/// ignores writes and reads as zero, so an overflow there ran on silently. The M33 checks
+/// MSPLIM; the M4F's MPU forbids the 32 bytes below RAM (the rest of the map stays as it is).
+/// A push into the guard faults, and stacking the fault's frame there locks the core up.
+pub fn guard_stack() {
+    unsafe extern "C" {
+        static mut _stack_end: u32;
+    }
+    let bottom = (&raw const _stack_end) as u32;
+    #[cfg(board_an505)]
+    // SAFETY: the limit is the stack region's own bottom; the stack is above it.
+    unsafe {
+        cortex_m::register::msplim::write(bottom)
+    };
+    #[cfg(not(board_an505))]
+    {
+        const SIZE_32_B: u32 = 4 << 1; // RASR.SIZE: 2^(4 + 1) bytes
+        const XN: u32 = 1 << 28; // never execute; AP = 0: no access
+        const ENABLE: u32 = 1;
+        const PRIVDEFENA: u32 = 1 << 2; // the default map everywhere else
+        // SAFETY: the MPU is set once, at boot, before any task runs; region 0 covers only
+        // addresses no code or data uses.
+        unsafe {
+            let mpu = &*cortex_m::peripheral::MPU::PTR;
+            mpu.rnr.write(0);
+            mpu.rbar.write(bottom.wrapping_sub(32) & !31);
+            mpu.rasr.write(XN | SIZE_32_B | ENABLE);
+            mpu.ctrl.write(PRIVDEFENA | ENABLE);
+        }
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+    }
+}
+
 /// Set by the first panic: a panic while logging one exits at once, so the handler nests at
 /// most once (the stack bound of `cargo xtask stack` relies on it).
 static PANICKING: AtomicBool = AtomicBool::new(false);

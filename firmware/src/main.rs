@@ -71,6 +71,7 @@ mod firmware {
         static mut ROBOT: MaybeUninit<Robot<'static>> = MaybeUninit::uninit();
         static mut SCENARIO: MaybeUninit<Scenario> = MaybeUninit::uninit();
         static mut SPACE: PlannerSpace = PlannerSpace::new();
+        board::guard_stack();
         let run = this_run();
         let runs = (SCENARIOS.len() * Arch::ALL.len()) as u32;
         let (Some((file, json)), Some(&arch)) = (

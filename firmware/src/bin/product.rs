@@ -31,7 +31,7 @@ mod product {
     use psmpa_core::{
         ActionIo, Actuator, Config, Outcome, Platform, Reading, Sensor, SensorFault, Value,
     };
-    use psmpa_firmware::board::{exit, fail, stack_high_water};
+    use psmpa_firmware::board::{exit, fail, guard_stack, stack_high_water};
     use psmpa_firmware::executor;
 
     psmpa_core::include_mission!(mod fetch_tea = "../missions/fetch-tea.json");
@@ -125,6 +125,7 @@ mod product {
         // until written: no initial values in flash.
         static mut DECIDING: executor::Slot = MaybeUninit::uninit();
         static mut RUNTIME: MaybeUninit<ProductRuntime> = MaybeUninit::uninit();
+        guard_stack();
         let runtime = init(RUNTIME);
         psmpa_firmware::time_driver::start();
         executor::run(DECIDING, |thread, interrupt| {
