@@ -108,6 +108,12 @@ enum Command {
         /// Most nodes to generate, the start included (at most 917,503).
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(plan::BUDGET)))]
         budget: Option<u32>,
+        /// Most seconds of search (1 to 86,400): when it runs out the search ends as when
+        /// the node budget does (status 1, `budget`). A node costs at most one heuristic
+        /// estimate past it.
+        #[arg(long, value_name = "SECONDS", default_value_t = plan::TIME_LIMIT_S,
+              value_parser = clap::value_parser!(u32).range(1..=86_400))]
+        time_limit: u32,
         /// Print exactly one JSON object.
         #[arg(long)]
         json: bool,
@@ -273,14 +279,24 @@ fn run(cli: Cli) -> Result<(), Stop> {
             mission,
             search,
             budget,
+            time_limit,
             json,
         } => {
             let bytes = files::read_input(&mission, "mission").map_err(Stop::Bad)?;
-            let outcome = plan::plan(&mission, &bytes, search, budget).map_err(Stop::Bad)?;
+            let limits = plan::Limits {
+                budget,
+                time: std::time::Duration::from_secs(u64::from(time_limit)),
+            };
+            let outcome = plan::plan(&mission, &bytes, search, limits).map_err(Stop::Bad)?;
             let text = if json {
                 serde_json::to_string(&outcome).map_err(Stop::internal)? + "\n"
             } else {
-                outcome.text()
+                // Action names as `check` shows them: a control or bidi character escaped.
+                outcome
+                    .text()
+                    .lines()
+                    .map(|l| json::printable(l) + "\n")
+                    .collect()
             };
             let printed = files::print(text.as_bytes());
             // No plan is status 1 even when the reader has gone.

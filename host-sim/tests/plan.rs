@@ -208,3 +208,60 @@ fn no_plan_stays_status_1_when_the_reader_has_gone() {
     drop(child.stdout.take());
     assert_eq!(child.wait().unwrap().code(), Some(1));
 }
+
+/// `--time-limit` ends a search whose nodes are costly (4,000 actions in every heuristic
+/// estimate, a 2^40-step counter) as a node budget does, and says it was the time; at the
+/// default node budget the search would take about a minute on this machine.
+#[test]
+fn a_time_limit_ends_a_search_as_a_budget() {
+    use psmpa_sim::planning::Action;
+    let mut problem = counter(40);
+    problem.name = "counter-slow".into();
+    problem.facts.push("never".into());
+    problem.actions.extend((0..4000).map(|i| Action {
+        name: format!("idle{i}"),
+        pre: vec!["never".into()],
+        add: vec!["b0".into()],
+        del: vec![],
+    }));
+    let (status, v) = plan(&problem, "astar-hmax", &["--time-limit", "1"]);
+    assert_eq!(status, Some(1), "{v}");
+    assert_eq!(v["error"], "budget");
+    assert_eq!(v["ran_out"], "time");
+    assert!(v["expanded"].as_u64().unwrap() > 0);
+    // The node budget says so too.
+    let (_, v) = plan(&problem, "astar-hmax", &["--budget", "50"]);
+    assert_eq!(
+        (&v["error"], &v["ran_out"]),
+        (&"budget".into(), &"nodes".into())
+    );
+    // Out of range: named.
+    let out = bin()
+        .args(["plan", "--time-limit", "0", "x.json"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--time-limit"));
+}
+
+/// `plan`'s text escapes what `check` escapes: a name's bidi override, CSI and DEL would
+/// otherwise act on the terminal.
+#[test]
+fn plan_text_escapes_hidden_characters() {
+    use psmpa_sim::planning::Action;
+    let mut problem = counter(1);
+    problem.name = "counter-names".into();
+    problem.actions.push(Action {
+        name: "evil\u{202e}\u{9b}\u{7f}".into(),
+        pre: vec!["nb0".into()],
+        add: vec!["b0".into()],
+        del: vec!["nb0".into()],
+    });
+    problem.actions.remove(0);
+    let path = file("counter-names.json", &problem.mission_json());
+    let out = bin().arg("plan").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains(r"evil\u202e\u009b\u007f"), "{text}");
+    assert!(!text.contains('\u{202e}') && !text.contains('\u{9b}') && !text.contains('\u{7f}'));
+}

@@ -20,6 +20,9 @@ pub const ACTIONS: usize = 4096;
 pub const NODES: usize = 1 << 20;
 /// The largest node budget (`--budget`): 917,503.
 pub const BUDGET: u32 = Planner::<NODES, WORDS>::capacity();
+/// The default of `--time-limit`, seconds: with a mission's load and the start's estimate
+/// the command ends well within a minute.
+pub const TIME_LIMIT_S: u32 = 30;
 /// The longest plan reported: as long as a plan can be (a node's depth is 16 bits).
 const LENGTH: usize = 1 << 16;
 
@@ -77,6 +80,9 @@ pub struct Outcome {
     /// `unsolvable` or `budget` (without a plan).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<&'static str>,
+    /// Which budget ran out, `nodes` or `time` (with `budget`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ran_out: Option<&'static str>,
     /// Nodes expanded.
     pub expanded: u32,
     /// Nodes generated (with a plan).
@@ -108,8 +114,9 @@ impl Outcome {
             (None, error) => format!(
                 "no plan ({}): {} after {} nodes expanded\n",
                 self.search,
-                match error {
-                    Some("budget") => "the node budget ran out",
+                match (error, self.ran_out) {
+                    (Some("budget"), Some("time")) => "the time limit ran out",
+                    (Some("budget"), _) => "the node budget ran out",
                     _ => "the goal cannot be reached",
                 },
                 self.expanded
@@ -118,31 +125,30 @@ impl Outcome {
     }
 }
 
-/// Plans on the mission in `bytes` (from `file`) with `search` and at most `budget` nodes.
-/// `Err` is bad input, as one line.
-pub fn plan(
-    file: &Path,
-    bytes: &[u8],
-    search: Method,
-    budget: Option<u32>,
-) -> Result<Outcome, String> {
+/// What bounds a search: nodes and wall time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Most nodes to generate (`None`: [`BUDGET`]).
+    pub budget: Option<u32>,
+    /// Most wall time for the search.
+    pub time: std::time::Duration,
+}
+
+/// Plans on the mission in `bytes` (from `file`) with `search` within `limits`. `Err` is bad
+/// input, as one line.
+pub fn plan(file: &Path, bytes: &[u8], search: Method, limits: Limits) -> Result<Outcome, String> {
     // Tens of MB of capacity: built on a thread whose stack holds them (touched as used).
     std::thread::scope(|scope| {
         std::thread::Builder::new()
             .stack_size(256 << 20)
-            .spawn_scoped(scope, || plan_here(file, bytes, search, budget))
+            .spawn_scoped(scope, || plan_here(file, bytes, search, limits))
             .map_err(|e| format!("cannot start the planner: {e}"))?
             .join()
             .map_err(|_| "the planner stopped unexpectedly".to_owned())?
     })
 }
 
-fn plan_here(
-    file: &Path,
-    bytes: &[u8],
-    search: Method,
-    budget: Option<u32>,
-) -> Result<Outcome, String> {
+fn plan_here(file: &Path, bytes: &[u8], search: Method, limits: Limits) -> Result<Outcome, String> {
     let decoded = crate::json::strict_file(file, bytes)?;
     let mut loaded: Box<Wide<'_>> = Box::new(Loaded::empty());
     let loaded = &mut *loaded;
@@ -151,6 +157,7 @@ fn plan_here(
         length: None,
         plan: None,
         error: Some("unsolvable"),
+        ran_out: None,
         expanded,
         generated: None,
         time_ms: None,
@@ -168,15 +175,21 @@ fn plan_here(
     }
     let m = &loaded.mission;
     let mut planner = Planner::<NODES, WORDS>::new(search.strategy());
-    if let Some(b) = budget {
+    if let Some(b) = limits.budget {
         planner.budget = b;
     }
     let mut space: Search<NODES, WORDS> = Search::new();
     let actions = m.domain.actions();
     let started = std::time::Instant::now();
+    let mut timed_out = false;
+    // Asked before every node: a clock read is tens of nanoseconds, a node at least as much.
+    let mut out_of_time = || {
+        timed_out = timed_out || started.elapsed() >= limits.time;
+        timed_out
+    };
     space.start(&planner, actions, m.task.init, m.task.goal);
     let result: Result<Found<LENGTH>, PlanningError> = loop {
-        if let Some(r) = space.step(actions, u32::MAX) {
+        if let Some(r) = space.step_until(actions, u32::MAX, &mut out_of_time) {
             break r;
         }
     };
@@ -194,6 +207,7 @@ fn plan_here(
                     .collect(),
             ),
             error: None,
+            ran_out: None,
             expanded: found.expanded,
             generated: Some(found.generated),
             time_ms: Some(time_ms),
@@ -201,6 +215,7 @@ fn plan_here(
         Err(PlanningError::Unsolvable { expanded }) => Ok(unsolvable(expanded)),
         Err(PlanningError::Budget { expanded, .. }) => Ok(Outcome {
             error: Some("budget"),
+            ran_out: Some(if timed_out { "time" } else { "nodes" }),
             ..unsolvable(expanded)
         }),
         Err(PlanningError::TooLong { limit }) => Err(format!(
