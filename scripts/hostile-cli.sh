@@ -83,5 +83,15 @@ t 40.1a "$B plan slow.json --search astar-hmax --time-limit 2"
     printf '],"task":{"event":"go","init":[],"goal":["f1"]}}'
 } >high.json
 t 40.1b "$B plan high.json"
+# Issue 40: outputs. The report after a trace on standard output's own file; a regular file
+# named through /proc replaced, not appended to; a process substitution as a pipe; a private
+# file kept private; a planner thread the machine will not start (status 3).
+t 40.3 "$B run $S --arch psmpa --json --trace /dev/stdout >so.txt; grep -c '^time_s' so.txt >&2; tail -c 2 so.txt | grep -q '}'"
+echo old >p.csv
+t 40.2 "$B run $S --arch psmpa --trace /proc/self/cwd/p.csv >/dev/null; grep -c -e '^time_s' -e '^old' p.csv >&2"
+t 40.8 "$B run $S --arch psmpa --trace >(wc -c >/dev/null) >/dev/null"
+echo x >priv.csv && chmod 600 priv.csv
+t 40.8 "$B run $S --arch psmpa --trace priv.csv >/dev/null; stat -c %a priv.csv >&2"
+t 40.4 "ulimit -v 100000; $B plan $M"
 t clap "$B run --arch"
 echo "files left: $(ls -A | grep -v -e '^tm$' -e '^out$' -e '^err$' | tr '\n' ' ')"

@@ -287,7 +287,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 budget,
                 time: std::time::Duration::from_secs(u64::from(time_limit)),
             };
-            let outcome = plan::plan(&mission, &bytes, search, limits).map_err(Stop::Bad)?;
+            let outcome = plan::plan(&mission, &bytes, search, limits)?;
             let text = if json {
                 serde_json::to_string(&outcome).map_err(Stop::internal)? + "\n"
             } else {
@@ -313,6 +313,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
             shifts,
             plots,
         } => {
+            psmpa_sim::cli::workers()?;
             if let Some(dir) = &plots {
                 if dir.exists() && !dir.is_dir() {
                     return Err(Stop::bad(format!(
@@ -368,6 +369,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 }
                 None => None,
             };
+            psmpa_sim::cli::workers()?;
             let stats = sweep::sweep(seed, runs, &arches, !json).map_err(Stop::internal)?;
             let text = if json {
                 serde_json::to_string_pretty(&stats).map_err(Stop::internal)? + "\n"
@@ -384,6 +386,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
         } => {
             // Opened before the study: a bad path fails before anything runs.
             let plot = create(plot.as_deref())?;
+            psmpa_sim::cli::workers()?;
             let study = sensitivity::study(seed, runs, true).map_err(Stop::internal)?;
             let plot = match plot {
                 Some(mut out) => {
@@ -469,7 +472,7 @@ fn usage_error(e: &clap::Error) -> ExitCode {
             return match files::print(text.as_bytes()) {
                 Ok(()) | Err(Stop::ClosedPipe) => ExitCode::SUCCESS,
                 Err(Stop::NoPlan) => ExitCode::from(1),
-                Err(Stop::Bad(m) | Stop::Internal(m)) => {
+                Err(Stop::Bad(m) | Stop::Internal(m) | Stop::Resource(m)) => {
                     say(&m);
                     ExitCode::from(2)
                 }
@@ -516,6 +519,10 @@ fn main() -> ExitCode {
         Err(Stop::Internal(message)) => {
             say(&message);
             ExitCode::from(1)
+        }
+        Err(Stop::Resource(message)) => {
+            say(&message);
+            ExitCode::from(3)
         }
     }
 }

@@ -573,3 +573,127 @@ fn an_output_through_a_link_keeps_the_link() {
     }
     assert_eq!(names_in(&dir), ["a", "b", "made", "t.csv"]);
 }
+
+/// `--trace /dev/stdout > log` (standard output truncated, not appended) and `--trace log >
+/// log`: the output goes through standard output itself, so the report follows it whole. The
+/// report used to overwrite the trace's first bytes, or to be lost.
+#[test]
+fn an_output_that_is_standard_output_s_file_keeps_both_in_order() {
+    let dir = folder("stdout-trunc");
+    for trace in ["/dev/stdout", "same.csv"] {
+        let log = dir.join("same.csv");
+        let out = psmpa(sonar8())
+            .current_dir(&dir)
+            .args(["--json", "--trace", trace])
+            .stdout(std::fs::File::create(&log).unwrap())
+            .output()
+            .unwrap();
+        assert_success(&out);
+        let text = std::fs::read_to_string(&log).unwrap();
+        assert!(
+            text.starts_with("time_s,sonar_m,"),
+            "{trace}: {}",
+            &text[..40]
+        );
+        let report = text.find("\n{").expect("the report after the trace");
+        let v: serde_json::Value = serde_json::from_str(&text[report..]).unwrap();
+        assert!(v["trace_hash"].is_string(), "{trace}: the whole report");
+        assert_eq!(text.matches("time_s,").count(), 1, "{trace}: one trace");
+    }
+}
+
+/// A regular file named through `/proc` is replaced whole, as any other path to it: it was
+/// appended to (two headers), even by a run that then failed.
+#[test]
+fn a_regular_file_named_through_proc_is_replaced_not_appended() {
+    let dir = folder("proc-path");
+    std::fs::write(dir.join("t.csv"), "OLD\n").unwrap();
+    let out = psmpa(sonar8())
+        .current_dir(&dir)
+        .args(["--trace", "/proc/self/cwd/t.csv"])
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let text = std::fs::read_to_string(dir.join("t.csv")).unwrap();
+    assert!(text.starts_with("time_s,"), "{}", &text[..20]);
+    assert_eq!(text.matches("time_s,").count(), 1);
+    // A failing run leaves it as it was.
+    std::fs::write(dir.join("t.csv"), "OLD\n").unwrap();
+    let out = psmpa(sonar8())
+        .current_dir(&dir)
+        .args(["--trace", "/proc/self/cwd/t.csv"])
+        .stdout(
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open("/dev/full")
+                .unwrap(),
+        )
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(std::fs::read_to_string(dir.join("t.csv")).unwrap(), "OLD\n");
+}
+
+/// A process substitution (`--trace >(wc -c)`, a pipe named `/dev/fd/63`) is written as a pipe;
+/// it was refused.
+#[test]
+fn a_process_substitution_takes_an_output() {
+    let dir = folder("procsub");
+    let out = Command::new("bash")
+        .current_dir(&dir)
+        .arg("-c")
+        .arg(format!(
+            "'{}' run '{}' --arch psmpa --trace >(wc -l > lines) >/dev/null; s=$?; wait; exit $s",
+            env!("CARGO_BIN_EXE_psmpa-sim"),
+            sonar8().display()
+        ))
+        .output()
+        .unwrap();
+    assert_success(&out);
+    // The substitution may finish after bash does: wait for its count.
+    let lines = (0..100)
+        .find_map(|_| {
+            let text = std::fs::read_to_string(dir.join("lines")).unwrap_or_default();
+            if text.ends_with('\n') {
+                return Some(text);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+            None
+        })
+        .unwrap();
+    assert!(lines.trim().parse::<u64>().unwrap() > 100, "{lines}");
+}
+
+/// A file replaced keeps its mode, as `>` keeps it: a 0600 trace stayed private; it came out
+/// 0644.
+#[cfg(unix)]
+#[test]
+fn a_replaced_file_keeps_its_mode() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = folder("mode");
+    let path = dir.join("t.csv");
+    std::fs::write(&path, "x").unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    assert_success(&psmpa(sonar8()).arg("--trace").arg(&path).output().unwrap());
+    let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o600);
+}
+
+/// A planner thread the machine will not start (too little address space) is status 3, one
+/// line: a resource, not bad input (it was status 2, or an abort).
+#[test]
+fn a_planner_the_machine_cannot_start_is_status_3() {
+    let out = Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 100000; exec '{}' plan '{}'",
+            env!("CARGO_BIN_EXE_psmpa-sim"),
+            repo("missions/fetch-tea.json").display()
+        ))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("cannot start the planner"), "{stderr}");
+}

@@ -62,6 +62,9 @@ pub enum Stop {
     ClosedPipe,
     /// `plan` found no plan (and said so): exit 1.
     NoPlan,
+    /// The machine could not give what the command needs (a thread, its stack): exit 3 with
+    /// this line. Not the input's fault: the same command may run where more is allowed.
+    Resource(String),
 }
 
 impl Stop {
@@ -181,21 +184,47 @@ impl Output {
     /// never be written (no such folder, a directory, no permission).
     pub fn create(path: &Path) -> Result<Self, String> {
         let fail = |e: io::Error| format!("{}: cannot write: {e}", path.display());
-        // `/dev/stdout`, `/dev/fd/3`, `/proc/self/fd/1` name an open stream, whatever file it
-        // was redirected to: written in place, appending (as `>>` asked, and so as not to
-        // overwrite what `>` already wrote), never replaced by a rename.
-        let stream = path.starts_with("/dev") || path.starts_with("/proc");
-        // Write through a symbolic link to the file it names, as `>` does, even one that
-        // names a file not made yet: renaming over the link would lose it.
-        let target = follow(path).map_err(fail)?;
+        // A character device, FIFO or socket (`/dev/null`, a pipe, `>(gzip)` as `/dev/fd/63`,
+        // `/dev/stdout` on a terminal) is written in place, appending, as there is nothing to
+        // rename; the kernel follows `/dev/fd` and `/proc` links to it. Any regular file,
+        // whatever path names it, is replaced whole.
+        let target = match std::fs::metadata(path) {
+            Ok(meta) if meta.is_dir() => {
+                return Err(format!("{}: is a directory, not a file", path.display()));
+            }
+            // The file standard output writes to (`--trace /dev/stdout > log`, `--trace log
+            // > log`): written through standard output itself, whose offset the report then
+            // follows, so that both arrive whole and in order.
+            Ok(meta) if stdout_file().is_some_and(|out| same_file(&out, &meta)) => {
+                use std::os::fd::AsFd as _;
+                let fd = io::stdout().as_fd().try_clone_to_owned().map_err(fail)?;
+                return Ok(Self {
+                    path: path.to_path_buf(),
+                    given: path.to_path_buf(),
+                    sink: Sink::Direct(BufWriter::new(File::from(fd))),
+                    error: None,
+                    _pending: None,
+                });
+            }
+            Ok(meta) if !meta.is_file() => {
+                let file = OpenOptions::new().append(true).open(path).map_err(fail)?;
+                return Ok(Self {
+                    path: path.to_path_buf(),
+                    given: path.to_path_buf(),
+                    sink: Sink::Direct(BufWriter::new(file)),
+                    error: None,
+                    _pending: None,
+                });
+            }
+            // Through a symbolic link to the file it names, as `>` does, even one that names a
+            // file not made yet: renaming over the link would lose it.
+            _ => follow(path).map_err(fail)?,
+        };
         let sink = match std::fs::metadata(&target) {
             Ok(meta) if meta.is_dir() => {
                 return Err(format!("{}: is a directory, not a file", path.display()));
             }
-            Ok(meta) if stream || !meta.is_file() => Sink::Direct(BufWriter::new(
-                OpenOptions::new().append(true).open(path).map_err(fail)?,
-            )),
-            _ => {
+            existing => {
                 let dir = match target.parent() {
                     Some(d) if !d.as_os_str().is_empty() => d,
                     _ => Path::new("."),
@@ -208,9 +237,11 @@ impl Output {
                 builder.prefix(&prefix).suffix(".part");
                 #[cfg(unix)]
                 {
-                    // As any new file: 0666 less the umask (a temporary file is 0600).
+                    // A file replaced keeps its mode, as `>` keeps it; a new one is 0666 less
+                    // the umask, as any new file (a temporary file is 0600).
                     use std::os::unix::fs::PermissionsExt as _;
-                    builder.permissions(std::fs::Permissions::from_mode(0o666));
+                    let mode = existing.as_ref().map_or(0o666, |m| m.permissions().mode());
+                    builder.permissions(std::fs::Permissions::from_mode(mode & 0o7777));
                 }
                 let file = builder.tempfile_in(dir).map_err(|e| {
                     // tempfile ends its message with the temporary path (`... at path
@@ -219,6 +250,14 @@ impl Output {
                     let cause = message.split(" at path ").next().unwrap_or(&message);
                     format!("{}: cannot write: {cause}", path.display())
                 })?;
+                #[cfg(unix)]
+                if let Ok(meta) = &existing {
+                    // And its owner and group where the user may keep them (the owner only
+                    // as root; a group the user belongs to): else the user's, as for `cp`.
+                    use std::os::unix::fs::MetadataExt as _;
+                    let _ = std::os::unix::fs::fchown(file.as_file(), Some(meta.uid()), None);
+                    let _ = std::os::unix::fs::fchown(file.as_file(), None, Some(meta.gid()));
+                }
                 Sink::Staged(BufWriter::new(file))
             }
         };
@@ -413,4 +452,26 @@ pub fn distinct(named: &[(&str, &Path)]) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// Standard output's file when it is a regular file (`> out.txt`), else `None` (a terminal, a
+/// pipe, a device, which several writers may share in order).
+fn stdout_file() -> Option<Metadata> {
+    use std::os::fd::AsFd as _;
+    let fd = io::stdout().as_fd().try_clone_to_owned().ok()?;
+    File::from(fd).metadata().ok().filter(Metadata::is_file)
+}
+
+/// Whether two files' metadata are one file.
+fn same_file(a: &Metadata, b: &Metadata) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt as _;
+        a.dev() == b.dev() && a.ino() == b.ino()
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (a, b);
+        false
+    }
 }

@@ -9,6 +9,7 @@ use psmpa_core::planner::{Found, Heuristic, Planner, PlanningError, Search, Stra
 use serde::Serialize;
 
 use crate::cli::check::error_line;
+use crate::cli::files::Stop;
 
 /// Fact-set words of the command's missions.
 const WORDS: usize = 4;
@@ -134,17 +135,29 @@ pub struct Limits {
     pub time: std::time::Duration,
 }
 
+/// The planner thread's stack: the search space, once more for a debug build's moves of it,
+/// and 16 MiB for the rest (the plan found, the frames). About 130 MiB of address space,
+/// touched only as used.
+pub const STACK: usize = 2 * std::mem::size_of::<Search<NODES, WORDS>>() + (16 << 20);
+
 /// Plans on the mission in `bytes` (from `file`) with `search` within `limits`. `Err` is bad
-/// input, as one line.
-pub fn plan(file: &Path, bytes: &[u8], search: Method, limits: Limits) -> Result<Outcome, String> {
+/// input ([`Stop::Bad`]) or a thread the machine would not start ([`Stop::Resource`]), as one
+/// line.
+pub fn plan(file: &Path, bytes: &[u8], search: Method, limits: Limits) -> Result<Outcome, Stop> {
     // Tens of MB of capacity: built on a thread whose stack holds them (touched as used).
     std::thread::scope(|scope| {
         std::thread::Builder::new()
-            .stack_size(256 << 20)
+            .stack_size(STACK)
             .spawn_scoped(scope, || plan_here(file, bytes, search, limits))
-            .map_err(|e| format!("cannot start the planner: {e}"))?
+            .map_err(|e| {
+                Stop::Resource(format!(
+                    "cannot start the planner (a thread with {} MiB of stack): {e}",
+                    STACK >> 20
+                ))
+            })?
             .join()
-            .map_err(|_| "the planner stopped unexpectedly".to_owned())?
+            .map_err(|_| Stop::internal("the planner stopped unexpectedly"))?
+            .map_err(Stop::Bad)
     })
 }
 
