@@ -8,6 +8,8 @@ use std::cell::RefCell;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::{Parser, Subcommand, ValueEnum};
 use psmpa_sim::cli::files::{self, Output, Stop};
@@ -16,7 +18,10 @@ use psmpa_sim::cli::{check, outputs, plan, report, sensitivity, sweep, table1};
 use psmpa_sim::robot::Arch;
 use psmpa_sim::run::Summary;
 use psmpa_sim::scenario::Scenario;
-use psmpa_sim::sim::{Recorded, TraceRecord, WorldRecord, run_logged, run_recorded, run_summary};
+use psmpa_sim::sim::{
+    Recorded, RunError, TraceRecord, WorldRecord, run_logged, run_logged_until, run_recorded,
+    run_summary,
+};
 use psmpa_sim::{json, load};
 
 #[derive(Parser)]
@@ -217,9 +222,16 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 outputs::plot_fits(&sc).map_err(Stop::Bad)?;
             }
             // Outputs are opened before the run: a bad path fails before anything runs.
-            let (trace, timeline) = (create(trace.as_deref())?, create(timeline.as_deref())?);
+            let (mut trace, mut timeline) =
+                (create(trace.as_deref())?, create(timeline.as_deref())?);
             let plot = create(plot.as_deref())?;
-            let mcap = create(mcap.as_deref())?;
+            let mut mcap = create(mcap.as_deref())?;
+            // A streamed output that fails stops the run at once (`--trace /dev/full`).
+            let failed = Arc::new(AtomicBool::new(false));
+            for out in [&mut trace, &mut timeline, &mut mcap].into_iter().flatten() {
+                out.alarm(Arc::clone(&failed));
+            }
+            warn_of_size(&sc, trace.is_some(), mcap.is_some());
             let (summary, done) =
                 if trace.is_none() && timeline.is_none() && plot.is_none() && mcap.is_none() {
                     // Nothing to write: keep no event log.
@@ -230,9 +242,19 @@ fn run(cli: Cli) -> Result<(), Stop> {
                         streams = streams.with_mcap(out, &sc).map_err(Stop::Bad)?;
                     }
                     let streams = RefCell::new(streams);
-                    let (summary, _, _) =
-                        run_logged(&sc, arch, WorldStream(&streams), TraceStream(&streams))
-                            .map_err(Stop::internal)?;
+                    let (summary, _, _) = match run_logged_until(
+                        &sc,
+                        arch,
+                        WorldStream(&streams),
+                        TraceStream(&streams),
+                        || failed.load(Ordering::Relaxed),
+                    ) {
+                        Ok(done) => done,
+                        Err(RunError::Stopped) => {
+                            return Err(Stop::Bad(first_write_error(streams.into_inner())));
+                        }
+                        Err(e) => return Err(Stop::internal(e)),
+                    };
                     let (done, world) = streams
                         .into_inner()
                         .finish(summary.time_cost_ms)
@@ -407,6 +429,43 @@ fn run(cli: Cli) -> Result<(), Stop> {
         }
     }
     Ok(())
+}
+
+/// The first write error of a run's streamed outputs, as one line.
+fn first_write_error(streams: Streams) -> String {
+    match streams.finish(0) {
+        Err(e) => e,
+        Ok((outputs, _)) => outputs
+            .into_iter()
+            .find_map(|mut o| o.finish().err())
+            .unwrap_or_else(|| "an output could not be written".to_owned()),
+    }
+}
+
+/// Output bytes a sample takes, at most about (measured on a 1 ms sonar and bumper: 122 B of
+/// CSV and 191 B of MCAP a sample, with the world's events); the timeline grows with events,
+/// not samples.
+const CSV_PER_SAMPLE: u64 = 128;
+const MCAP_PER_SAMPLE: u64 = 192;
+/// Above this estimate `run` warns before it starts.
+const WARN_BYTES: u64 = 1 << 30;
+
+/// One line on stderr when the outputs asked for may exceed [`WARN_BYTES`] (a day at 1 ms
+/// samples is over 20 GB of CSV); the run goes on.
+fn warn_of_size(sc: &Scenario, csv: bool, mcap: bool) {
+    let samples = [sc.sonar.period_ms, sc.bumper_period_ms]
+        .iter()
+        .map(|p| sc.max_ms / (*p).max(1))
+        .sum::<u64>();
+    let per = u64::from(csv) * CSV_PER_SAMPLE + u64::from(mcap) * MCAP_PER_SAMPLE;
+    let bytes = samples.saturating_mul(per);
+    if bytes > WARN_BYTES {
+        say(&format!(
+            "warning: the outputs may take up to about {:.1} GB ({samples} samples of {} s)",
+            bytes as f64 / 1e9,
+            sc.max_ms / 1000
+        ));
+    }
 }
 
 /// Streams a run of `sc` under `arch` into the MCAP log `out` alone; gives it back to commit.

@@ -38,6 +38,8 @@ pub enum RunError {
     Mission(MissionError),
     /// The simulation deadlocked or ran past its limit.
     Sim(SimError),
+    /// The caller's `stop` said so ([`run_logged_until`]): an output failed.
+    Stopped,
 }
 
 impl std::fmt::Display for RunError {
@@ -45,6 +47,7 @@ impl std::fmt::Display for RunError {
         match self {
             Self::Mission(e) => write!(f, "the mission could not be built: {e:?}"),
             Self::Sim(e) => write!(f, "simulation failed: {e}"),
+            Self::Stopped => write!(f, "the run was stopped"),
         }
     }
 }
@@ -97,13 +100,36 @@ pub fn run_logged<L: WorldLog, T: TraceSink>(
     log: L,
     sink: T,
 ) -> Result<(Summary, L, T), RunError> {
+    run_logged_until(scenario, arch, log, sink, || false)
+}
+
+/// [`run_logged`], asking `stop` at every step of the run (every wake of its sensing or
+/// deciding side): when it answers `true` the run ends at once with [`RunError::Stopped`]. A
+/// command whose output failed (`--trace /dev/full`) stops there instead of simulating on.
+pub fn run_logged_until<L: WorldLog, T: TraceSink>(
+    scenario: &Scenario,
+    arch: Arch,
+    log: L,
+    sink: T,
+    stop: impl Fn() -> bool,
+) -> Result<(Summary, L, T), RunError> {
     let limit = Duration::from_millis(scenario.max_ms) + SLACK;
     let robot = fetch_tea(scenario).map_err(RunError::Mission)?;
     let mut space = robot::PlannerSpace::new();
     // SAFETY: `simulate` pins the run on its own stack and drops it before it returns.
     let run = unsafe { run_robot(&Prioritized, &robot, scenario, arch, &mut space, log, sink) };
-    let done = simulate(run, limit).map_err(RunError::Sim)?;
-    Ok(done.output)
+    let watched = async move {
+        let mut run = core::pin::pin!(run);
+        core::future::poll_fn(|cx| {
+            if stop() {
+                return core::task::Poll::Ready(None);
+            }
+            run.as_mut().poll(cx).map(Some)
+        })
+        .await
+    };
+    let done = simulate(watched, limit).map_err(RunError::Sim)?;
+    done.output.ok_or(RunError::Stopped)
 }
 
 thread_local! {

@@ -697,3 +697,35 @@ fn a_planner_the_machine_cannot_start_is_status_3() {
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(stderr.contains("cannot start the planner"), "{stderr}");
 }
+
+/// A day of 1 ms samples whose trace goes to a full device: a warning of the size asked for,
+/// then the write error, at once (under a 2 s CPU limit; the whole day took about 12 s).
+#[test]
+fn a_write_error_stops_the_run_at_once() {
+    let dir = folder("full-at-once");
+    let day = long_scenario(&dir, 86_400);
+    // (The timeline grows with events, not samples: this day's fits in its buffer.)
+    for output in ["--trace", "--mcap"] {
+        let out = Command::new("bash")
+            .arg("-c")
+            .arg(format!(
+                "ulimit -t 2; exec '{}' run '{}' --arch psmpa {output} /dev/full",
+                env!("CARGO_BIN_EXE_psmpa-sim"),
+                day.display()
+            ))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{output}: {stderr}");
+        assert!(
+            stderr
+                .trim_end()
+                .ends_with("/dev/full: cannot write: No space left on device (os error 28)"),
+            "{output}: {stderr}"
+        );
+        assert!(
+            stderr.starts_with("psmpa-sim: warning: the outputs may take up to about"),
+            "{stderr}"
+        );
+    }
+}

@@ -175,6 +175,8 @@ pub struct Output {
     given: PathBuf,
     sink: Sink,
     error: Option<io::Error>,
+    /// Raised at the first write error ([`Output::alarm`]).
+    alarm: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
     /// Dropped last, after the temporary file is renamed or removed.
     _pending: Option<Registered>,
 }
@@ -203,6 +205,7 @@ impl Output {
                     given: path.to_path_buf(),
                     sink: Sink::Direct(BufWriter::new(File::from(fd))),
                     error: None,
+                    alarm: None,
                     _pending: None,
                 });
             }
@@ -213,6 +216,7 @@ impl Output {
                     given: path.to_path_buf(),
                     sink: Sink::Direct(BufWriter::new(file)),
                     error: None,
+                    alarm: None,
                     _pending: None,
                 });
             }
@@ -270,8 +274,18 @@ impl Output {
             given: path.to_path_buf(),
             sink,
             error: None,
+            alarm: None,
             _pending: pending,
         })
+    }
+
+    /// Raises `flag` at the output's first write error, so that the run writing it can stop
+    /// at once (the error itself is reported by [`Output::finish`]).
+    pub fn alarm(&mut self, flag: std::sync::Arc<std::sync::atomic::AtomicBool>) {
+        if self.error.is_some() {
+            flag.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        self.alarm = Some(flag);
     }
 
     /// The path the output is for.
@@ -323,6 +337,9 @@ impl Write for Output {
         };
         if let Err(e) = written {
             self.error = Some(e);
+            if let Some(flag) = &self.alarm {
+                flag.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
         }
         Ok(buf.len())
     }
