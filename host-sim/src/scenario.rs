@@ -1073,7 +1073,8 @@ impl Scenario {
         let p = file.smpa.unwrap_or_default();
         let pick = |v: Option<f64>, default: Option<f64>| v.or(default).unwrap_or(0.0);
 
-        if file.name.trim().is_empty() {
+        // One rule for blank names, the missions' (white space and invisible characters).
+        if psmpa_core::domain::blank(&file.name) {
             return Err(invalid(Field::top("name"), Problem::Empty));
         }
         let name = file.name.clone();

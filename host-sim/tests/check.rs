@@ -327,3 +327,53 @@ fn a_goal_that_already_holds_is_said_in_words() {
         "{text}"
     );
 }
+
+/// One rule for names, in missions and scenarios: two facts, actions or plans that read alike
+/// are duplicates, and a name of invisible characters is blank. Each was accepted.
+#[test]
+fn names_that_read_alike_are_refused() {
+    let mission = fetch_tea();
+    for (from, to) in [
+        ("\"in_kitchen\"\n", "\"in_kitchen\", \"In_Kitchen\"\n"),
+        ("\"in_kitchen\"\n", "\"in_kitchen\", \"in_kitchen\u{a0}\"\n"),
+        (
+            "\"in_kitchen\"\n",
+            "\"in_kitchen\", \"in\u{200b}_kitchen\"\n",
+        ),
+    ] {
+        assert_eq!(mission.matches(from).count(), 1, "{from}");
+        let path = file("alike.json", &mission.replacen(from, to, 1));
+        let out = bin().arg("check").arg(&path).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{to}: {stderr}");
+        assert!(stderr.contains("duplicate name"), "{stderr}");
+    }
+    let path = file(
+        "blank.json",
+        &mission.replacen(
+            "\"name\": \"fetch-tea\"",
+            "\"name\": \"\u{200b}\u{200b}\"",
+            1,
+        ),
+    );
+    let out = bin().arg("check").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    // A scenario's name too.
+    let scenario = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/sonar-8.json"),
+    )
+    .unwrap()
+    .replacen("\"sonar-8\"", "\"\u{200b}\u{feff}\"", 1);
+    let path = file("blank-scenario.json", &scenario);
+    let out = bin()
+        .args(["run", "--arch", "psmpa"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("name: must not be empty or only spaces"),
+        "{stderr}"
+    );
+}

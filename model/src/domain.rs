@@ -114,10 +114,70 @@ impl<const NS: usize, const NA: usize, const W: usize, const NF: usize> Default
     }
 }
 
-/// A name that is empty or only (ASCII) white space: it could not be told apart in print.
-/// (ASCII only: Unicode's whitespace table costs flash.)
-pub(crate) fn blank(name: &str) -> bool {
-    name.bytes().all(|b| b.is_ascii_whitespace())
+/// A character a terminal would act on or not show: a control character, or an invisible
+/// format or filler character (soft hyphen, zero-width spaces and joiners, bidirectional marks,
+/// overrides and isolates, line and paragraph separators, variation selectors, tags, Hangul
+/// fillers, the byte order mark), which can make a name read as another.
+pub(crate) fn hidden(c: char) -> bool {
+    c.is_control()
+        || matches!(
+            c,
+            '\u{00AD}'
+                | '\u{034F}'
+                | '\u{061C}'
+                | '\u{115F}'..='\u{1160}'
+                | '\u{17B4}'..='\u{17B5}'
+                | '\u{180B}'..='\u{180F}'
+                | '\u{200B}'..='\u{200F}'
+                | '\u{2028}'..='\u{202E}'
+                | '\u{2060}'..='\u{206F}'
+                | '\u{3164}'
+                | '\u{FE00}'..='\u{FE0F}'
+                | '\u{FEFF}'
+                | '\u{FFA0}'
+                | '\u{FFF9}'..='\u{FFFB}'
+                | '\u{1D173}'..='\u{1D17A}'
+                | '\u{E0000}'..='\u{E0FFF}'
+        )
+}
+
+/// White space in a name: Unicode's with `std`; ASCII's and the no-break space without
+/// (Unicode's tables would cost a robot's loader 13 KB of flash).
+fn space(c: char) -> bool {
+    #[cfg(feature = "std")]
+    return c.is_whitespace();
+    #[cfg(not(feature = "std"))]
+    return c.is_ascii_whitespace() || c == '\u{a0}';
+}
+
+/// A name that is empty or only white space and invisible characters ([`hidden`]: zero-width
+/// spaces, bidi marks, ...): it could not be told apart in print.
+pub fn blank(name: &str) -> bool {
+    name.chars().all(|c| space(c) || hidden(c))
+}
+
+/// Whether two names read alike, so that one mission (or scenario) may not hold both: equal
+/// once invisible characters are dropped, white space (a no-break space too) read as a space
+/// and trimmed, and letters lower-cased. With feature `std` (the host's tools, the
+/// `include_mission!` macro) the rule is Unicode's: any white space, any letter's case, both
+/// names in the composed form (NFC). A robot's run-time loader (no `std`) folds ASCII letters
+/// only, to spare the tables' flash: a mission `psmpa-sim check` accepts passes it.
+pub fn same_name(a: &str, b: &str) -> bool {
+    folded(a).eq(folded(b))
+}
+
+fn folded(name: &str) -> impl Iterator<Item = char> + '_ {
+    let trimmed = name.trim_matches(|c: char| space(c) || hidden(c));
+    #[cfg(feature = "std")]
+    let chars = unicode_normalization::UnicodeNormalization::nfc(trimmed.chars())
+        .filter(|c| !hidden(*c))
+        .flat_map(char::to_lowercase);
+    #[cfg(not(feature = "std"))]
+    let chars = trimmed
+        .chars()
+        .filter(|c| !hidden(*c))
+        .map(|c| c.to_ascii_lowercase());
+    chars.map(|c| if space(c) { ' ' } else { c })
 }
 
 fn push_name<'a, const N: usize>(
@@ -128,7 +188,7 @@ fn push_name<'a, const N: usize>(
     if blank(name) {
         return Err(DomainError::EmptyName(which));
     }
-    if table.contains(&name) {
+    if table.iter().any(|n| same_name(n, name)) {
         return Err(DomainError::Duplicate(which));
     }
     let index = table.len();
@@ -205,7 +265,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
         if blank(name) {
             return Err(DomainError::EmptyName(Table::Fact));
         }
-        if self.fact_id(name).is_some() {
+        if self.facts.iter().any(|n| same_name(n, name)) {
             return Err(DomainError::Duplicate(Table::Fact));
         }
         let full = DomainError::Full {
@@ -236,7 +296,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
         if blank(sensor.name) {
             return Err(DomainError::EmptyName(Table::Sensor));
         }
-        if self.sensor_id(sensor.name).is_some() {
+        if self.sensors.iter().any(|s| same_name(s.name, sensor.name)) {
             return Err(DomainError::Duplicate(Table::Sensor));
         }
         if let SensorMode::Cyclic { period } = sensor.mode {
@@ -258,7 +318,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
         if blank(action.name) {
             return Err(DomainError::EmptyName(Table::Action));
         }
-        if self.action_id(action.name).is_some() {
+        if self.actions.iter().any(|a| same_name(a.name, action.name)) {
             return Err(DomainError::Duplicate(Table::Action));
         }
         let id = ActionId::new(self.actions.len()).ok_or(full)?;
@@ -449,5 +509,42 @@ mod tests {
                 capacity: MAX_FACTS
             })
         );
+    }
+
+    /// Names that read alike are one name: case, a trailing or no-break space, a zero-width
+    /// space, Unicode composition (with `std`, as tests build); a name of invisible characters
+    /// only is blank. Each of these was accepted as a second, different name.
+    #[test]
+    fn names_that_read_alike_are_duplicates() {
+        for (a, b) in [
+            ("clear", "Clear"),
+            ("clear", "clear "),
+            ("path clear", "path\u{a0}clear"),
+            ("clear", "cle\u{200b}ar"),
+        ] {
+            assert!(same_name(a, b), "{a:?} {b:?}");
+            let mut d: Domain<'_, 1, 1> = Domain::new();
+            d.add_fact(a).unwrap();
+            assert_eq!(
+                d.add_fact(b),
+                Err(DomainError::Duplicate(Table::Fact)),
+                "{b:?}"
+            );
+            assert_eq!(
+                d.add_event(a).and_then(|_| d.add_event(b)),
+                Err(DomainError::Duplicate(Table::Event))
+            );
+        }
+        #[cfg(feature = "std")]
+        assert!(
+            same_name("caf\u{e9}", "Cafe\u{301}"),
+            "composed and decomposed"
+        );
+        assert!(!same_name("clear", "clean"));
+        assert!(!same_name("a b", "ab"));
+        for name in ["", "  ", "\u{200b}\u{200b}", "\u{a0}\u{feff}", "\u{202e}"] {
+            assert!(blank(name), "{name:?}");
+        }
+        assert!(!blank("a\u{200b}"));
     }
 }

@@ -374,32 +374,7 @@ pub fn printable(text: &str) -> Cow<'_, str> {
     Cow::Owned(out)
 }
 
-/// A character a terminal would act on or not show: a control character, or an invisible
-/// format or filler character (soft hyphen, zero-width spaces and joiners, bidirectional marks,
-/// overrides and isolates, line and paragraph separators, variation selectors, tags, Hangul
-/// fillers, the byte order mark), which can make a name read as another.
-fn hidden(c: char) -> bool {
-    c.is_control()
-        || matches!(
-            c,
-            '\u{00AD}'
-                | '\u{034F}'
-                | '\u{061C}'
-                | '\u{115F}'..='\u{1160}'
-                | '\u{17B4}'..='\u{17B5}'
-                | '\u{180B}'..='\u{180F}'
-                | '\u{200B}'..='\u{200F}'
-                | '\u{2028}'..='\u{202E}'
-                | '\u{2060}'..='\u{206F}'
-                | '\u{3164}'
-                | '\u{FE00}'..='\u{FE0F}'
-                | '\u{FEFF}'
-                | '\u{FFA0}'
-                | '\u{FFF9}'..='\u{FFFB}'
-                | '\u{1D173}'..='\u{1D17A}'
-                | '\u{E0000}'..='\u{E0FFF}'
-        )
-}
+use crate::domain::hidden;
 
 /// Decodes the `\u` escapes of valid JSON that stand for ordinary characters.
 fn decode_escapes(bytes: &[u8]) -> Cow<'_, [u8]> {

@@ -226,7 +226,11 @@ impl<'a, const NP: usize, const L: usize, const W: usize> PlanLibrary<'a, NP, L,
         if crate::domain::blank(plan.name) {
             return Err(PlanError::EmptyName);
         }
-        if self.plans.iter().any(|p| p.name == plan.name) {
+        if self
+            .plans
+            .iter()
+            .any(|p| crate::domain::same_name(p.name, plan.name))
+        {
             return Err(PlanError::Duplicate);
         }
         let id = PlanId::new(self.plans.len()).ok_or(full)?;
