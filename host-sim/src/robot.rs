@@ -115,6 +115,15 @@ pub enum MissionError {
     MissingFact(&'static str),
     /// A sensor the scenario gives a period to is not declared cyclic in the mission.
     NotCyclic(&'static str),
+    /// A sensor perceives nothing (`empty`), or a fact other than the one its device gives.
+    Perceives {
+        /// The sensor.
+        sensor: &'static str,
+        /// The fact its device gives.
+        gives: &'static str,
+        /// Its `per` is empty.
+        empty: bool,
+    },
     /// A scenario period could not be applied.
     Domain(DomainError),
 }
@@ -130,6 +139,18 @@ impl core::fmt::Display for MissionError {
             Self::NotCyclic(name) => write!(
                 f,
                 "sensor `{name}` must be `cyclic`: the robot samples it on the scenario's period"
+            ),
+            Self::Perceives {
+                sensor,
+                gives,
+                empty: true,
+            } => write!(
+                f,
+                "sensor `{sensor}` perceives nothing (its `per` is empty): the robot's {sensor} gives `{gives}`"
+            ),
+            Self::Perceives { sensor, gives, .. } => write!(
+                f,
+                "sensor `{sensor}` perceives a fact its device cannot give: the robot's {sensor} gives only `{gives}`"
             ),
             Self::Domain(e) => write!(f, "{e:?}"),
         }
@@ -197,7 +218,23 @@ pub fn requirements<const NS: usize, const NA: usize>(
         door_unlocked: fact("door_unlocked")?,
     };
     for (i, sensor) in d.sensors().iter().enumerate() {
-        let name = match SensorId::new(i).and_then(|id| bindings.sensor(id)) {
+        let bound = SensorId::new(i).and_then(|id| bindings.sensor(id));
+        // What each device decides (its `sample`): nothing else may be in its `per`.
+        let (name, gives, fact) = match bound {
+            Some(NaoSensor::Sonar) => ("sonar", "path_clear", percepts.path_clear),
+            Some(NaoSensor::Bumper) => ("bumper", "path_clear", percepts.path_clear),
+            Some(NaoSensor::Camera) => ("camera", "handle_seen", percepts.handle_seen),
+            Some(NaoSensor::Handle) => ("handle", "door_unlocked", percepts.door_unlocked),
+            None => continue,
+        };
+        if sensor.per.is_empty() || !sensor.per.is_subset(FactSet::single(fact)) {
+            return Err(MissionError::Perceives {
+                sensor: name,
+                gives,
+                empty: sensor.per.is_empty(),
+            });
+        }
+        let name = match bound {
             Some(NaoSensor::Sonar) => "sonar",
             Some(NaoSensor::Bumper) => "bumper",
             _ => continue,

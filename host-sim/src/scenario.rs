@@ -672,6 +672,13 @@ pub enum Problem {
     },
     /// Must be a whole number of milliseconds.
     NotWhole(f64),
+    /// Must be a whole number of `unit`.
+    NotWholeUnit {
+        /// The value.
+        value: f64,
+        /// The unit, with its size ("0.001 m/s").
+        unit: &'static str,
+    },
     /// Outside `[min, max]`.
     OutOfRange {
         /// The value.
@@ -730,6 +737,9 @@ impl fmt::Display for Problem {
             Self::BelowOneMillisecond(v) => write!(f, "must be at least 0.001 s, got {}", Shown(v)),
             Self::BelowUnit { value, least } => {
                 write!(f, "must be at least {least}, got {}", Shown(value))
+            }
+            Self::NotWholeUnit { value, unit } => {
+                write!(f, "must be a whole number of {unit}, got {}", Shown(value))
             }
             Self::NotWhole(v) => write!(
                 f,
@@ -812,6 +822,36 @@ fn seconds(field: Field, value: f64) -> Result<u64, ScenarioError> {
         ));
     }
     Ok((ms + 0.5) as u64)
+}
+
+/// An obstacle's speed in mm/s (µm a ms) from `um_per_s`, which must be a whole number of
+/// them: a slower or finer speed cannot be represented and is refused.
+fn mm_per_s(field: Field, um_per_s: i64, value: f64) -> Result<u16, ScenarioError> {
+    if um_per_s % 1000 != 0 {
+        return Err(invalid(
+            field,
+            if um_per_s < 1000 {
+                Problem::BelowUnit {
+                    value,
+                    least: "0.001 m/s (or 0, standing)",
+                }
+            } else {
+                Problem::NotWholeUnit {
+                    value,
+                    unit: "0.001 m/s",
+                }
+            },
+        ));
+    }
+    u16::try_from(um_per_s / 1000).map_err(|_| {
+        invalid(
+            field,
+            Problem::AboveMax {
+                value,
+                max: MAX_SPEED_MPS,
+            },
+        )
+    })
 }
 
 /// A whole number of milliseconds, at least 1.
@@ -1225,13 +1265,14 @@ impl Scenario {
                 kind,
                 at_ms: seconds(at("at_s"), i.at_s.unwrap_or(3.0))? as u32,
                 ahead_um: metres(at("ahead_m"), i.ahead_m.unwrap_or(default_ahead))? as i32,
-                hold_ms: seconds(at("hold_s"), i.hold_s.unwrap_or(4.0))? as u32,
-                // µm per ms is mm/s: up_to's µm / 1000.
-                speed_um_per_ms: (up_to(
+                // Held for no time, it is never there: refused, not "detected".
+                hold_ms: positive_seconds(at("hold_s"), i.hold_s.unwrap_or(4.0))? as u32,
+                // µm per ms is mm/s: up_to's µm / 1000, whole (0.0005 m/s was 0).
+                speed_um_per_ms: mm_per_s(
                     at("speed_mps"),
+                    up_to(at("speed_mps"), i.speed_mps.unwrap_or(0.0), MAX_SPEED_MPS)?,
                     i.speed_mps.unwrap_or(0.0),
-                    MAX_SPEED_MPS,
-                )? / 1000) as u16,
+                )?,
                 height_um: up_to(
                     at("height_m"),
                     i.height_m
@@ -1550,5 +1591,35 @@ mod tests {
             s.to_canonical(&mut buf),
             Err(CanonicalError::NameNeedsEscapes)
         );
+    }
+
+    /// Values the world cannot represent are refused, not truncated: an obstacle held for no
+    /// time (it was "detected" and side-stepped), a speed below or between whole mm/s (0.0005
+    /// m/s stood still).
+    #[test]
+    fn unrepresentable_interferences_are_refused() {
+        let one = |field: &str| {
+            err(&format!(
+                r#"{{"name":"x","interferences":[{{"kind":"box",{field}}}]}}"#
+            ))
+            .to_string()
+        };
+        assert_eq!(
+            one(r#""hold_s":0"#),
+            "interferences[0].hold_s: must be greater than 0, got 0"
+        );
+        assert_eq!(
+            one(r#""speed_mps":0.0005"#),
+            "interferences[0].speed_mps: must be at least 0.001 m/s (or 0, standing), got 0.0005"
+        );
+        assert_eq!(
+            one(r#""speed_mps":0.0015"#),
+            "interferences[0].speed_mps: must be a whole number of 0.001 m/s, got 0.0015"
+        );
+        let ok = Scenario::parse(
+            br#"{"name":"x","interferences":[{"kind":"box","speed_mps":0.15,"hold_s":0.001}]}"#,
+        )
+        .unwrap();
+        assert_eq!(ok.interferences[0].speed_um_per_ms, 150);
     }
 }

@@ -377,3 +377,33 @@ fn names_that_read_alike_are_refused() {
         "{stderr}"
     );
 }
+
+/// `check --platform nao` refuses a sensor that perceives nothing or a fact its device cannot
+/// give (the sonar deciding `door_open` from an echo); both were accepted.
+#[test]
+fn a_nao_sensor_perceives_only_what_its_device_gives() {
+    let mission = fetch_tea();
+    let sonar = r#""name": "sonar",  "per": ["path_clear"]"#;
+    assert_eq!(mission.matches(sonar).count(), 1);
+    for (per, says) in [
+        (
+            r#""name": "sonar",  "per": []"#,
+            "sensor `sonar` perceives nothing",
+        ),
+        (
+            r#""name": "sonar",  "per": ["path_clear", "door_open"]"#,
+            "sensor `sonar` perceives a fact its device cannot give",
+        ),
+    ] {
+        let path = file("per.json", &mission.replacen(sonar, per, 1));
+        let out = bin()
+            .args(["check", "--platform", "nao"])
+            .arg(&path)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{per}: {stderr}");
+        assert!(stderr.contains(says), "{stderr}");
+        assert_eq!(stderr.lines().count(), 1);
+    }
+}

@@ -729,3 +729,20 @@ fn a_write_error_stops_the_run_at_once() {
         );
     }
 }
+
+/// A box still standing when the run ends was never "taken away before the robot came near".
+#[test]
+fn an_interference_that_outlives_the_run_says_so() {
+    let held = file(
+        "held.json",
+        r#"{"name": "held", "door_m": 1000, "max_s": 10,
+            "interferences": [{"kind": "box", "at_s": 1, "ahead_m": 900, "hold_s": 60}]}"#,
+    );
+    let out = psmpa(&held).output().unwrap();
+    assert_success(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("not met (still there when the run ended)"),
+        "{text}"
+    );
+}

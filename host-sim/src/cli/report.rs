@@ -188,6 +188,11 @@ pub fn human(scenario: &Scenario, summary: &Summary) -> String {
         let what = match report.fate {
             _ if report.skipped => "not put down (due after the robot reached the door)".to_owned(),
             _ if !report.placed => "not put down (the run ended before it was due)".to_owned(),
+            Fate::Unmet
+                if u64::from(item.at_ms) + u64::from(item.hold_ms) > summary.time_cost_ms =>
+            {
+                "not met (still there when the run ended)".to_owned()
+            }
             Fate::Unmet => "not met (taken away before the robot came near)".to_owned(),
             Fate::Detected(d) => format!(
                 "detected by the {}{}",
