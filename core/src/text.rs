@@ -273,7 +273,7 @@ impl<
                 write!(f, "plan {} does not compile: {error:?}", n.plan(plan))
             }
             E::Planning { error, faulty } => {
-                write!(f, "no library plan could run, and the planner: {error:?}")?;
+                write!(f, "no library plan could run, and the planner: {error}")?;
                 n.out_of_service(f, faulty)
             }
             E::InitialModel { failure } => write!(

@@ -102,7 +102,7 @@ fn diagnose(bytes: &[u8]) -> Option<String> {
                     inner.column()
                 )
             } else {
-                format!("{path}: {inner}")
+                format!("{path}: {}", plain(&inner.to_string()))
             }
         }
     };
@@ -121,4 +121,29 @@ fn array_for_object(file: &serde_json::Value) -> Option<String> {
     let items = file.get("interferences").and_then(Value::as_array)?;
     let index = items.iter().position(Value::is_array)?;
     Some(format!("interferences[{index}]"))
+}
+
+/// serde's message without the program's own type names: `expected struct FaultFile` is an
+/// object, `invalid type: floating point `1.8e19`, expected u64` a whole number out of range.
+fn plain(message: &str) -> String {
+    let at = message.find(" at line ").map_or("", |i| &message[i..]);
+    for (ty, max) in [
+        ("u64", u64::MAX),
+        ("u32", u64::from(u32::MAX)),
+        ("u16", u64::from(u16::MAX)),
+    ] {
+        if message.contains(&format!("expected {ty}")) {
+            return format!("must be a whole number from 0 to {max}{at}");
+        }
+    }
+    match message.find("expected struct ") {
+        Some(i) => {
+            let rest = &message[i + "expected struct ".len()..];
+            let end = rest
+                .find(|c: char| !c.is_alphanumeric())
+                .unwrap_or(rest.len());
+            format!("{}expected an object{}", &message[..i], &rest[end..])
+        }
+        None => message.to_owned(),
+    }
 }

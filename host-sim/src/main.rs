@@ -111,12 +111,12 @@ enum Command {
         #[arg(long, value_enum, default_value = "bfs")]
         search: plan::Method,
         /// Most nodes to generate, the start included (at most 917,503).
-        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(plan::BUDGET)))]
+        #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=i64::from(plan::BUDGET)))]
         budget: Option<u32>,
         /// Most seconds of search (1 to 86,400): when it runs out the search ends as when
         /// the node budget does (status 1, `budget`). A node costs at most one heuristic
         /// estimate past it.
-        #[arg(long, value_name = "SECONDS", default_value_t = plan::TIME_LIMIT_S,
+        #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", default_value_t = plan::TIME_LIMIT_S,
               value_parser = clap::value_parser!(u32).range(1..=86_400))]
         time_limit: u32,
         /// Print exactly one JSON object.
@@ -130,7 +130,7 @@ enum Command {
         json: bool,
         /// Runs of each row with its interference instants shifted by a random offset within
         /// one SMPA cycle (1 to 100,000).
-        #[arg(long, default_value_t = psmpa_sim::cli::table1::SHIFTS,
+        #[arg(long, allow_negative_numbers = true, default_value_t = psmpa_sim::cli::table1::SHIFTS,
               value_parser = clap::value_parser!(u32).range(1..=100_000))]
         shifts: u32,
         /// Also write each row's plot as DIR/<scenario>.svg.
@@ -140,11 +140,10 @@ enum Command {
     /// Runs randomized scenarios and prints summary statistics.
     Sweep {
         /// Number of scenarios (at most 1,000,000).
-        #[arg(long, default_value_t = 1000,
-              value_parser = clap::value_parser!(u64).range(1..=psmpa_sim::cli::sweep::MAX_RUNS))]
+        #[arg(long, allow_negative_numbers = true, default_value_t = 1000, value_parser = sweep_runs)]
         runs: u64,
         /// Seed of the scenario generator.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, allow_negative_numbers = true, default_value_t = 1, value_parser = whole)]
         seed: u64,
         /// Run only this architecture (default: both).
         #[arg(long, value_enum)]
@@ -156,7 +155,8 @@ enum Command {
         #[arg(long, value_name = "FILE.mcap")]
         mcap: Option<PathBuf>,
         /// The scenario written by --mcap: N of sweep-SEED-N, from 0 to runs - 1.
-        #[arg(long, value_name = "N", default_value_t = 0, requires = "mcap")]
+        #[arg(long, allow_negative_numbers = true, value_name = "N", default_value_t = 0,
+              requires = "mcap", value_parser = whole)]
         mcap_run: u64,
         /// The architecture written by --mcap (default: --arch, or psmpa when the sweep runs
         /// both).
@@ -175,11 +175,11 @@ enum Command {
     Sensitivity {
         /// Random worlds per cell (at most 100,000); each runs once under P-SMPA and once per
         /// cell under SMPA, clean and with faults.
-        #[arg(long, default_value_t = 1000,
-              value_parser = clap::value_parser!(u64).range(1..=sensitivity::MAX_RUNS))]
+        #[arg(long, allow_negative_numbers = true, default_value_t = 1000,
+              value_parser = sensitivity_runs)]
         runs: u64,
         /// Seed of the world generator.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, allow_negative_numbers = true, default_value_t = 1, value_parser = whole)]
         seed: u64,
         /// Print exactly one JSON object (README.md describes its shape).
         #[arg(long)]
@@ -188,6 +188,33 @@ enum Command {
         #[arg(long, value_name = "FILE.svg")]
         plot: Option<PathBuf>,
     },
+}
+
+/// A whole number from 0 to 2^64 - 1 (a seed, a run's number), with a message that says so.
+fn whole(text: &str) -> Result<u64, String> {
+    if text.starts_with('-') {
+        return Err("must not be negative".to_owned());
+    }
+    text.parse()
+        .map_err(|_| format!("must be a whole number from 0 to {}", u64::MAX))
+}
+
+/// `sweep --runs`: 1 to [`sweep::MAX_RUNS`].
+fn sweep_runs(text: &str) -> Result<u64, String> {
+    let max = sweep::MAX_RUNS;
+    match whole(text) {
+        Ok(n) if (1..=max).contains(&n) => Ok(n),
+        _ => Err(format!("must be a whole number from 1 to {max}")),
+    }
+}
+
+/// `sensitivity --runs`: 1 to [`sensitivity::MAX_RUNS`].
+fn sensitivity_runs(text: &str) -> Result<u64, String> {
+    let max = sensitivity::MAX_RUNS;
+    match whole(text) {
+        Ok(n) if (1..=max).contains(&n) => Ok(n),
+        _ => Err(format!("must be a whole number from 1 to {max}")),
+    }
 }
 
 fn create(path: Option<&Path>) -> Result<Option<Output>, Stop> {
@@ -336,31 +363,22 @@ fn run(cli: Cli) -> Result<(), Stop> {
             plots,
         } => {
             psmpa_sim::cli::workers()?;
+            // The folder is checked before the work and made only for the files at the end.
             if let Some(dir) = &plots {
-                if dir.exists() && !dir.is_dir() {
-                    return Err(Stop::bad(format!(
-                        "{}: not a folder (--plots names a folder to write the plots into)",
-                        dir.display()
-                    )));
-                }
-                std::fs::create_dir_all(dir).map_err(|e| {
-                    Stop::bad(format!("{}: cannot create the folder: {e}", dir.display()))
-                })?;
+                files::writable_folder(dir).map_err(Stop::Bad)?;
             }
             let rows = table1::compute(shifts).map_err(Stop::internal)?;
-            let mut done = Vec::new();
-            if let Some(dir) = plots {
+            let mut svgs = Vec::new();
+            if let Some(dir) = &plots {
                 for sc in table1::scenarios().map_err(Stop::internal)? {
                     let path = dir.join(format!("{}.svg", sc.name.as_str()));
-                    let mut out = Output::create(&path).map_err(Stop::Bad)?;
                     let runs = [
                         run_recorded(&sc, Arch::PSmpa).map_err(Stop::internal)?,
                         run_recorded(&sc, Arch::Smpa).map_err(Stop::internal)?,
                     ];
                     let svg = outputs::plot(&sc, &runs)
                         .map_err(|e| Stop::bad(format!("{}: {e}", path.display())))?;
-                    let _ = out.write_all(svg.as_bytes());
-                    done.push(out);
+                    svgs.push((path, svg));
                 }
             }
             let text = if json {
@@ -368,7 +386,24 @@ fn run(cli: Cli) -> Result<(), Stop> {
             } else {
                 table1::render(&rows)
             };
-            files::print_and_commit(text.as_bytes(), done)?;
+            let made = match &plots {
+                Some(dir) => files::make_folder(dir).map_err(Stop::Bad)?,
+                None => None,
+            };
+            let written = (|| {
+                let mut done = Vec::new();
+                for (path, svg) in &svgs {
+                    let mut out = Output::create(path).map_err(Stop::Bad)?;
+                    let _ = out.write_all(svg.as_bytes());
+                    done.push(out);
+                }
+                files::print_and_commit(text.as_bytes(), done)
+            })();
+            if let (Err(Stop::Bad(_)), Some(top)) = (&written, &made) {
+                // Nothing was put in place: the folders this command made go too.
+                let _ = std::fs::remove_dir_all(top);
+            }
+            written?;
         }
         Command::Sweep {
             runs,
@@ -463,7 +498,7 @@ fn warn_of_size(sc: &Scenario, csv: bool, mcap: bool) {
         say(&format!(
             "warning: the outputs may take up to about {:.1} GB ({samples} samples of {} s)",
             bytes as f64 / 1e9,
-            sc.max_ms / 1000
+            outputs::seconds_text(sc.max_ms)
         ));
     }
 }
@@ -513,14 +548,45 @@ fn plot_both(
 }
 
 /// One line on standard error; control characters (from a file name or an argument) are
-/// shown escaped, never sent to the terminal.
+/// shown escaped, never sent to the terminal, and a long word quoted from the input is
+/// shortened ([`shorten`]).
 fn say(message: &str) {
     let _ = writeln!(
         std::io::stderr().lock(),
         "psmpa-sim: {}",
-        json::printable(message)
+        shorten(&json::printable(message))
     );
 }
+
+/// A word (a run without spaces) longer than [`LONG_WORD`] bytes shown as its first 48 and
+/// last 16 bytes, with how many were left out: an error quotes names and keys from the input,
+/// which may be a megabyte long.
+fn shorten(line: &str) -> String {
+    let mut out = String::with_capacity(line.len().min(4 * LONG_WORD));
+    for (i, word) in line.split(' ').enumerate() {
+        if i > 0 {
+            out.push(' ');
+        }
+        if word.len() <= LONG_WORD {
+            out.push_str(word);
+            continue;
+        }
+        let head = (0..=48).rev().find(|&i| word.is_char_boundary(i)).unwrap_or(0);
+        let tail = (word.len() - 16..word.len())
+            .find(|&i| word.is_char_boundary(i))
+            .unwrap_or(word.len());
+        out.push_str(&format!(
+            "{}...({} bytes)...{}",
+            &word[..head],
+            tail - head,
+            &word[tail..]
+        ));
+    }
+    out
+}
+
+/// The longest word [`say`] shows whole, bytes.
+const LONG_WORD: usize = 100;
 
 /// clap's message for a bad command line, in one line; help and version as clap prints them.
 fn usage_error(e: &clap::Error) -> ExitCode {

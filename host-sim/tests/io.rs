@@ -746,3 +746,102 @@ fn an_interference_that_outlives_the_run_says_so() {
         "{text}"
     );
 }
+
+/// `table1 --plots`: a folder that cannot be written is refused before the work (under a 2 s
+/// CPU limit; 100,000 shifts take minutes), and folders made for a command that then fails are
+/// removed (they were left behind).
+#[test]
+fn table1_plots_are_checked_first_and_leave_no_folders() {
+    let out = Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -t 2; exec '{}' table1 --shifts 100000 --plots /proc/self",
+            env!("CARGO_BIN_EXE_psmpa-sim")
+        ))
+        .output()
+        .unwrap();
+    assert_refused(&out, &["/proc/self: cannot write"]);
+    let dir = folder("plots-left");
+    let out = bin()
+        .current_dir(&dir)
+        .args(["table1", "--shifts", "1", "--plots", "a/b/c"])
+        .stdout(
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open("/dev/full")
+                .unwrap(),
+        )
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(names_in(&dir).is_empty(), "{:?}", names_in(&dir));
+}
+
+/// Messages: a negative number names its option and the range; a megabyte key is quoted
+/// short; no program type names; max_s to the millisecond it was given.
+#[test]
+fn messages_name_options_quote_short_and_hide_internals() {
+    for (args, says) in [
+        (
+            &["sweep", "--seed", "-1"][..],
+            "'--seed <SEED>': must not be negative",
+        ),
+        (
+            &["sweep", "--runs", "-3"][..],
+            "'--runs <RUNS>': must be a whole number from 1 to",
+        ),
+        (
+            &["plan", "x.json", "--budget", "-5"][..],
+            "'--budget <BUDGET>': -5 is not in 1..=",
+        ),
+        (
+            &["sweep", "--seed", "18446744073709551616"][..],
+            "must be a whole number from 0 to 18446744073709551615",
+        ),
+    ] {
+        let out = bin().args(args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+    }
+    let key = "k".repeat(300_000);
+    let path = file("long-key.json", &format!(r#"{{"name": "x", "{key}": 1}}"#));
+    let out = psmpa(&path).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr.len() < 1_000, "{} bytes", stderr.len());
+    assert!(stderr.contains("...(299937 bytes)..."), "{stderr}");
+    let path = file(
+        "fault-5.json",
+        r#"{"name": "x", "fault": 5, "interferences": []}"#,
+    );
+    let stderr = String::from_utf8(psmpa(&path).output().unwrap().stderr).unwrap();
+    assert!(
+        stderr.contains("fault: invalid type: integer `5`, expected an object"),
+        "{stderr}"
+    );
+    let text = std::fs::read_to_string(repo("scenarios/sonar-6.json"))
+        .unwrap()
+        .replace("\"seed\": 42", "\"seed\": 18446744073709551616");
+    let stderr =
+        String::from_utf8(psmpa(file("seed.json", &text)).output().unwrap().stderr).unwrap();
+    assert!(
+        stderr.contains("seed: must be a whole number from 0 to 18446744073709551615"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("e+19"), "{stderr}");
+    let long = file(
+        "plot-long.json",
+        r#"{"name": "l", "door_m": 1000, "max_s": 500.001, "robot": {"speed_mps": 0.001},
+            "sonar": {"period_ms": 1}, "bumper": {"period_ms": 1}, "interferences": []}"#,
+    );
+    let stderr = String::from_utf8(
+        psmpa(&long)
+            .args(["--plot", "p.svg"])
+            .output()
+            .unwrap()
+            .stderr,
+    )
+    .unwrap();
+    assert!(stderr.contains("in 500.001 s"), "{stderr}");
+}

@@ -72,6 +72,23 @@ pub enum PlanningError {
     },
 }
 
+impl core::fmt::Display for PlanningError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Unsolvable { expanded } => {
+                write!(f, "no plan exists ({expanded} states searched)")
+            }
+            Self::Budget { limit, .. } => write!(f, "none found within {limit} nodes"),
+            Self::TooLong { limit } => {
+                write!(f, "the shortest plan is longer than {limit} actions")
+            }
+            Self::TooManyActions { limit } => {
+                write!(f, "more than {limit} actions, the most a search takes")
+            }
+        }
+    }
+}
+
 /// A plan and what finding it cost.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Found<const L: usize> {

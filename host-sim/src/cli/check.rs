@@ -183,7 +183,7 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
                 PlanningError::TooLong { limit } => {
                     format!("the shortest plan is longer than {limit} actions")
                 }
-                _ => format!("{e:?}"),
+                _ => e.to_string(),
             };
             let _ = writeln!(
                 out,

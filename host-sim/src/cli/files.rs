@@ -492,3 +492,51 @@ fn same_file(a: &Metadata, b: &Metadata) -> bool {
         false
     }
 }
+
+/// Checks, before any work, that files can be written in folder `dir` once it is made: its
+/// deepest existing ancestor is a folder this process may write in (a file is made and
+/// removed there). Nothing is left behind.
+pub fn writable_folder(dir: &Path) -> Result<(), String> {
+    let mut at = dir;
+    let existing = loop {
+        match std::fs::metadata(at) {
+            Ok(meta) if meta.is_dir() => break at,
+            Ok(_) => {
+                return Err(format!(
+                    "{}: not a folder (--plots names a folder to write the plots into)",
+                    at.display()
+                ));
+            }
+            Err(_) => match at.parent() {
+                Some(p) if !p.as_os_str().is_empty() => at = p,
+                _ => break Path::new("."),
+            },
+        }
+    };
+    tempfile::Builder::new()
+        .prefix(".psmpa-check.")
+        .tempfile_in(existing)
+        .map(drop)
+        .map_err(|e| {
+            let message = e.to_string();
+            let cause = message.split(" at path ").next().unwrap_or(&message);
+            format!("{}: cannot write: {cause}", dir.display())
+        })
+}
+
+/// Makes folder `dir` and its missing parents; the topmost one made, to remove if the
+/// command then fails (`None` when `dir` existed).
+pub fn make_folder(dir: &Path) -> Result<Option<PathBuf>, String> {
+    let mut top = None;
+    let mut at = dir;
+    while !at.exists() {
+        top = Some(at.to_path_buf());
+        match at.parent() {
+            Some(p) if !p.as_os_str().is_empty() => at = p,
+            _ => break,
+        }
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| format!("{}: cannot create the folder: {e}", dir.display()))?;
+    Ok(top)
+}

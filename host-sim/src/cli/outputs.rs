@@ -604,6 +604,18 @@ fn printable(text: &str) -> String {
 /// for the plot and drawn (two runs, a few hundred bytes a sample in all).
 pub const PLOT_SAMPLES: u64 = 1_000_000;
 
+/// `ms` as seconds, to the millisecond it was given: 500001 is "500.001", 600000 "600".
+pub fn seconds_text(ms: u64) -> String {
+    match ms % 1000 {
+        0 => (ms / 1000).to_string(),
+        frac => format!(
+            "{}.{}",
+            ms / 1000,
+            format!("{frac:03}").trim_end_matches('0')
+        ),
+    }
+}
+
 /// Refuses `--plot` up front for a scenario whose runs may take more than [`PLOT_SAMPLES`]
 /// samples.
 pub fn plot_fits(scenario: &Scenario) -> Result<(), String> {
@@ -614,7 +626,7 @@ pub fn plot_fits(scenario: &Scenario) -> Result<(), String> {
             "--plot: up to {samples} sensor samples in {} s, more than the {PLOT_SAMPLES} a \
              plot holds: shorten max_s, lengthen the sensor periods, or leave out --plot \
              (--trace and --timeline have no limit)",
-            scenario.max_ms / 1000
+            seconds_text(scenario.max_ms)
         ));
     }
     Ok(())

@@ -235,6 +235,6 @@ fn plan_here(file: &Path, bytes: &[u8], search: Method, limits: Limits) -> Resul
             "{}: the plan is longer than {limit} actions, the most this command reports",
             file.display()
         )),
-        Err(e) => Err(format!("{}: {e:?}", file.display())),
+        Err(e) => Err(format!("{}: {e}", file.display())),
     }
 }
