@@ -93,5 +93,21 @@ t 40.8 "$B run $S --arch psmpa --trace >(wc -c >/dev/null) >/dev/null"
 echo x >priv.csv && chmod 600 priv.csv
 t 40.8 "$B run $S --arch psmpa --trace priv.csv >/dev/null; stat -c %a priv.csv >&2"
 t 40.4 "ulimit -v 100000; $B plan $M"
+# The worst case of a heuristic's estimate under the 1 MiB input limit: a 250-step chain the
+# estimate walks in as many rounds, 650 actions of 199 preconditions each, 6 toggles for a large
+# state space. With the default limits it ends at 30 s (status 1, "the time limit ran out");
+# here with --time-limit 5, to show how far past the limit it runs (one estimate).
+python3 - <<'PY'
+import json
+facts = [f"f{i}" for i in range(256)]
+acts = [{"name": f"c{i}", "pre": [f"f{i}"], "add": [f"f{i+1}"], "del": [f"f{i}"]} for i in reversed(range(250))]
+for i in range(250, 256):
+    acts += [{"name": f"t{i}", "pre": [], "add": [f"f{i}"]}, {"name": f"u{i}", "pre": [f"f{i}"], "del": [f"f{i}"]}]
+acts += [{"name": f"x{n}", "pre": facts[1:200], "add": ["f0"]} for n in range(650)]
+m = {"name": "worst", "facts": facts, "events": ["go"], "sensors": [], "actions": acts, "plans": [],
+     "task": {"event": "go", "init": ["f0"], "goal": ["f249"] + facts[250:]}}
+open("worst.json", "w").write(json.dumps(m, separators=(",", ":")))
+PY
+t 40.1c "$B plan worst.json --search astar-hmax --time-limit 5"
 t clap "$B run --arch"
 echo "files left: $(ls -A | grep -v -e '^tm$' -e '^out$' -e '^err$' | tr '\n' ' ')"

@@ -82,7 +82,11 @@ pub struct Config {
     /// Lost samples in a row after which a sensor counts as [`SensorFault::Silent`].
     pub max_lost: u8,
     /// Search nodes the planner takes in one poll of the deciding side before it yields
-    /// (at least 1): on one executor, a sample waits for at most one slice of a search.
+    /// (at least 1): on one executor, a sample waits for at most one slice of a search. A
+    /// slice's worst cost, for the timing analysis: `plan_slice` expansions, each one pass over
+    /// the NA actions plus, for a heuristic search, one estimate per node generated (at most
+    /// NA), an estimate being at most (facts + 1) passes over every action's pre and add
+    /// facts. Breadth-first search needs no estimate.
     pub plan_slice: u16,
 }
 

@@ -571,7 +571,10 @@ fn shorten(line: &str) -> String {
             out.push_str(word);
             continue;
         }
-        let head = (0..=48).rev().find(|&i| word.is_char_boundary(i)).unwrap_or(0);
+        let head = (0..=48)
+            .rev()
+            .find(|&i| word.is_char_boundary(i))
+            .unwrap_or(0);
         let tail = (word.len() - 16..word.len())
             .find(|&i| word.is_char_boundary(i))
             .unwrap_or(word.len());

@@ -163,7 +163,24 @@ pub fn blank(name: &str) -> bool {
 /// names in the composed form (NFC). A robot's run-time loader (no `std`) folds ASCII letters
 /// only, to spare the tables' flash: a mission `psmpa-sim check` accepts passes it.
 pub fn same_name(a: &str, b: &str) -> bool {
+    if a.is_ascii() && b.is_ascii() {
+        // The common case, without Unicode's tables: a loader compares every pair of names.
+        return ascii_folded(a).eq(ascii_folded(b));
+    }
     folded(a).eq(folded(b))
+}
+
+fn ascii_folded(name: &str) -> impl Iterator<Item = u8> + '_ {
+    name.trim_matches(|c: char| c.is_ascii_whitespace() || c.is_ascii_control())
+        .bytes()
+        .filter(|b| !b.is_ascii_control())
+        .map(|b| {
+            if b.is_ascii_whitespace() {
+                b' '
+            } else {
+                b.to_ascii_lowercase()
+            }
+        })
 }
 
 fn folded(name: &str) -> impl Iterator<Item = char> + '_ {
