@@ -845,3 +845,31 @@ fn messages_name_options_quote_short_and_hide_internals() {
     .unwrap();
     assert!(stderr.contains("in 500.001 s"), "{stderr}");
 }
+
+/// Worker threads the machine will not start (100 of them under 60 MB of address space): one
+/// line and status 3 for sweep, table1 and sensitivity; they panicked ("The global thread pool
+/// has not been initialized").
+#[test]
+fn workers_the_machine_cannot_start_are_status_3() {
+    for command in [
+        "sweep --runs 10",
+        "table1 --shifts 1",
+        "sensitivity --runs 1",
+    ] {
+        let out = Command::new("bash")
+            .arg("-c")
+            .arg(format!(
+                "ulimit -v 60000; RAYON_NUM_THREADS=100 exec timeout 60 '{}' {command}",
+                env!("CARGO_BIN_EXE_psmpa-sim")
+            ))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(3), "{command}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(
+            stderr.contains("cannot start the worker threads"),
+            "{stderr}"
+        );
+    }
+}
