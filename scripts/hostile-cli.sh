@@ -109,5 +109,15 @@ m = {"name": "worst", "facts": facts, "events": ["go"], "sensors": [], "actions"
 open("worst.json", "w").write(json.dumps(m, separators=(",", ":")))
 PY
 t 40.1c "$B plan worst.json --search astar-hmax --time-limit 5"
+# Issue 40, the rest: a write error stops a day-long run at once (after a size warning); names
+# that read alike; an interference held 0 s; negative options; a megabyte key quoted short.
+t 40.5 "$B run long.json --arch psmpa --trace /dev/full"
+sed 's/"in_kitchen"$/"in_kitchen", "In_Kitchen"/' "$M" >m40.json
+t 40.6 "$B check m40.json"
+sed 's/"hold_s": 4.0/"hold_s": 0/' "$S" >s40.json
+t 40.7 "$B run s40.json --arch psmpa"
+t 40.8 "$B sweep --seed -1"
+printf '{"name": "x", "%s": 1}' "$(head -c 300000 /dev/zero | tr '\0' k)" >k40.json
+t 40.8 "$B run k40.json --arch psmpa 2>&1 | wc -c >&2"
 t clap "$B run --arch"
 echo "files left: $(ls -A | grep -v -e '^tm$' -e '^out$' -e '^err$' | tr '\n' ' ')"
