@@ -1150,4 +1150,23 @@ mod tests {
         assert!(spread::<1>(52) > 4_050, "facts 52-63 of one word");
         assert!(spread::<1>(0) > 4_050, "facts 0-11 of one word");
     }
+
+    /// A planning error reads as words, not as the program's type (`Unsolvable { expanded:
+    /// 1 }` reached the runtime's messages).
+    #[test]
+    fn planning_errors_read_as_words() {
+        use std::string::ToString;
+        assert_eq!(
+            PlanningError::Unsolvable { expanded: 1 }.to_string(),
+            "no plan exists (1 states searched)"
+        );
+        assert_eq!(
+            PlanningError::Budget {
+                expanded: 3,
+                limit: 9
+            }
+            .to_string(),
+            "none found within 9 nodes"
+        );
+    }
 }
