@@ -131,6 +131,7 @@ pub mod exec;
 pub mod fsm;
 pub mod model;
 pub mod platform;
+pub mod record;
 pub mod runtime;
 pub mod sense;
 pub mod store;

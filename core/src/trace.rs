@@ -310,8 +310,20 @@ impl TraceHash {
     /// words after them (none in a one-word runtime, whose hashes are therefore the same as
     /// before fact sets had a width).
     pub fn add<const W: usize>(&mut self, at: Instant, event: &TraceEvent<W>) {
+        let (header, payload) = Self::words(event);
+        self.word(at.as_ticks());
+        self.word(header);
+        for w in payload.words() {
+            self.word(w);
+        }
+    }
+
+    /// The fixed encoding of `event` that the hash mixes: a header word (the kind and its
+    /// small fields) and a fact set (the event's facts, or a wider field in its low word).
+    /// The flight recorder ([`crate::record`]) stores exactly these words. O(1).
+    pub fn words<const W: usize>(event: &TraceEvent<W>) -> (u64, FactSetOf<W>) {
         use TraceEvent as E;
-        let (header, payload) = match *event {
+        match *event {
             E::ModelEstablished { beliefs } => (head(0, 0, 0, 0), beliefs),
             E::PlanSelected { plan, event } => {
                 (head(1, id(plan.index()), id(event.index()), 0), none())
@@ -381,11 +393,6 @@ impl TraceHash {
             E::PlanGenerated { length, expanded } => {
                 (head(18, length, 0, 0), low(u64::from(expanded)))
             }
-        };
-        self.word(at.as_ticks());
-        self.word(header);
-        for w in payload.words() {
-            self.word(w);
         }
     }
 }

@@ -1,0 +1,418 @@
+//! The flight recorder's format: what the deciding side consumed and decided, as compact
+//! binary frames a robot can stream (RTT, a RAM ring) and a host can check and replay.
+//!
+//! A recording is a [`Header`] (magic, version, fact-set width, the mission's hash) and then
+//! one [`Frame`] an event of the runtime's trace: the event's instant in ticks and the words
+//! [`TraceHash`] mixes for it ([`TraceHash::words`]), so a recording holds every delivered
+//! sample (sensor, value, the facts it decides), every lost sample and sensor fault, every
+//! behaviour's outcome, the plans selected and the states entered, bit for bit. Each frame
+//! carries its length and a CRC-32 of its bytes: a corrupted or cut recording is detected
+//! ([`RecordError`]), never read as events.
+//!
+//! Layout, little-endian: header `"PSMPAREC"`, version `u16`, width `u8` (fact-set words),
+//! mission `u64`; frame: length `u8` (of what follows, checksum excluded), ticks `u64`,
+//! header word `u64`, `W` fact-set words `u64`, CRC-32 (IEEE) `u32` of the length byte and
+//! what follows it.
+//!
+//! ```
+//! use embassy_time::Instant;
+//! use psmpa_core::record::{self, Frame};
+//! use psmpa_core::{SensorId, TraceEvent};
+//!
+//! let event: TraceEvent = TraceEvent::SensorOn { sensor: SensorId::new(1).unwrap() };
+//! let mut buf = [0u8; record::MAX_FRAME];
+//! let n = Frame::of(Instant::from_ticks(42), &event).encode(&mut buf).unwrap();
+//! let (back, used) = Frame::<1>::decode(&buf[..n], 0).unwrap();
+//! assert_eq!((back.ticks, used), (42, n));
+//! assert_eq!(back, Frame::of(Instant::from_ticks(42), &event));
+//! ```
+
+use embassy_time::Instant;
+
+use crate::facts::FactSetOf;
+use crate::trace::{TraceEvent, TraceHash, TraceSink};
+
+/// The first bytes of every recording.
+pub const MAGIC: [u8; 8] = *b"PSMPAREC";
+/// The format's version; a recording of another is refused ([`RecordError::Version`]).
+pub const VERSION: u16 = 1;
+/// Bytes of a [`Header`].
+pub const HEADER_LEN: usize = 8 + 2 + 1 + 8;
+/// The widest fact sets a frame holds: 4 words, 256 facts (the loader's most).
+pub const MAX_WORDS: usize = 4;
+/// Bytes of the largest frame.
+pub const MAX_FRAME: usize = frame_len(MAX_WORDS);
+
+/// Bytes of a frame of a `words`-word runtime: 29 for one word.
+pub const fn frame_len(words: usize) -> usize {
+    words.saturating_mul(8).saturating_add(21)
+}
+
+/// Why bytes are not a recording, or not this one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RecordError {
+    /// It does not start with [`MAGIC`].
+    NotARecording,
+    /// Written by another version of the format.
+    Version {
+        /// The version it was written in.
+        found: u16,
+    },
+    /// Its fact sets are of another width than the reader's (or wider than [`MAX_WORDS`]).
+    Width {
+        /// Its width, words.
+        found: u8,
+    },
+    /// The frame at byte `at` fails its checksum, or its length is not a frame's.
+    Corrupt {
+        /// Where the frame starts.
+        at: usize,
+    },
+    /// The bytes end inside the header or the frame at byte `at`.
+    Cut {
+        /// Where the cut item starts.
+        at: usize,
+    },
+    /// A buffer too small for a frame was given to [`Frame::encode`].
+    Buffer,
+}
+
+impl core::fmt::Display for RecordError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NotARecording => f.write_str("not a recording (no PSMPAREC at its start)"),
+            Self::Version { found } => write!(
+                f,
+                "a recording of format version {found}, this reads version {VERSION}"
+            ),
+            Self::Width { found } => write!(f, "a recording of {found}-word fact sets"),
+            Self::Corrupt { at } => write!(f, "the frame at byte {at} fails its checksum"),
+            Self::Cut { at } => write!(f, "cut short in the item at byte {at}"),
+            Self::Buffer => f.write_str("the buffer is smaller than a frame"),
+        }
+    }
+}
+
+/// What a recording says of itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Header {
+    /// Fact-set words of the runtime that wrote it.
+    pub width: u8,
+    /// The recorded mission's hash (the writer's choice of what it covers; `psmpa-sim` hashes
+    /// the mission and the scenario), so that a replay against another mission is refused.
+    pub mission: u64,
+}
+
+impl Header {
+    /// The header's bytes.
+    pub fn encode(&self) -> [u8; HEADER_LEN] {
+        let mut out = [0u8; HEADER_LEN];
+        let (magic, rest) = out.split_at_mut(8);
+        magic.copy_from_slice(&MAGIC);
+        let (version, rest) = rest.split_at_mut(2);
+        version.copy_from_slice(&VERSION.to_le_bytes());
+        let (width, mission) = rest.split_at_mut(1);
+        width.copy_from_slice(&[self.width]);
+        mission.copy_from_slice(&self.mission.to_le_bytes());
+        out
+    }
+
+    /// Reads the header at the start of `bytes`.
+    pub fn decode(bytes: &[u8]) -> Result<Self, RecordError> {
+        if bytes.get(..MAGIC.len()).is_some_and(|m| m != MAGIC) {
+            return Err(RecordError::NotARecording);
+        }
+        let header = bytes.get(..HEADER_LEN);
+        let Some(header) = header else {
+            return Err(if bytes.len() < MAGIC.len() && !MAGIC.starts_with(bytes) {
+                RecordError::NotARecording
+            } else {
+                RecordError::Cut { at: 0 }
+            });
+        };
+        let version = u16::from_le_bytes([byte(header, 8), byte(header, 9)]);
+        if version != VERSION {
+            return Err(RecordError::Version { found: version });
+        }
+        Ok(Self {
+            width: byte(header, 10),
+            mission: u64_at(header, 11),
+        })
+    }
+}
+
+/// One recorded event: its instant and the words of [`TraceHash::words`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Frame<const W: usize> {
+    /// The event's instant, ticks.
+    pub ticks: u64,
+    /// The event's header word.
+    pub header: u64,
+    /// The event's fact set.
+    pub payload: FactSetOf<W>,
+}
+
+impl<const W: usize> Frame<W> {
+    /// The frame of `event` at `at`. O(W).
+    pub fn of(at: Instant, event: &TraceEvent<W>) -> Self {
+        let (header, payload) = TraceHash::words(event);
+        Self {
+            ticks: at.as_ticks(),
+            header,
+            payload,
+        }
+    }
+
+    /// The event's kind, as the header word encodes it (a `TraceEvent` variant's number).
+    pub fn kind(&self) -> u8 {
+        (self.header & 0xFF) as u8
+    }
+
+    /// Writes the frame into `buf`; its length. O(W).
+    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, RecordError> {
+        let len = frame_len(W);
+        if W > MAX_WORDS {
+            return Err(RecordError::Width { found: W as u8 });
+        }
+        let out = buf.get_mut(..len).ok_or(RecordError::Buffer)?;
+        let body = len.saturating_sub(4);
+        let mut at = 0usize;
+        let mut put = |bytes: &[u8]| {
+            let end = at.saturating_add(bytes.len());
+            if let Some(dst) = out.get_mut(at..end) {
+                dst.copy_from_slice(bytes);
+            }
+            at = end;
+        };
+        put(&[body.saturating_sub(1) as u8]);
+        put(&self.ticks.to_le_bytes());
+        put(&self.header.to_le_bytes());
+        for w in self.payload.words() {
+            put(&w.to_le_bytes());
+        }
+        let crc = crc32(out.get(..body).unwrap_or(&[]));
+        if let Some(dst) = out.get_mut(body..len) {
+            dst.copy_from_slice(&crc.to_le_bytes());
+        }
+        Ok(len)
+    }
+
+    /// Reads the frame that starts at `bytes[0]`, which is byte `at` of the recording (for
+    /// errors); the frame and its length in bytes.
+    pub fn decode(bytes: &[u8], at: usize) -> Result<(Self, usize), RecordError> {
+        let len = frame_len(W);
+        let Some(&first) = bytes.first() else {
+            return Err(RecordError::Cut { at });
+        };
+        if usize::from(first) != len.saturating_sub(5) {
+            return Err(RecordError::Corrupt { at });
+        }
+        let frame = bytes.get(..len).ok_or(RecordError::Cut { at })?;
+        let body = len.saturating_sub(4);
+        let crc = (u64_at(frame, body) & 0xFFFF_FFFF) as u32;
+        if crc != crc32(frame.get(..body).unwrap_or(&[])) {
+            return Err(RecordError::Corrupt { at });
+        }
+        let mut words = [0u64; W];
+        for (i, w) in words.iter_mut().enumerate() {
+            *w = u64_at(frame, i.saturating_mul(8).saturating_add(17));
+        }
+        Ok((
+            Self {
+                ticks: u64_at(frame, 1),
+                header: u64_at(frame, 9),
+                payload: FactSetOf::from_words(words),
+            },
+            len,
+        ))
+    }
+}
+
+/// Every frame of a recording after its header, in order, each or why it cannot be read (the
+/// first error ends the iteration).
+pub fn frames<const W: usize>(
+    recording: &[u8],
+) -> impl Iterator<Item = Result<Frame<W>, RecordError>> + '_ {
+    let mut at = HEADER_LEN;
+    let mut failed = false;
+    core::iter::from_fn(move || {
+        if failed || at >= recording.len() {
+            return None;
+        }
+        let result = Frame::decode(recording.get(at..).unwrap_or(&[]), at);
+        match result {
+            Ok((frame, len)) => {
+                at = at.saturating_add(len);
+                Some(Ok(frame))
+            }
+            Err(e) => {
+                failed = true;
+                Some(Err(e))
+            }
+        }
+    })
+}
+
+/// Where a [`Recorder`] puts its bytes: a byte stream (RTT, a file) or a ring in RAM.
+pub trait RecordOut {
+    /// Takes the bytes of one header or one frame, whole.
+    fn write(&mut self, bytes: &[u8]);
+}
+
+/// A [`TraceSink`] that records every event into `out`, a header first. O(W) an event, no
+/// allocation.
+#[derive(Debug)]
+pub struct Recorder<O> {
+    out: O,
+}
+
+impl<O: RecordOut> Recorder<O> {
+    /// Starts a recording of a `W`-word runtime's mission `mission` (a hash) in `out`.
+    pub fn new<const W: usize>(mut out: O, mission: u64) -> Self {
+        out.write(
+            &Header {
+                width: W as u8,
+                mission,
+            }
+            .encode(),
+        );
+        Self { out }
+    }
+
+    /// The output, giving up the recorder.
+    pub fn into_inner(self) -> O {
+        self.out
+    }
+}
+
+impl<O: RecordOut, const W: usize> TraceSink<W> for Recorder<O> {
+    fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
+        let mut buf = [0u8; MAX_FRAME];
+        if let Ok(n) = Frame::of(at, event).encode(&mut buf) {
+            self.out.write(buf.get(..n).unwrap_or(&[]));
+        }
+    }
+}
+
+fn byte(bytes: &[u8], i: usize) -> u8 {
+    bytes.get(i).copied().unwrap_or(0)
+}
+
+fn u64_at(bytes: &[u8], i: usize) -> u64 {
+    let mut b = [0u8; 8];
+    for (k, v) in b.iter_mut().enumerate() {
+        *v = byte(bytes, i.saturating_add(k));
+    }
+    u64::from_le_bytes(b)
+}
+
+/// CRC-32 (IEEE 802.3, reflected, as zlib's), a bit at a time: no table in flash.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+        }
+    }
+    !crc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::action::SensorId;
+    use crate::facts::{FactId, FactSet};
+    use crate::store::Value;
+    use std::vec::Vec;
+
+    impl RecordOut for Vec<u8> {
+        fn write(&mut self, bytes: &[u8]) {
+            self.extend_from_slice(bytes);
+        }
+    }
+
+    fn recording() -> Vec<u8> {
+        let sonar = SensorId::new(0).unwrap();
+        let clear = FactSet::single(FactId::new(3).unwrap());
+        let mut rec = Recorder::new::<1>(Vec::new(), 0xABCD);
+        for (t, e) in [
+            (0, TraceEvent::SensorOn { sensor: sonar }),
+            (
+                100,
+                TraceEvent::Sample {
+                    sensor: sonar,
+                    value: Value::Mm(-1234),
+                    holds: clear,
+                },
+            ),
+            (200, TraceEvent::SampleLost { sensor: sonar }),
+        ] {
+            TraceSink::<1>::record(&mut rec, Instant::from_ticks(t), &e);
+        }
+        rec.into_inner()
+    }
+
+    #[test]
+    fn the_check_value_is_zlib_s() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    }
+
+    #[test]
+    fn frames_read_back_as_written_and_hash_alike() {
+        let bytes = recording();
+        assert_eq!(bytes.len(), HEADER_LEN + 3 * frame_len(1));
+        let header = Header::decode(&bytes).unwrap();
+        assert_eq!((header.width, header.mission), (1, 0xABCD));
+        let frames: Vec<Frame<1>> = frames(&bytes).map(Result::unwrap).collect();
+        assert_eq!(
+            frames.iter().map(|f| f.ticks).collect::<Vec<_>>(),
+            [0, 100, 200]
+        );
+        // The words are the trace hash's: a recording hashes as the run did.
+        let (h, p) = TraceHash::words::<1>(&TraceEvent::Sample {
+            sensor: SensorId::new(0).unwrap(),
+            value: Value::Mm(-1234),
+            holds: FactSet::single(FactId::new(3).unwrap()),
+        });
+        assert_eq!((frames[1].header, frames[1].payload), (h, p));
+        assert_eq!(frames[1].kind(), 9);
+    }
+
+    #[test]
+    fn a_changed_byte_or_a_cut_is_detected_never_read() {
+        let bytes = recording();
+        for i in HEADER_LEN..bytes.len() {
+            let mut bad = bytes.clone();
+            bad[i] ^= 0x10;
+            let errors: Vec<_> = frames::<1>(&bad).filter_map(Result::err).collect();
+            assert_eq!(errors.len(), 1, "byte {i}");
+            assert!(matches!(errors[0], RecordError::Corrupt { .. }), "byte {i}");
+        }
+        for cut in HEADER_LEN + 1..bytes.len() {
+            if (cut - HEADER_LEN) % frame_len(1) == 0 {
+                continue;
+            }
+            let last = frames::<1>(&bytes[..cut]).last().unwrap();
+            assert!(matches!(last, Err(RecordError::Cut { .. })), "cut at {cut}");
+        }
+        assert_eq!(Header::decode(&bytes[..5]), Err(RecordError::Cut { at: 0 }));
+    }
+
+    #[test]
+    fn other_files_and_versions_are_refused_with_a_reason() {
+        assert_eq!(
+            Header::decode(b"{\"name\": \"sonar-8\"}"),
+            Err(RecordError::NotARecording)
+        );
+        assert_eq!(Header::decode(b""), Err(RecordError::Cut { at: 0 }));
+        let mut old = recording();
+        old[8] = 0;
+        assert_eq!(Header::decode(&old), Err(RecordError::Version { found: 0 }));
+        assert_eq!(
+            std::format!("{}", RecordError::Version { found: 0 }),
+            "a recording of format version 0, this reads version 1"
+        );
+    }
+}
