@@ -150,7 +150,7 @@ fn space(c: char) -> bool {
     return c.is_ascii_whitespace() || c == '\u{a0}';
 }
 
-/// A name that is empty or only white space and invisible characters ([`hidden`]: zero-width
+/// A name that is empty or only white space and invisible characters (`hidden`: zero-width
 /// spaces, bidi marks, ...): it could not be told apart in print.
 pub fn blank(name: &str) -> bool {
     name.chars().all(|c| space(c) || hidden(c))
