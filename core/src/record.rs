@@ -29,7 +29,10 @@
 
 use embassy_time::Instant;
 
+use crate::action::{ActionId, SensorId};
 use crate::facts::FactSetOf;
+use crate::platform::{Outcome, SensorFault};
+use crate::store::Value;
 use crate::trace::{TraceEvent, TraceHash, TraceSink};
 
 /// The first bytes of every recording.
@@ -229,6 +232,124 @@ impl<const W: usize> Frame<W> {
     }
 }
 
+/// What a replay feeds the runtime, read back from a frame: the platform's side of the trace
+/// (readings, faults, a behaviour's outcome and its own events) and the states it runs in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Input<const W: usize> {
+    /// A sensor delivered a sample.
+    Sample {
+        /// The sensor.
+        sensor: SensorId,
+        /// Its main value.
+        value: Value,
+        /// The facts it decided true.
+        holds: FactSetOf<W>,
+    },
+    /// A sensor answered without a value.
+    Lost {
+        /// The sensor.
+        sensor: SensorId,
+    },
+    /// A sensor failed.
+    Fault {
+        /// The sensor.
+        sensor: SensorId,
+        /// How.
+        fault: SensorFault,
+    },
+    /// A behaviour state started.
+    Entered {
+        /// The state's index.
+        state: u8,
+        /// Its action.
+        action: ActionId,
+    },
+    /// A behaviour state ended; `None`: the runtime cut it short.
+    Left {
+        /// The state's index.
+        state: u8,
+        /// Its action.
+        action: ActionId,
+        /// How the behaviour ended.
+        outcome: Option<Outcome>,
+    },
+    /// A behaviour's own event (`ActionIo::trace`).
+    User {
+        /// Its code.
+        code: u16,
+        /// Its value.
+        value: i32,
+    },
+}
+
+impl<const W: usize> Frame<W> {
+    fn field(&self, i: u32) -> u8 {
+        (self.header.checked_shr(i.saturating_mul(8)).unwrap_or(0) & 0xFF) as u8
+    }
+
+    fn action(&self) -> Option<ActionId> {
+        ActionId::new(usize::from(self.field(2)) | usize::from(self.field(5)) << 8)
+    }
+
+    /// The input this frame records, if it is one ([`Input`]); `None` for the runtime's own
+    /// decisions (plans, beliefs, violations, sensors switched) and for fields out of range.
+    pub fn input(&self) -> Option<Input<W>> {
+        let sensor = || SensorId::new(usize::from(self.field(1)));
+        let low = self.payload.words().first().copied().unwrap_or(0);
+        Some(match self.kind() {
+            9 => {
+                let v = self.header.checked_shr(32).unwrap_or(0) as u32;
+                let signed = i32::from_le_bytes(v.to_le_bytes());
+                Input::Sample {
+                    sensor: sensor()?,
+                    value: match self.field(2) {
+                        0 => Value::Bool(v != 0),
+                        1 => Value::Int(signed),
+                        2 => Value::Mm(signed),
+                        3 => Value::Level(u8::try_from(v).ok()?),
+                        4 => Value::NoEcho,
+                        _ => return None,
+                    },
+                    holds: self.payload,
+                }
+            }
+            17 => Input::Lost { sensor: sensor()? },
+            10 => Input::Fault {
+                sensor: sensor()?,
+                fault: match self.field(2) {
+                    0 => SensorFault::Timeout,
+                    1 => SensorFault::OutOfRange,
+                    2 => SensorFault::Stuck,
+                    3 => SensorFault::Device(self.field(3)),
+                    4 => SensorFault::Silent,
+                    5 => SensorFault::Unbound,
+                    _ => return None,
+                },
+            },
+            4 => Input::Entered {
+                state: self.field(1),
+                action: self.action()?,
+            },
+            5 => Input::Left {
+                state: self.field(1),
+                action: self.action()?,
+                outcome: match self.field(3) {
+                    0 => None,
+                    1 => Some(Outcome::Success),
+                    2 => Some(Outcome::Failure),
+                    3 => Some(Outcome::Interrupted),
+                    _ => return None,
+                },
+            },
+            16 => Input::User {
+                code: (self.header.checked_shr(16).unwrap_or(0) & 0xFFFF) as u16,
+                value: i32::from_le_bytes(((low & 0xFFFF_FFFF) as u32).to_le_bytes()),
+            },
+            _ => return None,
+        })
+    }
+}
+
 /// Every frame of a recording after its header, in order, each or why it cannot be read (the
 /// first error ends the iteration).
 pub fn frames<const W: usize>(
@@ -280,6 +401,12 @@ impl<O: RecordOut> Recorder<O> {
         Self { out }
     }
 
+    /// A recorder that writes frames only: its caller wrote the header (and whatever it
+    /// keeps between the header and the frames, a tool's prologue).
+    pub fn frames_only(out: O) -> Self {
+        Self { out }
+    }
+
     /// The output, giving up the recorder.
     pub fn into_inner(self) -> O {
         self.out
@@ -308,7 +435,7 @@ fn u64_at(bytes: &[u8], i: usize) -> u64 {
 }
 
 /// CRC-32 (IEEE 802.3, reflected, as zlib's), a bit at a time: no table in flash.
-fn crc32(bytes: &[u8]) -> u32 {
+pub fn crc32(bytes: &[u8]) -> u32 {
     let mut crc = !0u32;
     for &b in bytes {
         crc ^= u32::from(b);
@@ -414,5 +541,75 @@ mod tests {
             std::format!("{}", RecordError::Version { found: 0 }),
             "a recording of format version 0, this reads version 1"
         );
+    }
+
+    /// The inputs a replay feeds read back as they were traced.
+    #[test]
+    fn inputs_read_back_from_their_frames() {
+        let sonar = SensorId::new(2).unwrap();
+        let action = ActionId::new(300).unwrap();
+        let clear = FactSet::single(FactId::new(3).unwrap());
+        for (event, input) in [
+            (
+                TraceEvent::Sample {
+                    sensor: sonar,
+                    value: Value::Mm(-7),
+                    holds: clear,
+                },
+                Some(Input::Sample {
+                    sensor: sonar,
+                    value: Value::Mm(-7),
+                    holds: clear,
+                }),
+            ),
+            (
+                TraceEvent::Sample {
+                    sensor: sonar,
+                    value: Value::Level(2),
+                    holds: FactSet::EMPTY,
+                },
+                Some(Input::Sample {
+                    sensor: sonar,
+                    value: Value::Level(2),
+                    holds: FactSet::EMPTY,
+                }),
+            ),
+            (
+                TraceEvent::SensorFailed {
+                    sensor: sonar,
+                    fault: SensorFault::Device(9),
+                },
+                Some(Input::Fault {
+                    sensor: sonar,
+                    fault: SensorFault::Device(9),
+                }),
+            ),
+            (
+                TraceEvent::StateLeft {
+                    state: 3,
+                    action,
+                    outcome: Some(Outcome::Interrupted),
+                },
+                Some(Input::Left {
+                    state: 3,
+                    action,
+                    outcome: Some(Outcome::Interrupted),
+                }),
+            ),
+            (
+                TraceEvent::User {
+                    code: 513,
+                    value: -2,
+                },
+                Some(Input::User {
+                    code: 513,
+                    value: -2,
+                }),
+            ),
+            (TraceEvent::SensorOn { sensor: sonar }, None),
+        ] {
+            let frame = Frame::<1>::of(Instant::from_ticks(5), &event);
+            assert_eq!(frame.input(), input, "{event:?}");
+        }
     }
 }
