@@ -16,6 +16,8 @@ pub use psmpa_model::json;
 pub mod load;
 #[cfg(feature = "std")]
 pub mod planning;
+#[cfg(feature = "std")]
+pub mod replay;
 pub mod robot;
 pub mod run;
 pub mod scenario;

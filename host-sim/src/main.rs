@@ -84,6 +84,23 @@ enum Command {
         /// (JSON messages, log time = simulated time).
         #[arg(long, value_name = "FILE.mcap")]
         mcap: Option<PathBuf>,
+        /// Write the run's flight recording (what the runtime consumed and decided, with the
+        /// scenario), for `psmpa-sim replay`.
+        #[arg(long, value_name = "FILE.rec")]
+        record: Option<PathBuf>,
+    },
+    /// Replays a flight recording through the runtime with no world, the recorded readings and
+    /// outcomes at their instants, and compares every decision. Exit status 0 when all match,
+    /// 1 at the first divergence, 2 for a file that is not a whole recording of this mission.
+    Replay {
+        /// The recording (`run --record`).
+        recording: PathBuf,
+        /// Print exactly one JSON object: decisions, diverged, and the divergence.
+        #[arg(long)]
+        json: bool,
+        /// Also write the replay's events as an MCAP log for Foxglove.
+        #[arg(long, value_name = "FILE.mcap")]
+        mcap: Option<PathBuf>,
     },
     /// Validates a mission file and prints each plan's FSM with its parallel sensor sets.
     Check {
@@ -231,6 +248,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
             plot,
             timeline,
             mcap,
+            record,
         } => {
             let bytes = files::read_input(&scenario, "scenario").map_err(Stop::Bad)?;
             let sc = load::parse(&scenario, &bytes).map_err(Stop::bad)?;
@@ -241,6 +259,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 ("--plot", &plot),
                 ("--timeline", &timeline),
                 ("--mcap", &mcap),
+                ("--record", &record),
             ] {
                 named.extend(path.as_deref().map(|p| (flag, p)));
             }
@@ -253,45 +272,56 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 (create(trace.as_deref())?, create(timeline.as_deref())?);
             let plot = create(plot.as_deref())?;
             let mut mcap = create(mcap.as_deref())?;
+            let mut record = create(record.as_deref())?;
             // A streamed output that fails stops the run at once (`--trace /dev/full`).
             let failed = Arc::new(AtomicBool::new(false));
-            for out in [&mut trace, &mut timeline, &mut mcap].into_iter().flatten() {
+            for out in [&mut trace, &mut timeline, &mut mcap, &mut record]
+                .into_iter()
+                .flatten()
+            {
                 out.alarm(Arc::clone(&failed));
             }
             warn_of_size(&sc, trace.is_some(), mcap.is_some());
-            let (summary, done) =
-                if trace.is_none() && timeline.is_none() && plot.is_none() && mcap.is_none() {
-                    // Nothing to write: keep no event log.
-                    (run_summary(&sc, arch).map_err(Stop::internal)?, Vec::new())
-                } else {
-                    let mut streams = Streams::new(&sc, arch, trace, timeline, plot.is_some());
-                    if let Some(out) = mcap {
-                        streams = streams.with_mcap(out, &sc).map_err(Stop::Bad)?;
+            let (summary, done) = if trace.is_none()
+                && timeline.is_none()
+                && plot.is_none()
+                && mcap.is_none()
+                && record.is_none()
+            {
+                // Nothing to write: keep no event log.
+                (run_summary(&sc, arch).map_err(Stop::internal)?, Vec::new())
+            } else {
+                let mut streams = Streams::new(&sc, arch, trace, timeline, plot.is_some());
+                if let Some(out) = mcap {
+                    streams = streams.with_mcap(out, &sc).map_err(Stop::Bad)?;
+                }
+                if let Some(out) = record {
+                    streams = streams.with_record(out, &bytes, arch);
+                }
+                let streams = RefCell::new(streams);
+                let (summary, _, _) = match run_logged_until(
+                    &sc,
+                    arch,
+                    WorldStream(&streams),
+                    TraceStream(&streams),
+                    || failed.load(Ordering::Relaxed),
+                ) {
+                    Ok(done) => done,
+                    Err(RunError::Stopped) => {
+                        return Err(Stop::Bad(first_write_error(streams.into_inner())));
                     }
-                    let streams = RefCell::new(streams);
-                    let (summary, _, _) = match run_logged_until(
-                        &sc,
-                        arch,
-                        WorldStream(&streams),
-                        TraceStream(&streams),
-                        || failed.load(Ordering::Relaxed),
-                    ) {
-                        Ok(done) => done,
-                        Err(RunError::Stopped) => {
-                            return Err(Stop::Bad(first_write_error(streams.into_inner())));
-                        }
-                        Err(e) => return Err(Stop::internal(e)),
-                    };
-                    let (done, world) = streams
-                        .into_inner()
-                        .finish(summary.time_cost_ms)
-                        .map_err(Stop::Bad)?;
-                    let mut done = done;
-                    if let Some(out) = plot {
-                        done.push(plot_both(out, world, &summary, &sc)?);
-                    }
-                    (summary, done)
+                    Err(e) => return Err(Stop::internal(e)),
                 };
+                let (done, world) = streams
+                    .into_inner()
+                    .finish(summary.time_cost_ms)
+                    .map_err(Stop::Bad)?;
+                let mut done = done;
+                if let Some(out) = plot {
+                    done.push(plot_both(out, world, &summary, &sc)?);
+                }
+                (summary, done)
+            };
             let text = if json {
                 let j = report::RunJson::new(&sc, &summary);
                 serde_json::to_string(&j).map_err(Stop::internal)? + "\n"
@@ -299,6 +329,36 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 report::human(&sc, &summary)
             };
             files::print_and_commit(text.as_bytes(), done)?;
+        }
+        Command::Replay {
+            recording,
+            json,
+            mcap,
+        } => {
+            if let Some(out) = &mcap {
+                files::distinct(&[("the recording", &recording), ("--mcap", out)])
+                    .map_err(Stop::Bad)?;
+            }
+            let mcap = create(mcap.as_deref())?;
+            let bytes =
+                files::read_limited(&recording, "recording", psmpa_sim::replay::MAX_RECORDING)
+                    .map_err(Stop::Bad)?;
+            let rec = psmpa_sim::replay::read(&recording, &bytes).map_err(Stop::Bad)?;
+            let (result, log) = psmpa_sim::replay::replay(&rec, mcap).map_err(Stop::internal)?;
+            let text = if json {
+                serde_json::to_string(&result).map_err(Stop::internal)? + "\n"
+            } else {
+                result.text()
+            };
+            let printed = files::print_and_commit(text.as_bytes(), log);
+            // A divergence is status 1 even when the reader has gone.
+            if result.diverged {
+                return Err(match printed {
+                    Err(Stop::Bad(m)) => Stop::Bad(m),
+                    _ => Stop::NoPlan,
+                });
+            }
+            printed?;
         }
         Command::Check {
             mission,

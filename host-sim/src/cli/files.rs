@@ -105,6 +105,11 @@ fn kind(meta: &Metadata) -> &'static str {
 /// file of at most [`MAX_INPUT`] bytes. A FIFO, device or directory is refused before it is
 /// opened (opening a FIFO waits for a writer forever; a device may never end).
 pub fn read_input(path: &Path, what: &str) -> Result<Vec<u8>, String> {
+    read_limited(path, what, MAX_INPUT)
+}
+
+/// [`read_input`] with a limit of `max` bytes (a recording may be larger than a scenario).
+pub fn read_limited(path: &Path, what: &str, max: u64) -> Result<Vec<u8>, String> {
     let at = |message: String| format!("{}: {message}", path.display());
     let refuse = |meta: &Metadata| {
         at(format!(
@@ -127,17 +132,17 @@ pub fn read_input(path: &Path, what: &str) -> Result<Vec<u8>, String> {
     let too_large = || {
         at(format!(
             "the file is larger than {} MiB, the limit for a {what} file",
-            MAX_INPUT >> 20
+            max >> 20
         ))
     };
-    if meta.len() > MAX_INPUT {
+    if meta.len() > max {
         return Err(too_large());
     }
     let mut bytes = Vec::new();
-    file.take(MAX_INPUT + 1)
+    file.take(max + 1)
         .read_to_end(&mut bytes)
         .map_err(|e| at(format!("cannot read the file: {e}")))?;
-    if bytes.len() as u64 > MAX_INPUT {
+    if bytes.len() as u64 > max {
         return Err(too_large());
     }
     Ok(bytes)

@@ -639,6 +639,8 @@ pub struct Streams {
     timeline: Option<Timeline<Output>>,
     /// The MCAP log and the path it is for (its errors name it).
     mcap: Option<(McapLog<Output>, PathBuf)>,
+    /// The flight recording (`--record`).
+    record: Option<psmpa_core::record::Recorder<crate::replay::RecordFile>>,
     world: Option<WorldRecord>,
 }
 
@@ -656,6 +658,7 @@ impl Streams {
             csv: csv.map(|o| TraceCsv::new(o, scenario)),
             timeline: timeline.map(|o| Timeline::new(o, scenario, arch)),
             mcap: None,
+            record: None,
             world: keep_world.then(WorldRecord::default),
         }
     }
@@ -666,6 +669,13 @@ impl Streams {
         let log = McapLog::new(out, scenario).map_err(|e| format!("{}: {e}", path.display()))?;
         self.mcap = Some((log, path));
         Ok(self)
+    }
+
+    /// Also records the run into `out` (`--record`): the scenario's bytes and the architecture
+    /// go in the recording.
+    pub fn with_record(mut self, out: Output, scenario_json: &[u8], arch: Arch) -> Self {
+        self.record = Some(crate::replay::recorder(out, scenario_json, arch));
+        self
     }
 
     /// Ends the outputs of a run that ended at `end_ms`; gives back the outputs to commit
@@ -684,6 +694,9 @@ impl Streams {
                 log.finish()
                     .map_err(|e| format!("{}: {e}", path.display()))?,
             );
+        }
+        if let Some(record) = self.record {
+            outputs.push(record.into_inner().0);
         }
         Ok((outputs, self.world))
     }
@@ -724,6 +737,9 @@ impl TraceSink for TraceStream<'_> {
         }
         if let Some((log, _)) = &mut s.mcap {
             log.runtime(at, event);
+        }
+        if let Some(record) = &mut s.record {
+            record.record(at, event);
         }
     }
 }

@@ -1,0 +1,524 @@
+//! A run's flight recording and its replay: `psmpa-sim run --record FILE` records what the
+//! runtime consumed and decided ([`psmpa_core::record`]); `psmpa-sim replay FILE` runs the
+//! recorded mission again through the same runtime with no world, feeding it the recorded
+//! readings, faults and behaviour outcomes at their instants, and compares every event it
+//! traces with the recording.
+//!
+//! A file is the core's header (its mission hash covers the Fetch Tea mission, the scenario's
+//! bytes and the architecture), a prologue (the scenario's bytes and the architecture, with
+//! a CRC-32), then the core's frames.
+
+use core::cell::{Cell, RefCell};
+use core::future::{pending, poll_fn};
+use core::pin::pin;
+use core::task::{Poll, Waker};
+use std::path::Path;
+
+use embassy_futures::select::select;
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_time::{Duration, Instant, Timer};
+use psmpa_core::record::{self, Frame, Header, Input, RecordOut, Recorder};
+use psmpa_core::{
+    ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Runtime, Sensor, SensorFault,
+    SensorId, SensorMode, TraceEvent, TraceHash, TraceSink,
+};
+use serde::Serialize;
+
+use crate::backend::simulate;
+use crate::cli::files::Output;
+use crate::cli::foxglove::McapLog;
+use crate::robot::{self, Arch, Caps, FetchTea};
+use crate::run::Sides as _;
+use crate::scenario::Scenario;
+use crate::sim::Prioritized;
+
+/// The largest recording `replay` reads: 256 MiB (a day of 1 ms samples is about 10 GB; a
+/// shipped scenario's, tens of kB).
+pub const MAX_RECORDING: u64 = 256 << 20;
+
+/// What a recording's decisions depend on: the mission, the scenario's bytes, the
+/// architecture.
+pub fn mission_hash(scenario_json: &[u8], arch: Arch) -> u64 {
+    let mut h = TraceHash::new();
+    h.write(robot::FETCH_TEA);
+    h.write(scenario_json);
+    h.write(&[arch_byte(arch)]);
+    h.value()
+}
+
+fn arch_byte(arch: Arch) -> u8 {
+    match arch {
+        Arch::PSmpa => 0,
+        Arch::Smpa => 1,
+    }
+}
+
+/// A recording's bytes before its frames: the core's header and the prologue.
+pub fn start(scenario_json: &[u8], arch: Arch) -> Vec<u8> {
+    let mut out = Header {
+        width: 1,
+        mission: mission_hash(scenario_json, arch),
+    }
+    .encode()
+    .to_vec();
+    let prologue_at = out.len();
+    out.extend_from_slice(&(scenario_json.len() as u32).to_le_bytes());
+    out.extend_from_slice(scenario_json);
+    out.push(arch_byte(arch));
+    let crc = record::crc32(&out[prologue_at..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
+/// A recording streamed into an output file.
+pub struct RecordFile(pub Output);
+
+impl RecordOut for RecordFile {
+    fn write(&mut self, bytes: &[u8]) {
+        // An `Output` keeps a write error for its commit (and raises its alarm).
+        let _ = std::io::Write::write_all(&mut self.0, bytes);
+    }
+}
+
+/// The recorder of a run: a [`TraceSink`] into `out`, the header and prologue written first.
+pub fn recorder(out: Output, scenario_json: &[u8], arch: Arch) -> Recorder<RecordFile> {
+    let mut out = RecordFile(out);
+    out.write(&start(scenario_json, arch));
+    Recorder::frames_only(out)
+}
+
+/// A recording, read and checked.
+pub struct Recording {
+    /// The scenario's bytes as recorded.
+    pub scenario_json: Vec<u8>,
+    /// The scenario.
+    pub scenario: Scenario,
+    /// The architecture.
+    pub arch: Arch,
+    /// Every recorded event.
+    pub frames: Vec<Frame<1>>,
+}
+
+/// Reads a recording from `bytes` (from `file`): one line naming the file and the fault when
+/// it is not one, not whole, or not of this mission.
+pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
+    let fail = |why: String| format!("{}: {why}", file.display());
+    let header = Header::decode(bytes).map_err(|e| fail(e.to_string()))?;
+    if header.width != 1 {
+        return Err(fail(format!(
+            "a recording of {}-word fact sets; the Fetch Tea mission has one",
+            header.width
+        )));
+    }
+    let at = record::HEADER_LEN;
+    let cut = || fail(format!("cut short in its prologue (byte {at})"));
+    let len_bytes = bytes.get(at..at + 4).ok_or_else(cut)?;
+    let len = u32::from_le_bytes([len_bytes[0], len_bytes[1], len_bytes[2], len_bytes[3]]) as usize;
+    let end = at + 4 + len + 1;
+    let body = bytes.get(at..end).ok_or_else(cut)?;
+    let crc = bytes.get(end..end + 4).ok_or_else(cut)?;
+    if record::crc32(body).to_le_bytes() != crc {
+        return Err(fail(format!(
+            "its prologue at byte {at} fails its checksum"
+        )));
+    }
+    let scenario_json = body[4..4 + len].to_vec();
+    let arch = match body[4 + len] {
+        0 => Arch::PSmpa,
+        1 => Arch::Smpa,
+        other => {
+            return Err(fail(format!(
+                "unknown architecture {other} in its prologue"
+            )));
+        }
+    };
+    if header.mission != mission_hash(&scenario_json, arch) {
+        return Err(fail(
+            "recorded with another mission than this psmpa-sim's Fetch Tea: refused".into(),
+        ));
+    }
+    let scenario = crate::load::parse(file, &scenario_json).map_err(|e| e.to_string())?;
+    let mut frames = Vec::new();
+    let mut offset = end + 4;
+    while offset < bytes.len() {
+        let (frame, used) =
+            Frame::<1>::decode(&bytes[offset..], offset).map_err(|e| fail(e.to_string()))?;
+        frames.push(frame);
+        offset += used;
+    }
+    Ok(Recording {
+        scenario_json,
+        scenario,
+        arch,
+        frames,
+    })
+}
+
+/// The first event where the replay and the recording differ.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Divergence {
+    /// Its number among the recorded events, from 0.
+    pub event: usize,
+    /// Its instant, seconds.
+    pub at_s: f64,
+    /// The recorded event, in words (`null`: the recording had ended).
+    pub recorded: Option<String>,
+    /// What the replay traced, in words (`null`: the replay had ended).
+    pub replayed: Option<String>,
+}
+
+/// A replay's result.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Replayed {
+    /// Decisions compared: events of the replay equal to the recording's, in order.
+    pub decisions: usize,
+    /// Whether an event differed.
+    pub diverged: bool,
+    /// The first difference.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub divergence: Option<Divergence>,
+}
+
+/// How far the replay has traced: the platform hands each input over when every recorded
+/// event before it has been traced again, so that inputs due at one instant arrive in the
+/// recorded order.
+#[derive(Default)]
+struct Progress {
+    traced: Cell<usize>,
+    waiting: RefCell<Vec<Waker>>,
+}
+
+impl Progress {
+    fn advance(&self) {
+        self.traced.set(self.traced.get() + 1);
+        for w in self.waiting.borrow_mut().drain(..) {
+            w.wake();
+        }
+    }
+
+    /// Until `index` events have been traced again.
+    async fn reach(&self, index: usize) {
+        poll_fn(|cx| {
+            if self.traced.get() >= index {
+                Poll::Ready(())
+            } else {
+                self.waiting.borrow_mut().push(cx.waker().clone());
+                Poll::Pending
+            }
+        })
+        .await;
+    }
+}
+
+/// The platform of a replay: no world, the recorded inputs at their instants.
+struct Replay<'f> {
+    frames: &'f [Frame<1>],
+    mission: &'f FetchTea<'f>,
+    progress: &'f Progress,
+}
+
+impl Replay<'_> {
+    /// The first recorded frame at or after `ticks` with an input `matching`.
+    fn next(
+        &self,
+        ticks: u64,
+        matching: impl Fn(&Input<1>) -> bool,
+    ) -> Option<(usize, u64, Input<1>)> {
+        // Not one already traced again: an earlier sampler's frame may share the instant.
+        let from = self
+            .frames
+            .partition_point(|f| f.ticks < ticks)
+            .max(self.progress.traced.get());
+        self.frames[from..].iter().enumerate().find_map(|(i, f)| {
+            f.input()
+                .filter(|input| matching(input))
+                .map(|input| (from + i, f.ticks, input))
+        })
+    }
+
+    fn on_demand(&self, sensor: SensorId) -> bool {
+        self.mission
+            .domain
+            .sensor(sensor)
+            .is_some_and(|s| matches!(s.mode, SensorMode::OnDemand))
+    }
+}
+
+impl Replay<'_> {
+    /// Until frame `index`'s instant, and every recorded event before it traced again.
+    async fn until(&self, index: usize) {
+        if let Some(frame) = self.frames.get(index) {
+            Timer::at(Instant::from_ticks(frame.ticks)).await;
+        }
+        self.progress.reach(index).await;
+    }
+}
+
+impl Sensor for Replay<'_> {
+    type Id = SensorId;
+
+    async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+        Ok(())
+    }
+
+    async fn switch_off(&self, _: SensorId) {}
+
+    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
+        let now = Instant::now().as_ticks();
+        let next = self.next(now, |input| match *input {
+            Input::Sample { sensor: s, .. }
+            | Input::Lost { sensor: s }
+            | Input::Fault { sensor: s, .. } => s == sensor,
+            _ => false,
+        });
+        let Some((index, _, input)) = next else {
+            return pending().await;
+        };
+        self.until(index).await;
+        match input {
+            Input::Sample { value, holds, .. } => Ok(Some(Reading::new(value, holds))),
+            Input::Lost { .. } => Ok(None),
+            // The runtime's own verdicts: it reaches them again when no answer comes.
+            Input::Fault {
+                fault: SensorFault::Timeout | SensorFault::Silent,
+                ..
+            } => pending().await,
+            Input::Fault { fault, .. } => Err(fault),
+            _ => pending().await,
+        }
+    }
+}
+
+impl Actuator for Replay<'_> {
+    type Id = ActionId;
+
+    async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
+        // The state this behaviour runs in: the last entered for `action` by now (SMPA first
+        // polls a behaviour at its first act phase, after the state was entered).
+        let now = Instant::now().as_ticks();
+        let upto = self.frames.partition_point(|f| f.ticks <= now);
+        let entered = self.frames[..upto].iter().rposition(
+            |f| matches!(f.input(), Some(Input::Entered { action: a, .. }) if a == action),
+        );
+        let Some(start) = entered else {
+            return pending().await;
+        };
+        for (index, frame) in self.frames.iter().enumerate().skip(start + 1) {
+            match frame.input() {
+                Some(Input::Left {
+                    action: a, outcome, ..
+                }) if a == action => {
+                    // The behaviour returned before the runtime switched its sensors off and
+                    // applied its effects: hand the outcome over before those are traced.
+                    let mut returned = index;
+                    while returned > start + 1
+                        && self
+                            .frames
+                            .get(returned - 1)
+                            .is_some_and(|f| matches!(f.kind(), 8 | 13))
+                    {
+                        returned -= 1;
+                    }
+                    self.until(returned).await;
+                    return match outcome {
+                        Some(o) => o,
+                        // The runtime cut it short: it will again.
+                        None => pending().await,
+                    };
+                }
+                Some(Input::User { code, value }) => {
+                    self.until(index).await;
+                    io.trace(code, value);
+                }
+                Some(Input::Sample { sensor, .. }) if self.on_demand(sensor) => {
+                    // Under SMPA a request made in an act phase waits, the sensor off, for the
+                    // next sense phase: ask right after that act phase started, when the
+                    // behaviour last ran; else at the sample's own turn.
+                    let phase = |f: &Frame<1>, act: bool| {
+                        f.kind() == 6 && ((f.header >> 16) & 0xFF == 1) == act
+                    };
+                    let window = &self.frames[start..index];
+                    let act = window.iter().rposition(|f| phase(f, true));
+                    let sensed_since =
+                        act.is_some_and(|a| window[a..].iter().any(|f| phase(f, false)));
+                    match act {
+                        Some(a) if sensed_since => self.until(start + a + 1).await,
+                        _ => self.until(index).await,
+                    }
+                    io.request(sensor);
+                }
+                _ => {}
+            }
+        }
+        pending().await
+    }
+}
+
+impl Platform for Replay<'_> {
+    type Mutex = NoopRawMutex;
+}
+
+/// Compares each traced event with the recording's next.
+struct Compare<'f> {
+    expected: &'f [Frame<1>],
+    mission: &'f FetchTea<'f>,
+    progress: &'f Progress,
+    next: usize,
+    divergence: Option<Divergence>,
+    /// The replay's events for Foxglove (`--mcap`).
+    mcap: Option<McapLog<Output>>,
+}
+
+impl TraceSink for Compare<'_> {
+    fn record(&mut self, at: Instant, event: &TraceEvent) {
+        if let Some(log) = &mut self.mcap {
+            log.runtime(at, event);
+        }
+        let got = Frame::of(at, event);
+        if self.divergence.is_none() {
+            let want = self.expected.get(self.next);
+            if want != Some(&got) {
+                self.divergence = Some(Divergence {
+                    event: self.next,
+                    at_s: seconds(want.map_or(got.ticks, |w| w.ticks.min(got.ticks))),
+                    recorded: want.map(|w| recorded_text(self.mission, w)),
+                    replayed: Some(crate::cli::outputs::describe(self.mission, event)),
+                });
+            }
+        }
+        self.next += 1;
+        self.progress.advance();
+    }
+}
+
+fn seconds(ticks: u64) -> f64 {
+    Instant::from_ticks(ticks).as_micros() as f64 / 1e6
+}
+
+/// A recorded frame in words: as the replay would trace it when it is one of its inputs, else
+/// its kind.
+fn recorded_text(mission: &FetchTea<'_>, frame: &Frame<1>) -> String {
+    let event = match frame.input() {
+        Some(Input::Sample {
+            sensor,
+            value,
+            holds,
+        }) => Some(TraceEvent::Sample {
+            sensor,
+            value,
+            holds,
+        }),
+        Some(Input::Lost { sensor }) => Some(TraceEvent::SampleLost { sensor }),
+        Some(Input::Fault { sensor, fault }) => Some(TraceEvent::SensorFailed { sensor, fault }),
+        Some(Input::Entered { .. })
+        | Some(Input::Left { .. })
+        | Some(Input::User { .. })
+        | None => None,
+    };
+    match event {
+        Some(e) => crate::cli::outputs::describe(mission, &e),
+        None => format!(
+            "a trace event of kind {} (header {:#x})",
+            frame.kind(),
+            frame.header
+        ),
+    }
+}
+
+/// Replays `recording` through the runtime and compares every event; with `mcap`, also logs
+/// the replay's events there for Foxglove, and gives the output back to commit.
+pub fn replay(
+    recording: &Recording,
+    mcap: Option<Output>,
+) -> Result<(Replayed, Option<Output>), String> {
+    let mcap = match mcap {
+        Some(out) => {
+            let path = out.path().to_path_buf();
+            Some(
+                McapLog::new(out, &recording.scenario)
+                    .map_err(|e| format!("{}: {e}", path.display()))?,
+            )
+        }
+        None => None,
+    };
+    let robot = robot::fetch_tea(&recording.scenario).map_err(|e| e.to_string())?;
+    let progress = Progress::default();
+    let platform = Replay {
+        frames: &recording.frames,
+        mission: &robot.mission,
+        progress: &progress,
+    };
+    let compare = Compare {
+        expected: &recording.frames,
+        mission: &robot.mission,
+        progress: &progress,
+        next: 0,
+        divergence: None,
+        mcap,
+    };
+    let mut space = robot::PlannerSpace::new();
+    let sc = &recording.scenario;
+    let runtime = Runtime::<'_, Replay<'_>, Caps, Compare<'_>>::new(
+        &robot.mission,
+        &platform,
+        compare,
+        robot::config(sc, recording.arch),
+    );
+    let limit = Duration::from_millis(sc.max_ms) + Duration::from_secs(1);
+    let run = async {
+        let deadline = Timer::at(Instant::from_millis(sc.max_ms));
+        let sensing = pin!(runtime.sensing());
+        let deciding = pin!(select(
+            runtime.run_planning(&robot::PLANNER, &mut space),
+            deadline
+        ));
+        // SAFETY: run to completion inside `simulate`, on this thread.
+        let _ = unsafe { Prioritized.beside(sensing, deciding) }.await;
+    };
+    simulate(run, limit).map_err(|e| format!("the replay failed: {e}"))?;
+    let mut compare = runtime.into_sink();
+    if compare.divergence.is_none() && compare.next < compare.expected.len() {
+        let want = &compare.expected[compare.next];
+        compare.divergence = Some(Divergence {
+            event: compare.next,
+            at_s: seconds(want.ticks),
+            recorded: Some(recorded_text(compare.mission, want)),
+            replayed: None,
+        });
+    }
+    let decisions = compare
+        .divergence
+        .as_ref()
+        .map_or(compare.next, |d| d.event);
+    let log = match compare.mcap.take() {
+        Some(log) => Some(log.finish()?),
+        None => None,
+    };
+    Ok((
+        Replayed {
+            decisions,
+            diverged: compare.divergence.is_some(),
+            divergence: compare.divergence,
+        },
+        log,
+    ))
+}
+
+impl Replayed {
+    /// The result in one line.
+    pub fn text(&self) -> String {
+        match &self.divergence {
+            None => format!(
+                "replay: {} decisions, every one as recorded\n",
+                self.decisions
+            ),
+            Some(d) => format!(
+                "replay diverged at {:.3} s (event {}): recorded {}, the replay {}\n",
+                d.at_s,
+                d.event,
+                d.recorded.as_deref().unwrap_or("nothing more"),
+                d.replayed.as_deref().unwrap_or("traced nothing more"),
+            ),
+        }
+    }
+}

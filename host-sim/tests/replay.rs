@@ -1,0 +1,211 @@
+//! `psmpa-sim run --record` and `psmpa-sim replay` (issue 39): every shipped scenario's
+//! recording replays with every decision as recorded; a changed reading diverges where it
+//! changes a decision; a file that is not a whole recording of this mission is refused in one
+//! line.
+
+mod common;
+
+use common::{assert_success, bin, folder, repo};
+
+use psmpa_core::record::{self, Frame, Input};
+use psmpa_core::{FactSet, TraceEvent};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+fn record(scenario: &Path, arch: &str, dir: &Path) -> PathBuf {
+    let out = dir.join(format!(
+        "{}.{arch}.rec",
+        scenario.file_stem().unwrap().to_string_lossy()
+    ));
+    let run = bin()
+        .arg("run")
+        .arg(scenario)
+        .args(["--arch", arch, "--record"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_success(&run);
+    out
+}
+
+fn replay(file: &Path) -> (Option<i32>, Value, String) {
+    let out = bin()
+        .arg("replay")
+        .arg(file)
+        .arg("--json")
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    let json = serde_json::from_str(&text).unwrap_or(Value::Null);
+    (out.status.code(), json, stderr)
+}
+
+#[test]
+fn every_shipped_scenario_replays_as_recorded() {
+    let dir = folder("replay-all");
+    let mut scenarios: Vec<PathBuf> = std::fs::read_dir(repo("scenarios"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    scenarios.sort();
+    assert!(scenarios.len() >= 16);
+    for scenario in &scenarios {
+        for arch in ["psmpa", "smpa"] {
+            let rec = record(scenario, arch, &dir);
+            let (status, v, stderr) = replay(&rec);
+            assert_eq!(status, Some(0), "{}: {v} {stderr}", scenario.display());
+            assert_eq!(v["diverged"], false, "{}", scenario.display());
+            assert!(v["decisions"].as_u64().unwrap() > 100, "{v}");
+        }
+    }
+}
+
+/// The frames after a recording's header and prologue, and where they start.
+fn frames(bytes: &[u8]) -> (usize, Vec<Frame<1>>) {
+    let len = u32::from_le_bytes(bytes[19..23].try_into().unwrap()) as usize;
+    let start = record::HEADER_LEN + 4 + len + 1 + 4;
+    let frames = bytes[start..]
+        .chunks(record::frame_len(1))
+        .enumerate()
+        .map(|(i, c)| {
+            Frame::decode(c, start + i * record::frame_len(1))
+                .unwrap()
+                .0
+        })
+        .collect();
+    (start, frames)
+}
+
+/// A sonar reading changed at one instant, its CRC made good: the replay diverges at that
+/// instant, where the changed reading makes the runtime see the path blocked.
+#[test]
+fn a_changed_reading_diverges_at_its_instant() {
+    let dir = folder("replay-changed");
+    let rec = record(&repo("scenarios/quiet.json"), "psmpa", &dir);
+    let mut bytes = std::fs::read(&rec).unwrap();
+    let (start, frames) = frames(&bytes);
+    // The first sonar sample of the walk that shows the path clear (quiet has no obstacle).
+    let entered = frames
+        .iter()
+        .position(|f| matches!(f.input(), Some(Input::Entered { .. })))
+        .unwrap();
+    let (index, sample) = frames
+        .iter()
+        .enumerate()
+        .skip(entered + 5)
+        .find_map(|(i, f)| match f.input() {
+            Some(Input::Sample {
+                sensor,
+                value,
+                holds,
+            }) if !holds.is_empty() && sensor.index() == 0 => Some((i, (sensor, value, f.ticks))),
+            _ => None,
+        })
+        .unwrap();
+    let (sensor, value, ticks) = sample;
+    let blocked = Frame::of(
+        embassy_time::Instant::from_ticks(ticks),
+        &TraceEvent::Sample {
+            sensor,
+            value,
+            holds: FactSet::EMPTY,
+        },
+    );
+    let at = start + index * record::frame_len(1);
+    blocked.encode(&mut bytes[at..]).unwrap();
+    let changed = dir.join("changed.rec");
+    std::fs::write(&changed, &bytes).unwrap();
+    let (status, v, _) = replay(&changed);
+    assert_eq!(status, Some(1), "{v}");
+    assert_eq!(v["diverged"], true);
+    let d = &v["divergence"];
+    let seconds = embassy_time::Instant::from_ticks(ticks).as_micros() as f64 / 1e6;
+    assert_eq!(d["at_s"].as_f64().unwrap(), seconds, "{v}");
+    // The changed sample itself is fed as recorded; the decision after it differs.
+    assert!(d["event"].as_u64().unwrap() as usize > index, "{v}");
+    assert_eq!(v["decisions"], d["event"]);
+    // The text form says where, what was recorded and what the replay decided, in one line.
+    let out = bin().arg("replay").arg(&changed).output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(text.lines().count(), 1, "{text}");
+    assert!(
+        text.starts_with(&format!("replay diverged at {seconds:.3} s")),
+        "{text}"
+    );
+}
+
+/// Not a recording, a changed byte, a cut, an older format, another mission: status 2, one
+/// line, never a panic.
+#[test]
+fn a_file_that_is_not_a_whole_recording_is_refused() {
+    let dir = folder("replay-bad");
+    let rec = record(&repo("scenarios/sonar-6.json"), "psmpa", &dir);
+    let bytes = std::fs::read(&rec).unwrap();
+    let (start, _) = frames(&bytes);
+    let write = |name: &str, bytes: &[u8]| {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let mut flipped = bytes.clone();
+    flipped[start + 3 * record::frame_len(1) + 12] ^= 4;
+    let mut older = bytes.clone();
+    older[8] = 0;
+    let mut other = bytes.clone();
+    // The prologue's scenario, changed, its checksum made good: another run's recording.
+    let name_at = bytes.windows(7).position(|w| w == b"sonar-6").unwrap();
+    other[name_at + 6] = b'7';
+    let prologue_end = start - 4;
+    let crc = record::crc32(&other[record::HEADER_LEN..prologue_end]);
+    other[prologue_end..start].copy_from_slice(&crc.to_le_bytes());
+    for (path, says) in [
+        (repo("scenarios/sonar-6.json"), "not a recording"),
+        (write("flipped.rec", &flipped), "fails its checksum"),
+        (write("cut.rec", &bytes[..bytes.len() - 7]), "cut short"),
+        (
+            write("cut-prologue.rec", &bytes[..30]),
+            "cut short in its prologue",
+        ),
+        (
+            write("older.rec", &older),
+            "format version 0, this reads version 1",
+        ),
+        (write("other.rec", &other), "another mission"),
+        (write("empty.rec", b""), "cut short"),
+    ] {
+        let (status, _, stderr) = replay(&path);
+        assert_eq!(status, Some(2), "{}: {stderr}", path.display());
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(says), "{}: {stderr}", path.display());
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+/// `replay --mcap` logs the replay's decisions for Foxglove: a readable MCAP whose /events
+/// channel holds them.
+#[test]
+fn a_replay_opens_in_foxglove() {
+    let dir = folder("replay-mcap");
+    let rec = record(&repo("scenarios/sonar-6.json"), "psmpa", &dir);
+    let log = dir.join("replay.mcap");
+    let out = bin()
+        .arg("replay")
+        .arg(&rec)
+        .arg("--mcap")
+        .arg(&log)
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let bytes = std::fs::read(&log).unwrap();
+    let topics: Vec<String> = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap().channel.topic.clone())
+        .collect();
+    assert!(
+        topics.iter().filter(|t| *t == "/events").count() > 10,
+        "{}",
+        topics.len()
+    );
+}
