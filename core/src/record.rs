@@ -33,7 +33,7 @@ use crate::action::{ActionId, SensorId};
 use crate::facts::FactSetOf;
 use crate::platform::{Outcome, SensorFault};
 use crate::store::Value;
-use crate::trace::{TraceEvent, TraceHash, TraceSink};
+use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink};
 
 /// The first bytes of every recording.
 pub const MAGIC: [u8; 8] = *b"PSMPAREC";
@@ -232,6 +232,29 @@ impl<const W: usize> Frame<W> {
     }
 }
 
+/// The kind numbers of [`TraceHash::words`]' header word ([`Frame::kind`]) that a reader
+/// tells apart.
+pub mod kind {
+    /// `StateEntered`.
+    pub const STATE_ENTERED: u8 = 4;
+    /// `StateLeft`.
+    pub const STATE_LEFT: u8 = 5;
+    /// `PhaseStarted`.
+    pub const PHASE_STARTED: u8 = 6;
+    /// `SensorOff`.
+    pub const SENSOR_OFF: u8 = 8;
+    /// `Sample`.
+    pub const SAMPLE: u8 = 9;
+    /// `SensorFailed`.
+    pub const SENSOR_FAILED: u8 = 10;
+    /// `EffectsApplied`.
+    pub const EFFECTS_APPLIED: u8 = 13;
+    /// `User`.
+    pub const USER: u8 = 16;
+    /// `SampleLost`.
+    pub const SAMPLE_LOST: u8 = 17;
+}
+
 /// What a replay feeds the runtime, read back from a frame: the platform's side of the trace
 /// (readings, faults, a behaviour's outcome and its own events) and the states it runs in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -291,13 +314,22 @@ impl<const W: usize> Frame<W> {
         ActionId::new(usize::from(self.field(2)) | usize::from(self.field(5)) << 8)
     }
 
+    /// The phase a `PhaseStarted` frame starts (SMPA), `None` for any other frame.
+    pub fn phase(&self) -> Option<Phase> {
+        match (self.kind(), self.field(2)) {
+            (kind::PHASE_STARTED, 0) => Some(Phase::Sense),
+            (kind::PHASE_STARTED, 1) => Some(Phase::Act),
+            _ => None,
+        }
+    }
+
     /// The input this frame records, if it is one ([`Input`]); `None` for the runtime's own
     /// decisions (plans, beliefs, violations, sensors switched) and for fields out of range.
     pub fn input(&self) -> Option<Input<W>> {
         let sensor = || SensorId::new(usize::from(self.field(1)));
         let low = self.payload.words().first().copied().unwrap_or(0);
         Some(match self.kind() {
-            9 => {
+            kind::SAMPLE => {
                 let v = self.header.checked_shr(32).unwrap_or(0) as u32;
                 let signed = i32::from_le_bytes(v.to_le_bytes());
                 Input::Sample {
@@ -313,8 +345,8 @@ impl<const W: usize> Frame<W> {
                     holds: self.payload,
                 }
             }
-            17 => Input::Lost { sensor: sensor()? },
-            10 => Input::Fault {
+            kind::SAMPLE_LOST => Input::Lost { sensor: sensor()? },
+            kind::SENSOR_FAILED => Input::Fault {
                 sensor: sensor()?,
                 fault: match self.field(2) {
                     0 => SensorFault::Timeout,
@@ -326,11 +358,11 @@ impl<const W: usize> Frame<W> {
                     _ => return None,
                 },
             },
-            4 => Input::Entered {
+            kind::STATE_ENTERED => Input::Entered {
                 state: self.field(1),
                 action: self.action()?,
             },
-            5 => Input::Left {
+            kind::STATE_LEFT => Input::Left {
                 state: self.field(1),
                 action: self.action()?,
                 outcome: match self.field(3) {
@@ -341,7 +373,7 @@ impl<const W: usize> Frame<W> {
                     _ => return None,
                 },
             },
-            16 => Input::User {
+            kind::USER => Input::User {
                 code: (self.header.checked_shr(16).unwrap_or(0) & 0xFFFF) as u16,
                 value: i32::from_le_bytes(((low & 0xFFFF_FFFF) as u32).to_le_bytes()),
             },
@@ -504,7 +536,7 @@ mod tests {
             holds: FactSet::single(FactId::new(3).unwrap()),
         });
         assert_eq!((frames[1].header, frames[1].payload), (h, p));
-        assert_eq!(frames[1].kind(), 9);
+        assert_eq!(frames[1].kind(), kind::SAMPLE);
     }
 
     #[test]

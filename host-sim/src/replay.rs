@@ -17,7 +17,8 @@ use std::path::Path;
 use embassy_futures::select::select;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
-use psmpa_core::record::{self, Frame, Header, Input, RecordOut, Recorder};
+use psmpa_core::record::{self, Frame, Header, Input, RecordOut, Recorder, kind};
+use psmpa_core::trace::Phase;
 use psmpa_core::{
     ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Runtime, Sensor, SensorFault,
     SensorId, SensorMode, TraceEvent, TraceHash, TraceSink,
@@ -312,10 +313,9 @@ impl Actuator for Replay<'_> {
                     // applied its effects: hand the outcome over before those are traced.
                     let mut returned = index;
                     while returned > start + 1
-                        && self
-                            .frames
-                            .get(returned - 1)
-                            .is_some_and(|f| matches!(f.kind(), 8 | 13))
+                        && self.frames.get(returned - 1).is_some_and(|f| {
+                            matches!(f.kind(), kind::SENSOR_OFF | kind::EFFECTS_APPLIED)
+                        })
                     {
                         returned -= 1;
                     }
@@ -334,13 +334,11 @@ impl Actuator for Replay<'_> {
                     // Under SMPA a request made in an act phase waits, the sensor off, for the
                     // next sense phase: ask right after that act phase started, when the
                     // behaviour last ran; else at the sample's own turn.
-                    let phase = |f: &Frame<1>, act: bool| {
-                        f.kind() == 6 && ((f.header >> 16) & 0xFF == 1) == act
-                    };
                     let window = &self.frames[start..index];
-                    let act = window.iter().rposition(|f| phase(f, true));
-                    let sensed_since =
-                        act.is_some_and(|a| window[a..].iter().any(|f| phase(f, false)));
+                    let act = window.iter().rposition(|f| f.phase() == Some(Phase::Act));
+                    let sensed_since = act.is_some_and(|a| {
+                        window[a..].iter().any(|f| f.phase() == Some(Phase::Sense))
+                    });
                     match act {
                         Some(a) if sensed_since => self.until(start + a + 1).await,
                         _ => self.until(index).await,

@@ -683,15 +683,8 @@ fn a_replaced_file_keeps_its_mode() {
 /// line: a resource, not bad input (it was status 2, or an abort).
 #[test]
 fn a_planner_the_machine_cannot_start_is_status_3() {
-    let out = Command::new("bash")
-        .arg("-c")
-        .arg(format!(
-            "ulimit -v 100000; exec '{}' plan '{}'",
-            env!("CARGO_BIN_EXE_psmpa-sim"),
-            repo("missions/fetch-tea.json").display()
-        ))
-        .output()
-        .unwrap();
+    let mission = repo("missions/fetch-tea.json");
+    let out = limited("ulimit -v 100000", &format!("plan '{}'", mission.display()));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(3), "{stderr}");
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
@@ -706,15 +699,10 @@ fn a_write_error_stops_the_run_at_once() {
     let day = long_scenario(&dir, 86_400);
     // (The timeline grows with events, not samples: this day's fits in its buffer.)
     for output in ["--trace", "--mcap"] {
-        let out = Command::new("bash")
-            .arg("-c")
-            .arg(format!(
-                "ulimit -t 2; exec '{}' run '{}' --arch psmpa {output} /dev/full",
-                env!("CARGO_BIN_EXE_psmpa-sim"),
-                day.display()
-            ))
-            .output()
-            .unwrap();
+        let out = limited(
+            "ulimit -t 2",
+            &format!("run '{}' --arch psmpa {output} /dev/full", day.display()),
+        );
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{output}: {stderr}");
         assert!(
@@ -752,14 +740,7 @@ fn an_interference_that_outlives_the_run_says_so() {
 /// removed (they were left behind).
 #[test]
 fn table1_plots_are_checked_first_and_leave_no_folders() {
-    let out = Command::new("bash")
-        .arg("-c")
-        .arg(format!(
-            "ulimit -t 2; exec '{}' table1 --shifts 100000 --plots /proc/self",
-            env!("CARGO_BIN_EXE_psmpa-sim")
-        ))
-        .output()
-        .unwrap();
+    let out = limited("ulimit -t 2", "table1 --shifts 100000 --plots /proc/self");
     assert_refused(&out, &["/proc/self: cannot write"]);
     let dir = folder("plots-left");
     let out = bin()
@@ -856,14 +837,7 @@ fn workers_the_machine_cannot_start_are_status_3() {
         "table1 --shifts 1",
         "sensitivity --runs 1",
     ] {
-        let out = Command::new("bash")
-            .arg("-c")
-            .arg(format!(
-                "ulimit -v 60000; RAYON_NUM_THREADS=100 exec timeout 60 '{}' {command}",
-                env!("CARGO_BIN_EXE_psmpa-sim")
-            ))
-            .output()
-            .unwrap();
+        let out = limited("ulimit -v 60000; export RAYON_NUM_THREADS=100", command);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(3), "{command}: {stderr}");
         assert_eq!(stderr.lines().count(), 1, "{stderr}");
@@ -872,4 +846,17 @@ fn workers_the_machine_cannot_start_are_status_3() {
             "{stderr}"
         );
     }
+}
+
+/// `psmpa-sim ARGS` (a shell word list) run by bash after `limits` (`ulimit -t 2`, ...), cut
+/// at 60 s.
+fn limited(limits: &str, args: &str) -> Output {
+    Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "{limits}; exec timeout 60 '{}' {args}",
+            env!("CARGO_BIN_EXE_psmpa-sim")
+        ))
+        .output()
+        .unwrap()
 }

@@ -104,23 +104,27 @@ impl Sensor<W> for Robot {
 impl Actuator<W> for Robot {
     type Id = ActionId;
 
-    /// Drives for `DRIVE_MS` of clear way: waits while the precondition is violated.
     async fn run(&self, _: ActionId, io: &ActionIo<'_, W>) -> Outcome {
-        let mut driven = 0;
-        let mut version = io.version();
-        while driven < DRIVE_MS {
-            if io.violation().is_some() {
-                version = io.changed(version).await;
-                continue;
-            }
-            let step = Instant::now();
-            if let Some(v) = io.changed_within(version, Duration::from_millis(10)).await {
-                version = v;
-            }
-            driven += Instant::now().as_millis() - step.as_millis();
-        }
-        Outcome::Success
+        drive(io).await
     }
+}
+
+/// Drives for `DRIVE_MS` of clear way: waits while the precondition is violated.
+async fn drive<const N: usize>(io: &ActionIo<'_, N>) -> Outcome {
+    let mut driven = 0;
+    let mut version = io.version();
+    while driven < DRIVE_MS {
+        if io.violation().is_some() {
+            version = io.changed(version).await;
+            continue;
+        }
+        let step = Instant::now();
+        if let Some(v) = io.changed_within(version, Duration::from_millis(10)).await {
+            version = v;
+        }
+        driven += Instant::now().as_millis() - step.as_millis();
+    }
+    Outcome::Success
 }
 
 impl Platform for Robot {
@@ -258,22 +262,7 @@ impl Actuator<{ wide200::W }> for Typed {
 
     async fn run(&self, action: wide200::Action, io: &ActionIo<'_, { wide200::W }>) -> Outcome {
         match action {
-            wide200::Action::Drive => {
-                let mut driven = 0;
-                let mut version = io.version();
-                while driven < DRIVE_MS {
-                    if io.violation().is_some() {
-                        version = io.changed(version).await;
-                        continue;
-                    }
-                    let step = Instant::now();
-                    if let Some(v) = io.changed_within(version, Duration::from_millis(10)).await {
-                        version = v;
-                    }
-                    driven += Instant::now().as_millis() - step.as_millis();
-                }
-                Outcome::Success
-            }
+            wide200::Action::Drive => drive(io).await,
         }
     }
 }
