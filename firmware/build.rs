@@ -10,10 +10,13 @@
 //!   `OUT_DIR`. (flip-link follows the include and moves the stack in the copy.)
 //! * every `scenarios/*.json`, validated here by the host's parser and embedded in its
 //!   canonical form (integers only), which the firmware reads with serde-json-core at boot;
-//! * `missions/fetch-tea.json` without insignificant whitespace.
+//! * `missions/fetch-tea.json` without insignificant whitespace;
+//! * each scenario's mission hash under each architecture, for its recordings' headers
+//!   (`psmpa_sim::robot::mission_hash`, which `psmpa-sim replay` checks).
 
 use std::{env, fs, path::Path, path::PathBuf};
 
+use psmpa_sim::robot::{Arch, mission_hash};
 use psmpa_sim::scenario::Scenario;
 
 /// The JSON text without whitespace outside strings.
@@ -117,7 +120,7 @@ fn main() {
         .unwrap_or_default();
     names.sort();
     let mut list = String::from(
-        "/// The embedded scenarios: (file name, canonical JSON).\npub static SCENARIOS: &[(&str, &[u8])] = &[\n",
+        "/// The embedded scenarios: (file name, canonical JSON, the mission hash of a recording of it\n/// under each of `Arch::ALL`).\npub static SCENARIOS: &[(&str, &[u8], [u64; 2])] = &[\n",
     );
     for name in &names {
         let path = dir.join(name);
@@ -135,8 +138,9 @@ fn main() {
         canonical.truncate(len);
         let file = out.join(format!("canonical-{name}"));
         write(&file, &canonical);
+        let hashes = Arch::ALL.map(|arch| mission_hash(&canonical, arch));
         list.push_str(&format!(
-            "    ({name:?}, include_bytes!({:?})),\n",
+            "    ({name:?}, include_bytes!({:?}), {hashes:?}),\n",
             file.display().to_string()
         ));
     }

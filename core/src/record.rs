@@ -435,7 +435,7 @@ impl<O: RecordOut> Recorder<O> {
 
     /// A recorder that writes frames only: its caller wrote the header (and whatever it
     /// keeps between the header and the frames, a tool's prologue).
-    pub fn frames_only(out: O) -> Self {
+    pub const fn frames_only(out: O) -> Self {
         Self { out }
     }
 
@@ -445,12 +445,25 @@ impl<O: RecordOut> Recorder<O> {
     }
 }
 
-impl<O: RecordOut, const W: usize> TraceSink<W> for Recorder<O> {
-    fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
+impl<O: RecordOut> Recorder<O> {
+    /// Encodes and writes `frame`: for a recorder that takes frames on the runtime's path
+    /// ([`Frame::of`], a copy of the event's words) and encodes them later, in idle time.
+    pub fn write_frame<const W: usize>(&mut self, frame: &Frame<W>) {
         let mut buf = [0u8; MAX_FRAME];
-        if let Ok(n) = Frame::of(at, event).encode(&mut buf) {
+        if let Ok(n) = frame.encode(&mut buf) {
             self.out.write(buf.get(..n).unwrap_or(&[]));
         }
+    }
+
+    /// The output.
+    pub fn out(&mut self) -> &mut O {
+        &mut self.out
+    }
+}
+
+impl<O: RecordOut, const W: usize> TraceSink<W> for Recorder<O> {
+    fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
+        self.write_frame(&Frame::of(at, event));
     }
 }
 
@@ -466,16 +479,206 @@ fn u64_at(bytes: &[u8], i: usize) -> u64 {
     u64::from_le_bytes(b)
 }
 
-/// CRC-32 (IEEE 802.3, reflected, as zlib's), a bit at a time: no table in flash.
-pub fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
+/// The remainders of the 16 nibbles, for [`crc32`]. (Evaluated at build time: an index out
+/// of range fails the build.)
+#[allow(clippy::indexing_slicing)]
+const NIBBLE: [u32; 16] = {
+    let mut t = [0u32; 16];
+    let mut i = 0;
+    while i < 16 {
+        let mut crc = i as u32;
+        let mut bit = 0;
+        while bit < 4 {
             crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+            bit += 1;
+        }
+        t[i] = crc;
+        i += 1;
+    }
+    t
+};
+
+/// The remainder of `crc`'s low nibble (the `& 0xF` keeps the index in the table).
+fn nibble(crc: u32) -> u32 {
+    NIBBLE.get((crc & 0xF) as usize).copied().unwrap_or(0)
+}
+
+/// CRC-32 (IEEE 802.3, reflected, as zlib's), four bits at a time: a 64-byte table in flash,
+/// a quarter of the bitwise loop's steps.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = Crc32::new();
+    crc.update(bytes);
+    crc.finish()
+}
+
+/// [`crc32`] of bytes that come in parts.
+#[derive(Clone, Copy, Debug)]
+pub struct Crc32(u32);
+
+impl Crc32 {
+    /// Nothing yet.
+    pub const fn new() -> Self {
+        Self(!0)
+    }
+
+    /// Adds `bytes`.
+    pub fn update(&mut self, bytes: &[u8]) {
+        let mut crc = self.0;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            crc = (crc >> 4) ^ nibble(crc);
+            crc = (crc >> 4) ^ nibble(crc);
+        }
+        self.0 = crc;
+    }
+
+    /// The checksum of everything added.
+    pub const fn finish(self) -> u32 {
+        !self.0
+    }
+}
+
+impl Default for Crc32 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// A RAM ring of the last `N` bytes of a recording, for a board's `.uninit` section: after a
+/// watchdog or fault reset, [`Ring::recovered`] reads back the frames it still holds whole,
+/// oldest first, so the seconds before the reset can be sent or read off by a probe.
+///
+/// `#[repr(C)]` with a magic word, so a board can tell a ring a previous boot wrote from what
+/// power-on left ([`Ring::recovered`] also checks every frame's checksum). Writing is O(the
+/// bytes written); nothing allocates, nothing is refused: the oldest bytes are overwritten.
+#[repr(C)]
+pub struct Ring<const N: usize> {
+    magic: u32,
+    /// Where the next byte goes, below `N`.
+    head: u32,
+    /// Bytes held, at most `N`.
+    len: u32,
+    bytes: [u8; N],
+}
+
+/// [`Ring`]'s magic word: "PSMR".
+const RING_MAGIC: u32 = 0x524D_5350;
+
+impl<const N: usize> Ring<N> {
+    /// An empty ring (for a `static` that is not in `.uninit`, and for tests).
+    pub const fn new() -> Self {
+        Self {
+            magic: RING_MAGIC,
+            head: 0,
+            len: 0,
+            bytes: [0; N],
         }
     }
-    !crc
+
+    /// Empties the ring: what a board calls at boot, after reading what a previous boot left.
+    pub fn clear(&mut self) {
+        self.magic = RING_MAGIC;
+        self.head = 0;
+        self.len = 0;
+    }
+
+    /// Bytes held: 0 unless a boot wrote this ring (its magic set, its counts in range), so
+    /// that what power-on leaves reads as empty.
+    pub fn held(&self) -> usize {
+        let ok = self.magic == RING_MAGIC && (self.head as usize) < N.max(1);
+        if ok { (self.len as usize).min(N) } else { 0 }
+    }
+
+    /// The byte `i` places after the oldest held.
+    fn byte(&self, i: usize) -> u8 {
+        let held = self.held();
+        // head < N and held <= N: no overflow; N.max(1): no division by zero.
+        let oldest = (self.head as usize)
+            .wrapping_add(N.wrapping_sub(held))
+            .checked_rem(N)
+            .unwrap_or(0);
+        byte(
+            &self.bytes,
+            oldest.wrapping_add(i).checked_rem(N).unwrap_or(0),
+        )
+    }
+
+    /// Copies the bytes held, oldest first, into `out`; how many (the newest when `out` is
+    /// shorter).
+    pub fn copy_into(&self, out: &mut [u8]) -> usize {
+        let held = self.held();
+        let skip = held.saturating_sub(out.len());
+        let n = held.saturating_sub(skip);
+        for (i, slot) in out.iter_mut().take(n).enumerate() {
+            *slot = self.byte(skip.saturating_add(i));
+        }
+        n
+    }
+
+    /// The frame at byte `at` of what is held, and its length.
+    fn frame_at<const W: usize>(&self, at: usize) -> Option<(Frame<W>, usize)> {
+        let len = frame_len(W);
+        if at.saturating_add(len) > self.held() || len > MAX_FRAME {
+            return None;
+        }
+        // The length byte first: most offsets fail there, before any checksum.
+        if usize::from(self.byte(at)) != len.saturating_sub(5) {
+            return None;
+        }
+        let mut buf = [0u8; MAX_FRAME];
+        for (i, slot) in buf.iter_mut().take(len).enumerate() {
+            *slot = self.byte(at.saturating_add(i));
+        }
+        Frame::<W>::decode(buf.get(..len)?, at).ok()
+    }
+
+    /// The whole frames held, oldest first. The oldest bytes may be the end of a frame
+    /// overwritten in part (or a header), so reading starts at the first offset where a
+    /// frame's length and checksum hold (a CRC-32 over 25 or more bytes: a false start is a 1
+    /// in 4 billion chance), and ends at the first frame that does not. No copy of the ring.
+    pub fn recovered<const W: usize>(&self) -> impl Iterator<Item = Frame<W>> + '_ {
+        let start = (0..self.held()).find(|&at| self.frame_at::<W>(at).is_some());
+        let mut at = start.unwrap_or(usize::MAX);
+        core::iter::from_fn(move || {
+            let (frame, len) = self.frame_at::<W>(at)?;
+            at = at.saturating_add(len);
+            Some(frame)
+        })
+    }
+}
+
+impl<const N: usize> Default for Ring<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> RecordOut for Ring<N> {
+    fn write(&mut self, bytes: &[u8]) {
+        if N == 0 {
+            return;
+        }
+        if self.magic != RING_MAGIC || self.head as usize >= N {
+            self.clear();
+        }
+        let mut head = self.head as usize;
+        for &b in bytes {
+            if let Some(slot) = self.bytes.get_mut(head) {
+                *slot = b;
+            }
+            head = head.saturating_add(1).checked_rem(N).unwrap_or(0);
+        }
+        self.head = head as u32;
+        self.len = (self.len as usize).saturating_add(bytes.len()).min(N) as u32;
+    }
+}
+
+/// Two outputs at once: a stream and a ring, for example.
+impl<A: RecordOut, B: RecordOut> RecordOut for (A, B) {
+    fn write(&mut self, bytes: &[u8]) {
+        self.0.write(bytes);
+        self.1.write(bytes);
+    }
 }
 
 #[cfg(test)]
@@ -573,6 +776,35 @@ mod tests {
             std::format!("{}", RecordError::Version { found: 0 }),
             "a recording of format version 0, this reads version 1"
         );
+    }
+
+    #[test]
+    fn a_ring_keeps_the_newest_whole_frames_after_a_reset() {
+        let bytes = recording();
+        // Room for two frames and a half: the oldest frame is cut, the header gone.
+        let mut ring: Ring<{ 2 * 29 + 14 }> = Ring::new();
+        ring.write(&bytes[..HEADER_LEN]);
+        for f in bytes[HEADER_LEN..].chunks(frame_len(1)) {
+            ring.write(f);
+        }
+        let all: Vec<Frame<1>> = frames(&bytes).map(Result::unwrap).collect();
+        let back: Vec<Frame<1>> = ring.recovered().collect();
+        assert_eq!(back, all[1..]);
+        let mut out = [0u8; 100];
+        let n = ring.copy_into(&mut out);
+        assert_eq!(&out[..n], &bytes[bytes.len() - n..]);
+        // What power-on leaves reads as nothing; a cleared ring holds nothing.
+        let mut garbage: Ring<64> = Ring::new();
+        garbage.magic = 0xDEAD_BEEF;
+        garbage.len = 64;
+        assert_eq!(garbage.recovered::<1>().count(), 0);
+        ring.clear();
+        assert_eq!(ring.recovered::<1>().count(), 0);
+        // A corrupted byte ends the frames read at the frame it is in.
+        let mut ring: Ring<256> = Ring::new();
+        ring.write(&bytes);
+        ring.bytes[HEADER_LEN + frame_len(1) + 3] ^= 1;
+        assert_eq!(ring.recovered::<1>().collect::<Vec<_>>(), all[..1]);
     }
 
     /// The inputs a replay feeds read back as they were traced.

@@ -252,6 +252,17 @@ pub type Slot = MaybeUninit<raw::Executor>;
 /// (deciding, sensing), then polls the deciding side whenever it has work and sleeps
 /// otherwise. Never returns: the firmware ends with a semihosting exit or a reset.
 pub fn run(slot: &'static mut Slot, init: impl FnOnce(Spawner, SendSpawner)) -> ! {
+    run_idle(slot, init, || false)
+}
+
+/// [`run`], with `idle` called while the deciding side has no work, before sleeping: one
+/// short piece of background work a call (the flight recorder's encoding), `true` while more
+/// remains. The deciding side's wakes are seen between calls; the sensing side preempts them.
+pub fn run_idle(
+    slot: &'static mut Slot,
+    init: impl FnOnce(Spawner, SendSpawner),
+    mut idle: impl FnMut() -> bool,
+) -> ! {
     // SAFETY: priorities are set once, before either interrupt is unmasked; nothing else
     // writes them.
     unsafe {
@@ -272,6 +283,9 @@ pub fn run(slot: &'static mut Slot, init: impl FnOnce(Spawner, SendSpawner)) -> 
             // SAFETY: only this loop polls the deciding executor; its pender never does.
             let own = timed(|| unsafe { deciding.poll() });
             record(false, own, tick);
+            continue;
+        }
+        if idle() {
             continue;
         }
         // Interrupts off between the check and WFI, so a wake cannot slip in unseen; a pending

@@ -22,6 +22,7 @@ mod firmware {
     use cortex_m_rt::entry;
     use defmt::{error, info};
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use psmpa_core::record::{Frame, RecordOut, Recorder};
     use psmpa_core::{TraceEvent, TraceSink};
     use psmpa_sim::robot::{Arch, PlannerSpace, Robot};
     use psmpa_sim::run::{Beside, Sides};
@@ -74,7 +75,7 @@ mod firmware {
         board::guard_stack();
         let run = this_run();
         let runs = (SCENARIOS.len() * Arch::ALL.len()) as u32;
-        let (Some((file, json)), Some(&arch)) = (
+        let (Some((file, json, hashes)), Some(&arch)) = (
             SCENARIOS.get((run / 2) as usize),
             Arch::ALL.get((run % 2) as usize),
         ) else {
@@ -88,6 +89,12 @@ mod firmware {
                 embassy_time_driver::TICK_HZ
             );
         }
+        // The flight recording of this run begins: header and prologue, then one frame an
+        // event.
+        let mission = hashes.get((run % 2) as usize).copied().unwrap_or(0);
+        let mut start = LogOut::new();
+        psmpa_sim::robot::record_start(&mut start, mission, json, arch);
+        start.flush();
         let robot = load_robot(ROBOT);
         let scenario = SCENARIO.write(Scenario::empty());
         if !parse(scenario, json, run) {
@@ -100,16 +107,20 @@ mod firmware {
         let (robot, scenario) = (&*robot, &*scenario);
         // Everything is prepared: the clock starts, and the run with it, at tick 0.
         time_driver::start();
-        executor::run(DECIDING, |deciding, sensing| {
-            let task = one_run(robot, scenario, SPACE, arch, run, runs);
-            match (task, executor::trampoline()) {
-                (Ok(task), Ok(trampoline)) => {
-                    deciding.spawn(task);
-                    sensing.spawn(trampoline);
+        executor::run_idle(
+            DECIDING,
+            |deciding, sensing| {
+                let task = one_run(robot, scenario, SPACE, arch, run, runs);
+                match (task, executor::trampoline()) {
+                    (Ok(task), Ok(trampoline)) => {
+                        deciding.spawn(task);
+                        sensing.spawn(trampoline);
+                    }
+                    _ => fail("a task is already running"),
                 }
-                _ => fail("a task is already running"),
-            }
-        })
+            },
+            idle,
+        )
     }
 
     /// The sensing side on the interrupt executor, preempting the deciding side; what they
@@ -146,7 +157,7 @@ mod firmware {
                 'static,
                 'static,
                 Reactions,
-                Steps,
+                Sink,
                 CriticalSectionRawMutex,
             >,
         >();
@@ -178,11 +189,138 @@ mod firmware {
         robot
     }
 
-    /// Tells the executor what each poll did, for the cost of each kind of step.
-    struct Steps;
+    /// The flight recorder's transport here: whole frames gathered in RAM and sent as one
+    /// defmt line, `rec [bytes]`, when the next does not fit (and at the end of a run), which
+    /// `cargo xtask qemu` gathers into one recording a run and replays on the host. A board
+    /// streams the same over RTT. The lines go out by semihosting, a cost no chip has: left
+    /// out of every measured cost, as the trace log's lines are.
+    struct LogOut {
+        buf: [u8; SEND],
+        len: usize,
+    }
 
-    impl TraceSink for Steps {
-        fn record(&mut self, _at: embassy_time::Instant, event: &TraceEvent) {
+    /// Bytes gathered before a line: 8 one-word frames (a line costs about 900 cycles, a
+    /// byte in it a few).
+    const SEND: usize = 256;
+
+    impl LogOut {
+        const fn new() -> Self {
+            Self {
+                buf: [0; SEND],
+                len: 0,
+            }
+        }
+
+        /// Sends what is gathered.
+        fn flush(&mut self) {
+            let Some(bytes) = self.buf.get(..self.len).filter(|b| !b.is_empty()) else {
+                return;
+            };
+            critical_section::with(|_| {
+                let begin = time_driver::counter();
+                info!("rec {=[u8]}", bytes);
+                let spent = begin.wrapping_sub(time_driver::counter());
+                TRANSPORT.fetch_add(spent, Ordering::Relaxed);
+                executor::uncounted(spent);
+            });
+            self.len = 0;
+        }
+    }
+
+    /// Cycles the transport took this boot.
+    static TRANSPORT: AtomicU32 = AtomicU32::new(0);
+
+    impl RecordOut for LogOut {
+        fn write(&mut self, bytes: &[u8]) {
+            if self.len + bytes.len() > SEND {
+                self.flush();
+            }
+            match self.buf.get_mut(self.len..self.len + bytes.len()) {
+                Some(room) => {
+                    room.copy_from_slice(bytes);
+                    self.len += bytes.len();
+                }
+                // Longer than the buffer (a prologue): sent on its own.
+                None => {
+                    let mut whole = LogOut::new();
+                    for part in bytes.chunks(SEND) {
+                        if let Some(room) = whole.buf.get_mut(..part.len()) {
+                            room.copy_from_slice(part);
+                            whole.len = part.len();
+                        }
+                        whole.flush();
+                    }
+                }
+            }
+        }
+    }
+
+    /// The recorder's cost this boot: frames, and cycles in all and the most for one, on the
+    /// runtime's path (taking the frame) and in idle time (encoding it).
+    static RECORDED: AtomicU32 = AtomicU32::new(0);
+    static TAKE_CYCLES: AtomicU32 = AtomicU32::new(0);
+    static TAKE_MAX: AtomicU32 = AtomicU32::new(0);
+    static ENCODE_CYCLES: AtomicU32 = AtomicU32::new(0);
+    static ENCODE_MAX: AtomicU32 = AtomicU32::new(0);
+    /// Frames encoded on the runtime's path because the queue was full.
+    static INLINE: AtomicU32 = AtomicU32::new(0);
+
+    /// Frames taken and not yet encoded: the runtime's path only copies an event's words
+    /// here; the idle loop encodes them ([`idle`]). When it is full the oldest is encoded
+    /// on the spot: nothing is dropped.
+    const QUEUE: usize = 256;
+
+    struct Recording {
+        queue: heapless::Deque<Frame<1>, QUEUE>,
+        recorder: RecordSink,
+    }
+
+    /// The recorder's encoder and its transport.
+    type RecordSink = Recorder<LogOut>;
+
+    static RECORDING: embassy_sync::blocking_mutex::Mutex<
+        CriticalSectionRawMutex,
+        core::cell::RefCell<Recording>,
+    > = embassy_sync::blocking_mutex::Mutex::new(core::cell::RefCell::new(Recording {
+        queue: heapless::Deque::new(),
+        recorder: Recorder::frames_only(LogOut::new()),
+    }));
+
+    /// Encodes one frame, timed.
+    fn encode(recorder: &mut RecordSink, frame: &Frame<1>) {
+        let (begin, sent) = (time_driver::counter(), TRANSPORT.load(Ordering::Relaxed));
+        recorder.write_frame(frame);
+        let own = begin
+            .wrapping_sub(time_driver::counter())
+            .wrapping_sub(TRANSPORT.load(Ordering::Relaxed).wrapping_sub(sent));
+        ENCODE_CYCLES.fetch_add(own, Ordering::Relaxed);
+        ENCODE_MAX.fetch_max(own, Ordering::Relaxed);
+    }
+
+    /// The idle loop's work: encodes one queued frame; whether more are queued.
+    fn idle() -> bool {
+        critical_section::with(|cs| {
+            let mut r = RECORDING.borrow(cs).borrow_mut();
+            let Recording { queue, recorder } = &mut *r;
+            if let Some(frame) = queue.pop_front() {
+                encode(recorder, &frame);
+            }
+            !queue.is_empty()
+        })
+    }
+
+    /// Encodes and sends whatever is queued: at the end of a run.
+    fn finish_recording() {
+        while idle() {}
+        critical_section::with(|cs| RECORDING.borrow(cs).borrow_mut().recorder.out().flush());
+    }
+
+    /// The runtime's trace: queued for the recording ([`RECORDING`]), and told to the
+    /// executor, for the cost of each kind of step.
+    struct Sink;
+
+    impl TraceSink for Sink {
+        fn record(&mut self, at: embassy_time::Instant, event: &TraceEvent) {
             executor::note(match event {
                 TraceEvent::Sample { sensor, .. }
                 | TraceEvent::SampleLost { sensor }
@@ -196,6 +334,23 @@ mod firmware {
                 | TraceEvent::PreconditionRestored { .. }
                 | TraceEvent::User { .. } => 0,
                 _ => executor::CONTROL,
+            });
+            critical_section::with(|cs| {
+                let begin = time_driver::counter();
+                let frame = Frame::of(at, event);
+                let mut r = RECORDING.borrow(cs).borrow_mut();
+                let Recording { queue, recorder } = &mut *r;
+                if queue.is_full()
+                    && let Some(oldest) = queue.pop_front()
+                {
+                    INLINE.fetch_add(1, Ordering::Relaxed);
+                    encode(recorder, &oldest);
+                }
+                let _ = queue.push_back(frame);
+                let own = begin.wrapping_sub(time_driver::counter());
+                RECORDED.fetch_add(1, Ordering::Relaxed);
+                TAKE_CYCLES.fetch_add(own, Ordering::Relaxed);
+                TAKE_MAX.fetch_max(own, Ordering::Relaxed);
             });
         }
     }
@@ -324,10 +479,11 @@ mod firmware {
                 arch,
                 space,
                 Reactions::default(),
-                Steps,
+                Sink,
             )
         };
         let (s, reactions, _) = go.await;
+        finish_recording();
         let (ticks, reference) = (
             embassy_time::Instant::now().as_ticks(),
             time_driver::reference_cycles(),
@@ -395,6 +551,17 @@ mod firmware {
             t.sample_gap_max_ms[0].map_or(-1, |ms| ms as i64),
             t.sample_gap_max_ms[1].map_or(-1, |ms| ms as i64),
             s.trace_hash
+        );
+        info!(
+            "recorder scenario={=str} arch={=str} frames={=u32} cycles={=u32} max_cycles={=u32} encode_cycles={=u32} encode_max={=u32} inline={=u32}",
+            name,
+            arch.name(),
+            RECORDED.load(Ordering::Relaxed),
+            TAKE_CYCLES.load(Ordering::Relaxed),
+            TAKE_MAX.load(Ordering::Relaxed),
+            ENCODE_CYCLES.load(Ordering::Relaxed),
+            ENCODE_MAX.load(Ordering::Relaxed),
+            INLINE.load(Ordering::Relaxed)
         );
         let (used, size) = stack_high_water();
         info!("stack high-water {=u32} of {=u32} bytes", used, size);

@@ -101,6 +101,12 @@ enum Command {
         /// Also write the replay's events as an MCAP log for Foxglove.
         #[arg(long, value_name = "FILE.mcap")]
         mcap: Option<PathBuf>,
+        /// A chip's recording: an event may come up to this many ms earlier or later than
+        /// recorded (the chip's computing takes time); all else must be equal, in order. 0
+        /// (the default): bit for bit, instants included.
+        #[arg(long, value_name = "MS", default_value_t = 0, allow_negative_numbers = true,
+              value_parser = clap::value_parser!(u32).range(0..=60_000))]
+        lag_ms: u32,
     },
     /// Validates a mission file and prints each plan's FSM with its parallel sensor sets.
     Check {
@@ -334,6 +340,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
             recording,
             json,
             mcap,
+            lag_ms,
         } => {
             if let Some(out) = &mcap {
                 files::distinct(&[("the recording", &recording), ("--mcap", out)])
@@ -344,7 +351,12 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 files::read_limited(&recording, "recording", psmpa_sim::replay::MAX_RECORDING)
                     .map_err(Stop::Bad)?;
             let rec = psmpa_sim::replay::read(&recording, &bytes).map_err(Stop::Bad)?;
-            let (result, log) = psmpa_sim::replay::replay(&rec, mcap).map_err(Stop::internal)?;
+            let (result, log) = psmpa_sim::replay::replay(
+                &rec,
+                mcap,
+                embassy_time::Duration::from_millis(lag_ms.into()),
+            )
+            .map_err(Stop::internal)?;
             let text = if json {
                 serde_json::to_string(&result).map_err(Stop::internal)? + "\n"
             } else {

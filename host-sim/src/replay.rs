@@ -21,7 +21,7 @@ use psmpa_core::record::{self, Frame, Header, Input, RecordOut, Recorder, kind};
 use psmpa_core::trace::Phase;
 use psmpa_core::{
     ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Runtime, Sensor, SensorFault,
-    SensorId, SensorMode, TraceEvent, TraceHash, TraceSink,
+    SensorId, SensorMode, TraceEvent, TraceSink,
 };
 use serde::Serialize;
 
@@ -37,38 +37,32 @@ use crate::sim::Prioritized;
 /// shipped scenario's, tens of kB).
 pub const MAX_RECORDING: u64 = 256 << 20;
 
-/// What a recording's decisions depend on: the mission, the scenario's bytes, the
-/// architecture.
+/// What a recording's decisions depend on: [`robot::mission_hash`] of this psmpa-sim's Fetch
+/// Tea mission.
 pub fn mission_hash(scenario_json: &[u8], arch: Arch) -> u64 {
-    let mut h = TraceHash::new();
-    h.write(robot::FETCH_TEA);
-    h.write(scenario_json);
-    h.write(&[arch_byte(arch)]);
-    h.value()
+    robot::mission_hash(scenario_json, arch)
 }
 
-fn arch_byte(arch: Arch) -> u8 {
-    match arch {
-        Arch::PSmpa => 0,
-        Arch::Smpa => 1,
-    }
-}
-
-/// A recording's bytes before its frames: the core's header and the prologue.
+/// A recording's bytes before its frames: the core's header and the prologue
+/// ([`robot::record_start`]).
 pub fn start(scenario_json: &[u8], arch: Arch) -> Vec<u8> {
-    let mut out = Header {
-        width: 1,
-        mission: mission_hash(scenario_json, arch),
+    let mut out = Bytes(Vec::new());
+    robot::record_start(
+        &mut out,
+        mission_hash(scenario_json, arch),
+        scenario_json,
+        arch,
+    );
+    out.0
+}
+
+/// Bytes gathered in memory.
+struct Bytes(Vec<u8>);
+
+impl RecordOut for Bytes {
+    fn write(&mut self, bytes: &[u8]) {
+        self.0.extend_from_slice(bytes);
     }
-    .encode()
-    .to_vec();
-    let prologue_at = out.len();
-    out.extend_from_slice(&(scenario_json.len() as u32).to_le_bytes());
-    out.extend_from_slice(scenario_json);
-    out.push(arch_byte(arch));
-    let crc = record::crc32(&out[prologue_at..]);
-    out.extend_from_slice(&crc.to_le_bytes());
-    out
 }
 
 /// A recording streamed into an output file.
@@ -138,7 +132,18 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
             "recorded with another mission than this psmpa-sim's Fetch Tea: refused".into(),
         ));
     }
-    let scenario = crate::load::parse(file, &scenario_json).map_err(|e| e.to_string())?;
+    let scenario = if scenario_json.first() == Some(&b'[') {
+        // A firmware's recording: the canonical form it embeds.
+        let mut s = Scenario::empty();
+        s.read_canonical(&scenario_json).map_err(|e| {
+            fail(format!(
+                "its scenario, in canonical form, does not read: {e}"
+            ))
+        })?;
+        s
+    } else {
+        crate::load::parse(file, &scenario_json).map_err(|e| e.to_string())?
+    };
     let mut frames = Vec::new();
     let mut offset = end + 4;
     while offset < bytes.len() {
@@ -178,6 +183,9 @@ pub struct Replayed {
     /// The first difference.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub divergence: Option<Divergence>,
+    /// The most an equal event came earlier or later than recorded, ms (0 unless a lag is
+    /// allowed).
+    pub skew_ms: u64,
 }
 
 /// How far the replay has traced: the platform hands each input over when every recorded
@@ -225,11 +233,11 @@ impl Replay<'_> {
         ticks: u64,
         matching: impl Fn(&Input<1>) -> bool,
     ) -> Option<(usize, u64, Input<1>)> {
-        // Not one already traced again: an earlier sampler's frame may share the instant.
-        let from = self
-            .frames
-            .partition_point(|f| f.ticks < ticks)
-            .max(self.progress.traced.get());
+        // The next not traced again, whatever its instant: where the recording was made, a
+        // sampler's period may be anchored a tick later or earlier than here (the chip's
+        // computing before it started), and its sample is still this one.
+        let _ = ticks;
+        let from = self.progress.traced.get();
         self.frames[from..].iter().enumerate().find_map(|(i, f)| {
             f.input()
                 .filter(|input| matching(input))
@@ -297,7 +305,11 @@ impl Actuator for Replay<'_> {
         // The state this behaviour runs in: the last entered for `action` by now (SMPA first
         // polls a behaviour at its first act phase, after the state was entered).
         let now = Instant::now().as_ticks();
-        let upto = self.frames.partition_point(|f| f.ticks <= now);
+        let upto = self
+            .frames
+            .partition_point(|f| f.ticks <= now)
+            .max(self.progress.traced.get())
+            .min(self.frames.len());
         let entered = self.frames[..upto].iter().rposition(
             |f| matches!(f.input(), Some(Input::Entered { action: a, .. }) if a == action),
         );
@@ -365,6 +377,10 @@ struct Compare<'f> {
     divergence: Option<Divergence>,
     /// The replay's events for Foxglove (`--mcap`).
     mcap: Option<McapLog<Output>>,
+    /// How much later or earlier than recorded an event may come, ticks.
+    lag: u64,
+    /// The most an equal event came later or earlier.
+    skew: u64,
 }
 
 impl TraceSink for Compare<'_> {
@@ -375,7 +391,14 @@ impl TraceSink for Compare<'_> {
         let got = Frame::of(at, event);
         if self.divergence.is_none() {
             let want = self.expected.get(self.next);
-            if want != Some(&got) {
+            let equal = want.is_some_and(|w| {
+                (w.header, w.payload) == (got.header, got.payload)
+                    && w.ticks.abs_diff(got.ticks) <= self.lag
+            });
+            if let Some(w) = want.filter(|_| equal) {
+                self.skew = self.skew.max(w.ticks.abs_diff(got.ticks));
+            }
+            if !equal {
                 self.divergence = Some(Divergence {
                     event: self.next,
                     at_s: seconds(want.map_or(got.ticks, |w| w.ticks.min(got.ticks))),
@@ -385,6 +408,14 @@ impl TraceSink for Compare<'_> {
             }
         }
         self.next += 1;
+        // Across a gap no longer than the lag the clock follows the recording: where it was
+        // made, computing took that time (a chip's cycles). A longer gap is a wait, which
+        // the replay's own timers make.
+        if let Some(next) = self.expected.get(self.next).filter(|_| self.lag > 0) {
+            if next.ticks.saturating_sub(at.as_ticks()) <= self.lag {
+                crate::backend::advance_to(Instant::from_ticks(next.ticks));
+            }
+        }
         self.progress.advance();
     }
 }
@@ -425,9 +456,15 @@ fn recorded_text(mission: &FetchTea<'_>, frame: &Frame<1>) -> String {
 
 /// Replays `recording` through the runtime and compares every event; with `mcap`, also logs
 /// the replay's events there for Foxglove, and gives the output back to commit.
+///
+/// `lag` 0 compares every event bit for bit, its instant included: a host's recording. A
+/// chip's computing takes time the host's does not, and its samplers start when its interrupt
+/// runs: there an event may come up to `lag` earlier or later than recorded, and everything
+/// else must be equal, in order ([`Replayed::skew`] says how far apart they came).
 pub fn replay(
     recording: &Recording,
     mcap: Option<Output>,
+    lag: Duration,
 ) -> Result<(Replayed, Option<Output>), String> {
     let mcap = match mcap {
         Some(out) => {
@@ -453,6 +490,8 @@ pub fn replay(
         next: 0,
         divergence: None,
         mcap,
+        lag: lag.as_ticks(),
+        skew: 0,
     };
     let mut space = robot::PlannerSpace::new();
     let sc = &recording.scenario;
@@ -497,6 +536,7 @@ pub fn replay(
             decisions,
             diverged: compare.divergence.is_some(),
             divergence: compare.divergence,
+            skew_ms: Duration::from_ticks(compare.skew).as_millis(),
         },
         log,
     ))

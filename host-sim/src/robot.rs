@@ -313,6 +313,50 @@ impl Arch {
     pub const ALL: [Self; 2] = [Self::PSmpa, Self::Smpa];
 }
 
+/// What a recording's decisions depend on: the mission, the scenario's bytes (a file's, or
+/// the canonical form a firmware embeds), the architecture. Its header carries it, so that a
+/// replay against another mission is refused.
+pub fn mission_hash(scenario: &[u8], arch: Arch) -> u64 {
+    let mut h = psmpa_core::TraceHash::new();
+    h.write(FETCH_TEA);
+    h.write(scenario);
+    h.write(&[arch.byte()]);
+    h.value()
+}
+
+impl Arch {
+    /// Its byte in a recording's prologue.
+    pub const fn byte(self) -> u8 {
+        match self {
+            Self::PSmpa => 0,
+            Self::Smpa => 1,
+        }
+    }
+}
+
+/// Writes a recording's start to `out`: the core's header (`mission`, from [`mission_hash`])
+/// and the prologue: the scenario's length (`u32`), bytes and the architecture's byte, with
+/// a CRC-32. The frames follow.
+pub fn record_start(
+    out: &mut impl psmpa_core::record::RecordOut,
+    mission: u64,
+    scenario: &[u8],
+    arch: Arch,
+) {
+    use psmpa_core::record::{self, Header};
+    out.write(&Header { width: 1, mission }.encode());
+    let len = (scenario.len() as u32).to_le_bytes();
+    let byte = [arch.byte()];
+    out.write(&len);
+    out.write(scenario);
+    out.write(&byte);
+    let mut crc = record::Crc32::new();
+    for part in [&len[..], scenario, &byte] {
+        crc.update(part);
+    }
+    out.write(&crc.finish().to_le_bytes());
+}
+
 /// The runtime settings of a run: only the policy differs between the architectures.
 pub fn config(scenario: &Scenario, arch: Arch) -> Config {
     Config {

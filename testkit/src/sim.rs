@@ -418,6 +418,13 @@ impl Drop for Running<'_> {
     }
 }
 
+/// Moves this thread's virtual clock forward to `at` (never back) from inside a poll, as the
+/// processor time a computation spends moves a chip's clock: for replaying a recording made
+/// where computing takes time. Timers due by then fire when the poll returns.
+pub fn advance_to(at: Instant) {
+    STATE.with(|s| s.now.set(s.now.get().max(at.as_ticks())));
+}
+
 /// Runs `future` to completion in virtual time starting at 0, on this thread. Fails when the
 /// future deadlocks or is still running at `limit`.
 pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Output>, SimError> {

@@ -9,6 +9,7 @@ use std::time::Instant;
 use psmpa_sim::robot::Arch;
 use psmpa_sim::sim::run_summary;
 
+use crate::recording;
 use crate::trace::{self, Allowance};
 
 /// The workspace root.
@@ -734,6 +735,63 @@ fn traces(
     (results, errors)
 }
 
+/// Replays every run's flight recording in `log` on the host ([`recording`]) and prints what
+/// the recorder cost on the firmware; the replays that did not match.
+fn replay_recordings(machine: Machine, log: &str, inject_fault: bool) -> Vec<String> {
+    let label = format!(
+        "{}{}",
+        if inject_fault { "fault/" } else { "" },
+        machine.name
+    );
+    let dir = recording::dir(&label);
+    let r = recording::replay_log(log, &dir, recording::CHIP_LAG);
+    let costs = tagged(log, "recorder");
+    let sum = |key: &str| -> u64 {
+        costs
+            .iter()
+            .filter_map(|c| c.get(key)?.parse::<u64>().ok())
+            .sum()
+    };
+    let most = |key: &str| -> u64 {
+        costs
+            .iter()
+            .filter_map(|c| c.get(key)?.parse::<u64>().ok())
+            .max()
+            .unwrap_or(0)
+    };
+    let (frames, cycles, encode) = (sum("frames"), sum("cycles"), sum("encode_cycles"));
+    println!(
+        "{}: flight recordings: {} of {} runs replayed on the host with every decision as recorded ({} decisions; {} bytes for {:.1} s recorded, {:.0} kB a minute; kept in {}); the recorder took {} cycles a frame on the runtime's path on average, {} at most, and {} on average, {} at most, to encode it in idle time ({} frames, {} encoded on the path for a full queue)",
+        machine.name,
+        r.runs - r.failures.len().min(r.runs),
+        r.runs,
+        r.decisions,
+        r.bytes,
+        r.recorded_ms as f64 / 1e3,
+        r.bytes as f64 / 1e3 / (r.recorded_ms.max(1) as f64 / 60e3),
+        dir.display(),
+        cycles.checked_div(frames).unwrap_or(0),
+        most("max_cycles"),
+        encode.checked_div(frames).unwrap_or(0),
+        most("encode_max"),
+        frames,
+        sum("inline")
+    );
+    let mut failures = r.failures;
+    if r.runs != costs.len() {
+        failures.push(format!(
+            "{}: {} recordings for {} runs",
+            machine.name,
+            r.runs,
+            costs.len()
+        ));
+    }
+    failures
+        .into_iter()
+        .map(|f| format!("{}: replay: {f}", machine.name))
+        .collect()
+}
+
 /// Builds and runs the firmware on every machine and compares it with the host. `Ok` only if,
 /// on each machine, every run of the host has a run on the firmware with the same outcome, and
 /// nothing else, and every run's clock kept time. With `inject_fault`, mps2-an386 only.
@@ -757,6 +815,7 @@ pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
             Ok(log) => {
                 let dir = traces.join(machine.name);
                 failures.extend(compare(*machine, &log, &host, &allowances, &dir));
+                failures.extend(replay_recordings(*machine, &log, inject_fault));
             }
             Err(e) => failures.push(e),
         }

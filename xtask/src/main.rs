@@ -21,6 +21,7 @@ mod callgrind;
 mod firmware;
 mod hil;
 mod planning;
+mod recording;
 mod size;
 mod stack;
 mod timing;
