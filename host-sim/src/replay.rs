@@ -546,6 +546,10 @@ impl Replayed {
     /// The result in one line.
     pub fn text(&self) -> String {
         match &self.divergence {
+            None if self.skew_ms > 0 => format!(
+                "replay: {} decisions, every one as recorded, within {} ms of its instant\n",
+                self.decisions, self.skew_ms
+            ),
             None => format!(
                 "replay: {} decisions, every one as recorded\n",
                 self.decisions

@@ -396,8 +396,10 @@ fn generate(
         #(#attrs)*
         #[doc = #doc]
         #vis mod #module {
-            // The file: the crate builds again when it changes.
-            const _: &[u8] = ::core::include_bytes!(#file);
+            /// The mission file's hash ([`psmpa_core::record::mission_hash`]): a flight
+            /// recording names its mission with it. (Including the file also builds the crate
+            /// again when it changes.)
+            pub const HASH: u64 = ::psmpa_core::record::mission_hash(::core::include_bytes!(#file));
 
             /// Words in the mission's fact sets.
             pub const W: usize = #w;
