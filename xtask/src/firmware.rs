@@ -761,7 +761,7 @@ fn replay_recordings(machine: Machine, log: &str, inject_fault: bool) -> Vec<Str
     };
     let (frames, cycles, encode) = (sum("frames"), sum("cycles"), sum("encode_cycles"));
     println!(
-        "{}: flight recordings: {} of {} runs replayed on the host with every decision as recorded ({} decisions; {} bytes for {:.1} s recorded, {:.0} kB a minute; kept in {}); the recorder took {} cycles a frame on the runtime's path on average, {} at most, and {} on average, {} at most, to encode it in idle time ({} frames, {} encoded on the path for a full queue)",
+        "{}: flight recordings: {} of {} runs replayed on the host with every decision as recorded ({} decisions; {} bytes for {:.1} s recorded, {:.0} kB a minute; kept in {}); the recorder took {} cycles a frame on the runtime's path on average, {} at most, and {} on average, {} at most, to encode it in idle time ({} frames; at most {} queued at once, {} encoded on the path for a full queue)",
         machine.name,
         r.runs - r.failures.len().min(r.runs),
         r.runs,
@@ -775,6 +775,7 @@ fn replay_recordings(machine: Machine, log: &str, inject_fault: bool) -> Vec<Str
         encode.checked_div(frames).unwrap_or(0),
         most("encode_max"),
         frames,
+        most("queued_max"),
         sum("inline")
     );
     let mut failures = r.failures;
