@@ -10,7 +10,7 @@
 //! ([`RecordError`]), never read as events.
 //!
 //! Layout, little-endian: header `"PSMPAREC"`, version `u16`, width `u8` (fact-set words),
-//! mission `u64`; frame: length `u8` (of what follows, checksum excluded), ticks `u64`,
+//! mission `u64`, tick rate `u32` (Hz, the unit of the frames' instants); frame: length `u8` (of what follows, checksum excluded), ticks `u64`,
 //! header word `u64`, `W` fact-set words `u64`, CRC-32 (IEEE) `u32` of the length byte and
 //! what follows it.
 //!
@@ -38,9 +38,10 @@ use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink};
 /// The first bytes of every recording.
 pub const MAGIC: [u8; 8] = *b"PSMPAREC";
 /// The format's version; a recording of another is refused ([`RecordError::Version`]).
-pub const VERSION: u16 = 1;
+/// Version 2 added the tick rate to the header.
+pub const VERSION: u16 = 2;
 /// Bytes of a [`Header`].
-pub const HEADER_LEN: usize = 8 + 2 + 1 + 8;
+pub const HEADER_LEN: usize = 8 + 2 + 1 + 8 + 4;
 /// The widest fact sets a frame holds: 4 words, 256 facts (the loader's most).
 pub const MAX_WORDS: usize = 4;
 /// Bytes of the largest frame.
@@ -105,9 +106,22 @@ pub struct Header {
     /// The recorded mission's hash (the writer's choice of what it covers; `psmpa-sim` hashes
     /// the mission and the scenario), so that a replay against another mission is refused.
     pub mission: u64,
+    /// The writer's embassy-time tick rate, Hz: the unit of every frame's instant (a board's
+    /// 1 MHz, the host's 1 kHz).
+    pub tick_hz: u32,
 }
 
 impl Header {
+    /// The header of a `width`-word runtime's recording of `mission`, at this build's tick
+    /// rate.
+    pub const fn new(width: u8, mission: u64) -> Self {
+        Self {
+            width,
+            mission,
+            tick_hz: embassy_time::TICK_HZ as u32,
+        }
+    }
+
     /// The header's bytes.
     pub fn encode(&self) -> [u8; HEADER_LEN] {
         let mut out = [0u8; HEADER_LEN];
@@ -115,9 +129,11 @@ impl Header {
         magic.copy_from_slice(&MAGIC);
         let (version, rest) = rest.split_at_mut(2);
         version.copy_from_slice(&VERSION.to_le_bytes());
-        let (width, mission) = rest.split_at_mut(1);
+        let (width, rest) = rest.split_at_mut(1);
         width.copy_from_slice(&[self.width]);
+        let (mission, tick_hz) = rest.split_at_mut(8);
         mission.copy_from_slice(&self.mission.to_le_bytes());
+        tick_hz.copy_from_slice(&self.tick_hz.to_le_bytes());
         out
     }
 
@@ -126,21 +142,27 @@ impl Header {
         if bytes.get(..MAGIC.len()).is_some_and(|m| m != MAGIC) {
             return Err(RecordError::NotARecording);
         }
-        let header = bytes.get(..HEADER_LEN);
-        let Some(header) = header else {
-            return Err(if bytes.len() < MAGIC.len() && !MAGIC.starts_with(bytes) {
-                RecordError::NotARecording
-            } else {
-                RecordError::Cut { at: 0 }
-            });
+        if bytes.len() < MAGIC.len() && !MAGIC.starts_with(bytes) {
+            return Err(RecordError::NotARecording);
+        }
+        // The version first: another version's header may be of another length.
+        if bytes.len() >= 10 {
+            let version = u16::from_le_bytes([byte(bytes, 8), byte(bytes, 9)]);
+            if version != VERSION {
+                return Err(RecordError::Version { found: version });
+            }
+        }
+        let Some(header) = bytes.get(..HEADER_LEN) else {
+            return Err(RecordError::Cut { at: 0 });
         };
-        let version = u16::from_le_bytes([byte(header, 8), byte(header, 9)]);
-        if version != VERSION {
-            return Err(RecordError::Version { found: version });
+        let tick_hz = (u64_at(header, 19) & 0xFFFF_FFFF) as u32;
+        if tick_hz == 0 {
+            return Err(RecordError::Corrupt { at: 19 });
         }
         Ok(Self {
             width: byte(header, 10),
             mission: u64_at(header, 11),
+            tick_hz,
         })
     }
 }
@@ -423,13 +445,7 @@ pub struct Recorder<O> {
 impl<O: RecordOut> Recorder<O> {
     /// Starts a recording of a `W`-word runtime's mission `mission` (a hash) in `out`.
     pub fn new<const W: usize>(mut out: O, mission: u64) -> Self {
-        out.write(
-            &Header {
-                width: W as u8,
-                mission,
-            }
-            .encode(),
-        );
+        out.write(&Header::new(W as u8, mission).encode());
         Self { out }
     }
 
@@ -785,11 +801,16 @@ mod tests {
         );
         assert_eq!(Header::decode(b""), Err(RecordError::Cut { at: 0 }));
         let mut old = recording();
-        old[8] = 0;
-        assert_eq!(Header::decode(&old), Err(RecordError::Version { found: 0 }));
+        old[8] = 1;
+        assert_eq!(Header::decode(&old), Err(RecordError::Version { found: 1 }));
+        // A version 1 header is shorter: still its version that is refused, not a cut.
         assert_eq!(
-            std::format!("{}", RecordError::Version { found: 0 }),
-            "a recording of format version 0, this reads version 1"
+            Header::decode(&old[..19]),
+            Err(RecordError::Version { found: 1 })
+        );
+        assert_eq!(
+            std::format!("{}", RecordError::Version { found: 1 }),
+            "a recording of format version 1, this reads version 2"
         );
     }
 

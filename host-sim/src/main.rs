@@ -93,7 +93,8 @@ enum Command {
     /// outcomes at their instants, and compares every decision. Exit status 0 when all match,
     /// 1 at the first divergence, 2 for a file that is not a whole recording of this mission.
     Replay {
-        /// The recording (`run --record`).
+        /// The recording (`run --record`), or a firmware's decoded log with its `rec` lines
+        /// (the first recording in it).
         recording: PathBuf,
         /// Print exactly one JSON object: decisions, diverged, and the divergence.
         #[arg(long)]
@@ -350,6 +351,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
             let bytes =
                 files::read_limited(&recording, "recording", psmpa_sim::replay::MAX_RECORDING)
                     .map_err(Stop::Bad)?;
+            let bytes = psmpa_sim::replay::bytes_of(&recording, bytes).map_err(Stop::Bad)?;
             let rec = psmpa_sim::replay::read(&recording, &bytes).map_err(Stop::Bad)?;
             let (result, log) = psmpa_sim::replay::replay(
                 &rec,

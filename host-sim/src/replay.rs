@@ -25,10 +25,12 @@ use psmpa_core::{
 };
 use serde::Serialize;
 
+use psmpa_drivers::robot::{RECORD_WORDS, Settings, fetch_tea};
+
 use crate::backend::simulate;
 use crate::cli::files::Output;
 use crate::cli::foxglove::McapLog;
-use crate::robot::{self, Arch, Caps, FetchTea};
+use crate::robot::{self, Arch, Caps};
 use crate::run::Sides as _;
 use crate::scenario::Scenario;
 use crate::sim::Prioritized;
@@ -82,16 +84,99 @@ pub fn recorder(out: Output, scenario_json: &[u8], arch: Arch) -> Recorder<Recor
     Recorder::frames_only(out)
 }
 
+/// The bytes of one `rec [..]` line of a decoded defmt log, or `None` for another line.
+fn rec_bytes(line: &str) -> Option<Result<Vec<u8>, String>> {
+    let list = match line.split_once(" rec [") {
+        Some((_, list)) => list,
+        None => line.strip_prefix("rec [")?,
+    };
+    // What follows the list (a location a log viewer adds) is not the recording's.
+    let (list, _) = list.split_once(']')?;
+    Some(
+        list.split(", ")
+            .filter(|b| !b.is_empty())
+            .map(|b| {
+                b.parse::<u8>()
+                    .map_err(|_| format!("not a byte, {b:.10}, in the line {line:.60}"))
+            })
+            .collect(),
+    )
+}
+
+/// The recordings in a firmware's decoded defmt log (`probe-rs run`, `defmt-print`): its
+/// `rec [bytes]` lines, in order, a new recording at each header.
+pub fn from_log(log: &str) -> Result<Vec<Vec<u8>>, String> {
+    let mut out: Vec<Vec<u8>> = Vec::new();
+    for line in log.lines() {
+        let Some(bytes) = rec_bytes(line) else {
+            continue;
+        };
+        let bytes = bytes?;
+        match out.last_mut() {
+            Some(last) if !bytes.starts_with(&record::MAGIC) => last.extend_from_slice(&bytes),
+            None if !bytes.starts_with(&record::MAGIC) => {
+                return Err("a recording's frame before any header".to_owned());
+            }
+            _ => out.push(bytes),
+        }
+    }
+    Ok(out)
+}
+
+/// A file's recording: the file itself, or the first recording in a decoded firmware log.
+pub fn bytes_of(file: &Path, bytes: Vec<u8>) -> Result<Vec<u8>, String> {
+    if bytes.starts_with(&record::MAGIC) {
+        return Ok(bytes);
+    }
+    match std::str::from_utf8(&bytes).map(from_log) {
+        Ok(Ok(recs)) if !recs.is_empty() => Ok(recs.into_iter().next().unwrap_or_default()),
+        Ok(Err(e)) => Err(format!("{}: {e}", file.display())),
+        // Neither: the header's check says why.
+        _ => Ok(bytes),
+    }
+}
+
+/// Where a recording was made, and what its replay needs besides the frames.
+pub enum Source {
+    /// psmpa-sim's NAO robot, or the QEMU firmware running it: the scenario (its bytes, a
+    /// file's or the canonical form) and the architecture.
+    Simulator {
+        /// The scenario's bytes as recorded.
+        scenario_json: Vec<u8>,
+        /// The scenario.
+        scenario: Box<Scenario>,
+        /// The architecture.
+        arch: Arch,
+    },
+    /// The Fetch Tea robot on a board (`psmpa-drivers`, the mission compiled in): its
+    /// calibration record, which sets the sensors' periods.
+    Board {
+        /// The calibration.
+        settings: Settings,
+    },
+}
+
+/// The prologue's kind byte of a board's recording (after the architectures' 0 and 1).
+pub const BOARD: u8 = 2;
+
 /// A recording, read and checked.
 pub struct Recording {
-    /// The scenario's bytes as recorded.
-    pub scenario_json: Vec<u8>,
-    /// The scenario.
-    pub scenario: Scenario,
-    /// The architecture.
-    pub arch: Arch,
+    /// Where it was made.
+    pub source: Source,
     /// Every recorded event.
     pub frames: Vec<Frame<1>>,
+}
+
+impl Recording {
+    /// A name for its file: `SCENARIO.ARCH`, or `board`.
+    pub fn name(&self) -> String {
+        match &self.source {
+            Source::Simulator { scenario, arch, .. } => {
+                format!("{}.{}", scenario.name, arch.name())
+            }
+            Source::Board { .. } => "board".to_owned(),
+        }
+    }
 }
 
 /// Reads a recording from `bytes` (from `file`): one line naming the file and the fault when
@@ -109,7 +194,10 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
     let cut = || fail(format!("cut short in its prologue (byte {at})"));
     let len_bytes = bytes.get(at..at + 4).ok_or_else(cut)?;
     let len = u32::from_le_bytes([len_bytes[0], len_bytes[1], len_bytes[2], len_bytes[3]]) as usize;
-    let end = at + 4 + len + 1;
+    let end = (at + 4)
+        .checked_add(len)
+        .and_then(|e| e.checked_add(1))
+        .ok_or_else(cut)?;
     let body = bytes.get(at..end).ok_or_else(cut)?;
     let crc = bytes.get(end..end + 4).ok_or_else(cut)?;
     if record::crc32(body).to_le_bytes() != crc {
@@ -117,47 +205,75 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
             "its prologue at byte {at} fails its checksum"
         )));
     }
-    let scenario_json = body[4..4 + len].to_vec();
-    let arch = match body[4 + len] {
-        0 => Arch::PSmpa,
-        1 => Arch::Smpa,
+    let prologue = &body[4..4 + len];
+    let source = match body[4 + len] {
+        BOARD => {
+            if header.mission != fetch_tea::HASH {
+                return Err(fail(
+                    "recorded on a board with another mission than missions/fetch-tea.json: refused"
+                        .into(),
+                ));
+            }
+            let mut words = [0u32; RECORD_WORDS];
+            if prologue.len() != 4 * RECORD_WORDS {
+                return Err(fail(format!(
+                    "a board's prologue of {} bytes, not a calibration record's {}",
+                    prologue.len(),
+                    4 * RECORD_WORDS
+                )));
+            }
+            for (w, b) in words.iter_mut().zip(prologue.chunks_exact(4)) {
+                *w = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            }
+            let settings = Settings::from_record(&words)
+                .map_err(|e| fail(format!("its calibration record: {e}")))?;
+            Source::Board { settings }
+        }
+        byte @ (0 | 1) => {
+            let arch = if byte == 0 { Arch::PSmpa } else { Arch::Smpa };
+            let scenario_json = prologue.to_vec();
+            if header.mission != mission_hash(&scenario_json, arch) {
+                return Err(fail(
+                    "recorded with another mission than this psmpa-sim's Fetch Tea: refused".into(),
+                ));
+            }
+            let scenario = if scenario_json.first() == Some(&b'[') {
+                // A firmware's recording: the canonical form it embeds.
+                let mut s = Scenario::empty();
+                s.read_canonical(&scenario_json).map_err(|e| {
+                    fail(format!(
+                        "its scenario, in canonical form, does not read: {e}"
+                    ))
+                })?;
+                s
+            } else {
+                crate::load::parse(file, &scenario_json).map_err(|e| e.to_string())?
+            };
+            Source::Simulator {
+                scenario_json,
+                scenario: Box::new(scenario),
+                arch,
+            }
+        }
         other => {
             return Err(fail(format!(
                 "unknown architecture {other} in its prologue"
             )));
         }
     };
-    if header.mission != mission_hash(&scenario_json, arch) {
-        return Err(fail(
-            "recorded with another mission than this psmpa-sim's Fetch Tea: refused".into(),
-        ));
-    }
-    let scenario = if scenario_json.first() == Some(&b'[') {
-        // A firmware's recording: the canonical form it embeds.
-        let mut s = Scenario::empty();
-        s.read_canonical(&scenario_json).map_err(|e| {
-            fail(format!(
-                "its scenario, in canonical form, does not read: {e}"
-            ))
-        })?;
-        s
-    } else {
-        crate::load::parse(file, &scenario_json).map_err(|e| e.to_string())?
-    };
     let mut frames = Vec::new();
     let mut offset = end + 4;
     while offset < bytes.len() {
-        let (frame, used) =
+        let (mut frame, used) =
             Frame::<1>::decode(&bytes[offset..], offset).map_err(|e| fail(e.to_string()))?;
+        // In the host's ticks (a board counts 1 MHz): what it took less than one of them to do
+        // comes at the same instant.
+        frame.ticks = (u128::from(frame.ticks) * u128::from(embassy_time::TICK_HZ)
+            / u128::from(header.tick_hz)) as u64;
         frames.push(frame);
         offset += used;
     }
-    Ok(Recording {
-        scenario_json,
-        scenario,
-        arch,
-        frames,
-    })
+    Ok(Recording { source, frames })
 }
 
 /// The first event where the replay and the recording differ.
@@ -222,7 +338,8 @@ impl Progress {
 /// The platform of a replay: no world, the recorded inputs at their instants.
 struct Replay<'f> {
     frames: &'f [Frame<1>],
-    mission: &'f FetchTea<'f>,
+    /// By sensor index: whether the mission reads it on demand.
+    on_demand: Vec<bool>,
     progress: &'f Progress,
 }
 
@@ -238,7 +355,9 @@ impl Replay<'_> {
         // computing before it started), and its sample is still this one.
         let _ = ticks;
         let from = self.progress.traced.get();
-        self.frames[from..].iter().enumerate().find_map(|(i, f)| {
+        // Past the recording's end (the replay went on) there is nothing more to feed.
+        let rest = self.frames.get(from..).unwrap_or_default();
+        rest.iter().enumerate().find_map(|(i, f)| {
             f.input()
                 .filter(|input| matching(input))
                 .map(|input| (from + i, f.ticks, input))
@@ -246,10 +365,7 @@ impl Replay<'_> {
     }
 
     fn on_demand(&self, sensor: SensorId) -> bool {
-        self.mission
-            .domain
-            .sensor(sensor)
-            .is_some_and(|s| matches!(s.mode, SensorMode::OnDemand))
+        self.on_demand.get(sensor.index()).copied().unwrap_or(false)
     }
 }
 
@@ -273,14 +389,7 @@ impl Sensor for Replay<'_> {
     async fn switch_off(&self, _: SensorId) {}
 
     async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
-        let now = Instant::now().as_ticks();
-        let next = self.next(now, |input| match *input {
-            Input::Sample { sensor: s, .. }
-            | Input::Lost { sensor: s }
-            | Input::Fault { sensor: s, .. } => s == sensor,
-            _ => false,
-        });
-        let Some((index, _, input)) = next else {
+        let Some((index, _, input)) = self.next_of(sensor) else {
             return pending().await;
         };
         self.until(index).await;
@@ -295,6 +404,34 @@ impl Sensor for Replay<'_> {
             Input::Fault { fault, .. } => Err(fault),
             _ => pending().await,
         }
+    }
+
+    /// Where the recording has a sample between two of the sensor's instants (a bump
+    /// switch's edge woke it), at that sample's instant: a sample on the grid comes no earlier
+    /// than its instant, so this never wakes one early.
+    ///
+    /// A sensor reads once an instant: where a board's samples came closer than one of the
+    /// host's ticks (a chattering switch at 1 MHz), the next comes a tick later.
+    async fn wake(&self, sensor: SensorId) {
+        match self.next_of(sensor) {
+            Some((_, ticks, _)) if ticks > Instant::now().as_ticks() => {
+                Timer::at(Instant::from_ticks(ticks)).await;
+            }
+            Some(_) => Timer::after_ticks(1).await,
+            None => pending().await,
+        }
+    }
+}
+
+impl Replay<'_> {
+    /// The next recorded reading, loss or fault of `sensor` not yet traced again.
+    fn next_of(&self, sensor: SensorId) -> Option<(usize, u64, Input<1>)> {
+        self.next(0, |input| match *input {
+            Input::Sample { sensor: s, .. }
+            | Input::Lost { sensor: s }
+            | Input::Fault { sensor: s, .. } => s == sensor,
+            _ => false,
+        })
     }
 }
 
@@ -371,7 +508,8 @@ impl Platform for Replay<'_> {
 /// Compares each traced event with the recording's next.
 struct Compare<'f> {
     expected: &'f [Frame<1>],
-    mission: &'f FetchTea<'f>,
+    /// An event in the mission's words.
+    describe: &'f dyn Fn(&TraceEvent) -> String,
     progress: &'f Progress,
     next: usize,
     divergence: Option<Divergence>,
@@ -399,11 +537,16 @@ impl TraceSink for Compare<'_> {
                 self.skew = self.skew.max(w.ticks.abs_diff(got.ticks));
             }
             if !equal {
+                // Where only the instants differ, say both.
+                let when = |ticks: u64| match want {
+                    Some(w) if w.ticks != got.ticks => format!(" at {:.3} s", seconds(ticks)),
+                    _ => String::new(),
+                };
                 self.divergence = Some(Divergence {
                     event: self.next,
                     at_s: seconds(want.map_or(got.ticks, |w| w.ticks.min(got.ticks))),
-                    recorded: want.map(|w| recorded_text(self.mission, w)),
-                    replayed: Some(crate::cli::outputs::describe(self.mission, event)),
+                    recorded: want.map(|w| recorded_text(self.describe, w) + &when(w.ticks)),
+                    replayed: Some((self.describe)(event) + &when(got.ticks)),
                 });
             }
         }
@@ -426,7 +569,7 @@ fn seconds(ticks: u64) -> f64 {
 
 /// A recorded frame in words: as the replay would trace it when it is one of its inputs, else
 /// its kind.
-fn recorded_text(mission: &FetchTea<'_>, frame: &Frame<1>) -> String {
+fn recorded_text(describe: &dyn Fn(&TraceEvent) -> String, frame: &Frame<1>) -> String {
     let event = match frame.input() {
         Some(Input::Sample {
             sensor,
@@ -445,7 +588,7 @@ fn recorded_text(mission: &FetchTea<'_>, frame: &Frame<1>) -> String {
         | None => None,
     };
     match event {
-        Some(e) => crate::cli::outputs::describe(mission, &e),
+        Some(e) => describe(&e),
         None => format!(
             "a trace event of kind {} (header {:#x})",
             frame.kind(),
@@ -460,32 +603,29 @@ fn recorded_text(mission: &FetchTea<'_>, frame: &Frame<1>) -> String {
 /// `lag` 0 compares every event bit for bit, its instant included: a host's recording. A
 /// chip's computing takes time the host's does not, and its samplers start when its interrupt
 /// runs: there an event may come up to `lag` earlier or later than recorded, and everything
-/// else must be equal, in order ([`Replayed::skew`] says how far apart they came).
+/// else must be equal, in order ([`Replayed::skew_ms`] says how far apart they came).
 pub fn replay(
     recording: &Recording,
     mcap: Option<Output>,
     lag: Duration,
 ) -> Result<(Replayed, Option<Output>), String> {
-    let mcap = match mcap {
-        Some(out) => {
-            let path = out.path().to_path_buf();
-            Some(
-                McapLog::new(out, &recording.scenario)
-                    .map_err(|e| format!("{}: {e}", path.display()))?,
-            )
-        }
-        None => None,
-    };
-    let robot = robot::fetch_tea(&recording.scenario).map_err(|e| e.to_string())?;
     let progress = Progress::default();
-    let platform = Replay {
-        frames: &recording.frames,
-        mission: &robot.mission,
-        progress: &progress,
+    let frames = &recording.frames;
+    let start = Instant::from_ticks(frames.first().map_or(0, |f| f.ticks));
+    let mcap = |scenario: &Scenario| -> Result<Option<McapLog<Output>>, String> {
+        match mcap {
+            Some(out) => {
+                let path = out.path().to_path_buf();
+                McapLog::new(out, scenario)
+                    .map(Some)
+                    .map_err(|e| format!("{}: {e}", path.display()))
+            }
+            None => Ok(None),
+        }
     };
-    let compare = Compare {
-        expected: &recording.frames,
-        mission: &robot.mission,
+    let compare = |describe, mcap| Compare {
+        expected: frames,
+        describe,
         progress: &progress,
         next: 0,
         divergence: None,
@@ -493,33 +633,101 @@ pub fn replay(
         lag: lag.as_ticks(),
         skew: 0,
     };
-    let mut space = robot::PlannerSpace::new();
-    let sc = &recording.scenario;
-    let runtime = Runtime::<'_, Replay<'_>, Caps, Compare<'_>>::new(
-        &robot.mission,
-        &platform,
-        compare,
-        robot::config(sc, recording.arch),
-    );
-    let limit = Duration::from_millis(sc.max_ms) + Duration::from_secs(1);
+    let platform = |modes: Vec<bool>| Replay {
+        frames,
+        on_demand: modes,
+        progress: &progress,
+    };
+    match &recording.source {
+        Source::Simulator { scenario, arch, .. } => {
+            let robot = robot::fetch_tea(scenario).map_err(|e| e.to_string())?;
+            let describe = |e: &TraceEvent| crate::cli::outputs::describe(&robot.mission, e);
+            let platform = platform(on_demand(robot.mission.domain.sensors()));
+            let runtime = Runtime::<'_, Replay<'_>, Caps, Compare<'_>>::new(
+                &robot.mission,
+                &platform,
+                compare(&describe, mcap(scenario)?),
+                robot::config(scenario, *arch),
+            );
+            let mut space = robot::PlannerSpace::new();
+            let end = Instant::from_millis(scenario.max_ms);
+            drive(
+                runtime.sensing(),
+                runtime.run_planning(&robot::PLANNER, &mut space),
+                start,
+                end,
+            )?;
+            finish(runtime.into_sink())
+        }
+        Source::Board { settings } => {
+            // As the board does: the compiled mission, its periods from the calibration.
+            let mut mission = fetch_tea::MISSION.clone();
+            for (sensor, period) in [
+                (fetch_tea::Sensor::Sonar, settings.sonar_period),
+                (fetch_tea::Sensor::Bumper, settings.bumper_period),
+            ] {
+                if let Some(period) = period {
+                    mission
+                        .domain
+                        .set_sensor_mode(sensor.id(), SensorMode::Cyclic { period })
+                        .map_err(|e| format!("the calibration's periods: {e:?}"))?;
+                }
+            }
+            let describe =
+                |e: &TraceEvent| psmpa_core::text::Describe::describe(&mission, *e).to_string();
+            let platform = platform(on_demand(mission.domain.sensors()));
+            let runtime = fetch_tea::Runtime::<'_, Replay<'_>, Compare<'_>>::new(
+                &mission,
+                &platform,
+                compare(&describe, mcap(&Scenario::empty())?),
+                psmpa_core::Config::default(),
+            );
+            // A second past the last frame: what the board traced at its last instant too.
+            let end =
+                Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);
+            drive(runtime.sensing(), runtime.run(), start, end)?;
+            finish(runtime.into_sink())
+        }
+    }
+}
+
+/// By sensor index: whether the mission reads it on demand.
+fn on_demand<const W: usize>(sensors: &[psmpa_core::SensorAction<'_, W>]) -> Vec<bool> {
+    sensors
+        .iter()
+        .map(|s| matches!(s.mode, SensorMode::OnDemand))
+        .collect()
+}
+
+/// Runs a replay's two sides until the deciding side ends or `end` (a second's margin).
+fn drive<S: core::future::Future, F: core::future::Future>(
+    sensing: S,
+    deciding: F,
+    start: Instant,
+    end: Instant,
+) -> Result<(), String> {
     let run = async {
-        let deadline = Timer::at(Instant::from_millis(sc.max_ms));
-        let sensing = pin!(runtime.sensing());
-        let deciding = pin!(select(
-            runtime.run_planning(&robot::PLANNER, &mut space),
-            deadline
-        ));
+        // The runtime started at the first recorded instant: a board boots first.
+        crate::backend::advance_to(start);
+        let sensing = pin!(sensing);
+        let deciding = pin!(select(deciding, Timer::at(end)));
         // SAFETY: run to completion inside `simulate`, on this thread.
         let _ = unsafe { Prioritized.beside(sensing, deciding) }.await;
     };
-    simulate(run, limit).map_err(|e| format!("the replay failed: {e}"))?;
-    let mut compare = runtime.into_sink();
+    let limit = Duration::from_ticks(end.as_ticks()) + Duration::from_secs(1);
+    simulate(run, limit)
+        .map(|_| ())
+        .map_err(|e| format!("the replay failed: {e}"))
+}
+
+/// The last comparison (a recording longer than its replay), and the result.
+fn finish(mut compare: Compare<'_>) -> Result<(Replayed, Option<Output>), String> {
     if compare.divergence.is_none() && compare.next < compare.expected.len() {
         let want = &compare.expected[compare.next];
         compare.divergence = Some(Divergence {
             event: compare.next,
             at_s: seconds(want.ticks),
-            recorded: Some(recorded_text(compare.mission, want)),
+            recorded: Some(recorded_text(compare.describe, want)),
             replayed: None,
         });
     }

@@ -344,7 +344,7 @@ pub fn record_start(
     arch: Arch,
 ) {
     use psmpa_core::record::{self, Header};
-    out.write(&Header { width: 1, mission }.encode());
+    out.write(&Header::new(1, mission).encode());
     let len = (scenario.len() as u32).to_le_bytes();
     let byte = [arch.byte()];
     out.write(&len);

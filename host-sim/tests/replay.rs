@@ -64,7 +64,8 @@ fn every_shipped_scenario_replays_as_recorded() {
 
 /// The frames after a recording's header and prologue, and where they start.
 fn frames(bytes: &[u8]) -> (usize, Vec<Frame<1>>) {
-    let len = u32::from_le_bytes(bytes[19..23].try_into().unwrap()) as usize;
+    let at = record::HEADER_LEN;
+    let len = u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
     let start = record::HEADER_LEN + 4 + len + 1 + 4;
     let frames = bytes[start..]
         .chunks(record::frame_len(1))
@@ -151,8 +152,10 @@ fn a_file_that_is_not_a_whole_recording_is_refused() {
     };
     let mut flipped = bytes.clone();
     flipped[start + 3 * record::frame_len(1) + 12] ^= 4;
-    let mut older = bytes.clone();
-    older[8] = 0;
+    // Version 1, before the header carried its tick rate: 4 bytes shorter.
+    let mut older = bytes[..19].to_vec();
+    older[8] = 1;
+    older.extend_from_slice(&bytes[record::HEADER_LEN..]);
     let mut other = bytes.clone();
     // The prologue's scenario, changed, its checksum made good: another run's recording.
     let name_at = bytes.windows(7).position(|w| w == b"sonar-6").unwrap();
@@ -165,12 +168,12 @@ fn a_file_that_is_not_a_whole_recording_is_refused() {
         (write("flipped.rec", &flipped), "fails its checksum"),
         (write("cut.rec", &bytes[..bytes.len() - 7]), "cut short"),
         (
-            write("cut-prologue.rec", &bytes[..30]),
+            write("cut-prologue.rec", &bytes[..34]),
             "cut short in its prologue",
         ),
         (
             write("older.rec", &older),
-            "format version 0, this reads version 1",
+            "format version 1, this reads version 2",
         ),
         (write("other.rec", &other), "another mission"),
         (write("empty.rec", b""), "cut short"),
@@ -239,4 +242,37 @@ fn a_chips_recording_replays_within_the_lag_it_is_given() {
         .output()
         .unwrap();
     assert_eq!(bad.status.code(), Some(2));
+}
+
+/// A firmware's decoded log (`probe-rs run`, `defmt-print`) replays as its recording: the
+/// `rec [bytes]` lines gathered, whatever else the log says.
+#[test]
+fn a_decoded_log_replays_as_its_recording() {
+    let dir = folder("replay-log");
+    let rec = record(&repo("scenarios/sonar-6.json"), "psmpa", &dir);
+    let bytes = std::fs::read(&rec).unwrap();
+    let mut log = String::from("0.000 INFO  calibration from flash: ...\n");
+    for (i, piece) in bytes.chunks(29).enumerate() {
+        let list: Vec<String> = piece.iter().map(u8::to_string).collect();
+        // Some viewers add where the message was logged.
+        let at = if i % 2 == 1 {
+            " (psmpa_board_rp rp/src/record.rs:57)"
+        } else {
+            ""
+        };
+        log += &format!("{}.{i:03} INFO  rec [{}]{at}\n", i / 1000, list.join(", "));
+        if i % 50 == 0 {
+            log += "1.000 WARN  go to door: precondition violated, {path_clear} false\n";
+        }
+    }
+    let file = dir.join("robot.log");
+    std::fs::write(&file, &log).unwrap();
+    let (status, v, stderr) = replay(&file);
+    assert_eq!(status, Some(0), "{v} {stderr}");
+    assert!(v["decisions"].as_u64().unwrap() > 100, "{v}");
+    // A frame before any header is no recording.
+    std::fs::write(&file, "0.1 INFO  rec [24, 0, 0]\n").unwrap();
+    let (status, _, stderr) = replay(&file);
+    assert_eq!(status, Some(2));
+    assert!(stderr.contains("before any header"), "{stderr}");
 }

@@ -744,7 +744,7 @@ fn replay_recordings(machine: Machine, log: &str, inject_fault: bool) -> Vec<Str
         machine.name
     );
     let dir = recording::dir(&label);
-    let r = recording::replay_log(log, &dir, recording::CHIP_LAG);
+    let r = recording::replay_log(log, &dir, recording::CHIP_LAG, None);
     let costs = tagged(log, "recorder");
     let sum = |key: &str| -> u64 {
         costs

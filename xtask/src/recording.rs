@@ -7,42 +7,15 @@
 use std::path::{Path, PathBuf};
 
 use embassy_time::Duration;
-use psmpa_core::record::MAGIC;
 use psmpa_sim::replay;
 
 /// How much earlier or later than recorded a replayed event may come from a chip's recording:
 /// the chip computes for a few ticks where the host takes none (`replay::replay`).
 pub const CHIP_LAG: Duration = Duration::from_millis(2);
 
-/// The bytes of one `rec [..]` line, or `None` for another line.
-fn rec_bytes(line: &str) -> Option<Result<Vec<u8>, String>> {
-    let (_, list) = line.split_once(" rec [")?;
-    let list = list.strip_suffix(']')?;
-    Some(
-        list.split(", ")
-            .filter(|b| !b.is_empty())
-            .map(|b| b.parse::<u8>().map_err(|e| format!("{line:.80}: {e}")))
-            .collect(),
-    )
-}
-
-/// The recordings in `log`, in order: each begins at a piece that starts with the magic.
+/// The recordings in a firmware's decoded log ([`replay::from_log`]).
 pub fn recordings(log: &str) -> Result<Vec<Vec<u8>>, String> {
-    let mut out: Vec<Vec<u8>> = Vec::new();
-    for line in log.lines() {
-        let Some(bytes) = rec_bytes(line) else {
-            continue;
-        };
-        let bytes = bytes?;
-        match out.last_mut() {
-            Some(last) if !bytes.starts_with(&MAGIC) => last.extend_from_slice(&bytes),
-            None if !bytes.starts_with(&MAGIC) => {
-                return Err("a recording's frame before any header".to_owned());
-            }
-            _ => out.push(bytes),
-        }
-    }
-    Ok(out)
+    replay::from_log(log)
 }
 
 /// What replaying a log's recordings found.
@@ -62,8 +35,9 @@ pub struct Replays {
     pub failures: Vec<String>,
 }
 
-/// Keeps each recording of `log` in `dir` (`SCENARIO.ARCH.rec`) and replays it on the host.
-pub fn replay_log(log: &str, dir: &Path, lag: Duration) -> Replays {
+/// Keeps each recording of `log` in `dir` and replays it on the host: `NAME.rec` where `name`
+/// is given, else `SCENARIO.ARCH.rec` (`-N` after the first).
+pub fn replay_log(log: &str, dir: &Path, lag: Duration, name: Option<&str>) -> Replays {
     let mut result = Replays::default();
     let recs = match recordings(log) {
         Ok(r) => r,
@@ -79,10 +53,18 @@ pub fn replay_log(log: &str, dir: &Path, lag: Duration) -> Replays {
         return result;
     }
     for (i, bytes) in recs.iter().enumerate() {
-        let mut path = dir.join(format!("run-{i}.rec"));
+        let file = |stem: &str| {
+            let n = if i > 0 && name.is_some() {
+                format!("-{i}")
+            } else {
+                String::new()
+            };
+            dir.join(format!("{stem}{n}.rec"))
+        };
+        let mut path = file(name.unwrap_or("run"));
         let read = replay::read(&path, bytes);
-        if let Ok(rec) = &read {
-            path = dir.join(format!("{}.{}.rec", rec.scenario.name, rec.arch.name()));
+        if let (Ok(rec), None) = (&read, name) {
+            path = file(&rec.name());
         }
         // Kept for reading whatever the replay says: `psmpa-sim replay FILE` runs it again.
         if let Err(e) = std::fs::write(&path, bytes) {
