@@ -33,7 +33,8 @@
 // * SEV is a no-op: embassy's thread executor needs it, so the logger's "SEV" message sets
 //   the core's event flag.
 // * A watchdog that fired fires again at the same instant for ever: the harness stops it and
-//   resets the chip itself (a new chip whose watchdog says it timed out, the same flash).
+//   resets the chip itself (a new chip whose watchdog says it timed out, the same flash and
+//   the same SRAM, as a reset leaves it).
 // * The boot ROM's path halts: the image is started from its vector table (VTOR, SP, PC);
 //   the ROM is zeros (the firmware calls no ROM routine).
 // * Inputs do not follow pull-ups: the world drives every input's level.
@@ -88,9 +89,13 @@ class Bench {
   /** A new chip at the current instant, running the flash image from its vector table. */
   boot(afterWatchdog) {
     const base = this.sim ? this.now : 0;
+    // A watchdog reset leaves SRAM as it was (what `.uninit` keeps: the flight recorder's
+    // ring); the new chip starts with the old one's.
+    const sram = afterWatchdog && this.mcu ? this.mcu.sram.slice() : null;
     this.sim = new Simulator();
     this.base = base;
     const mcu = (this.mcu = this.sim.rp2040);
+    if (sram) mcu.sram.set(sram);
     const core = (this.core = mcu.core);
     mcu.loadBootrom(new Uint32Array(4096));
     mcu.flash.set(this.image);
@@ -265,6 +270,12 @@ class Bench {
   /** Thread mode enters or leaves sleep: a busy stretch ends or begins. */
   sleeping(waiting) {
     const core = this.core;
+    // What the firmware wrote before it slept, also the first time after a reset (when no
+    // busy stretch was open): it may sleep for the rest of the run.
+    if (waiting) {
+      this.pollHealth();
+      this.readRtt();
+    }
     if (waiting && this.busySince !== null && core.IPSR === 0) {
       const busy = core.cycles - this.busySince.cycles - (this.handlerCycles - this.busySince.handlers);
       const t = this.accounts.thread;
@@ -275,8 +286,6 @@ class Bench {
         t.maxAt = this.now;
       }
       this.busySince = null;
-      this.pollHealth();
-      this.readRtt();
     } else if (!waiting && this.busySince === null) {
       this.busySince = { cycles: core.cycles, handlers: this.handlerCycles };
     }

@@ -28,6 +28,8 @@ compile_error!("choose a chip: feature `rp2040` (Pico) or `rp235xa` (Pico 2)");
 
 pub mod calibration;
 pub mod log;
+#[cfg(feature = "recorder")]
+pub mod record;
 
 use core::panic::PanicInfo;
 
@@ -190,21 +192,9 @@ async fn main(spawner: Spawner) {
     let p = embassy_rp::init(Default::default());
 
     let mut watchdog = Watchdog::new(p.WATCHDOG);
-    if watchdog.reset_reason() == Some(ResetReason::TimedOut) {
-        // Stopped by a hang or a fault: a robot does not drive off again by itself.
+    let reset = watchdog.reset_reason() == Some(ResetReason::TimedOut);
+    if reset {
         watchdog.stop();
-        error!("the watchdog reset the board (a hang or a fault): reset it to run again");
-        return;
-    }
-    // A probe's halt does not reset the board.
-    watchdog.pause_on_debug(true);
-    watchdog.start(WATCHDOG_TIMEOUT);
-    match feed(watchdog) {
-        Ok(task) => spawner.spawn(task),
-        Err(_) => {
-            error!("the watchdog task is already running");
-            return;
-        }
     }
 
     let settings = match calibration::read() {
@@ -224,6 +214,33 @@ async fn main(spawner: Spawner) {
             Settings::DEFAULT
         }
     };
+
+    // The flight recording begins; after a watchdog reset, what the ring kept comes first.
+    #[cfg(feature = "recorder")]
+    record::start(&settings, reset);
+    if reset {
+        // Stopped by a hang or a fault: a robot does not drive off again by itself.
+        error!("the watchdog reset the board (a hang or a fault): reset it to run again");
+        return;
+    }
+    // A probe's halt does not reset the board.
+    watchdog.pause_on_debug(true);
+    watchdog.start(WATCHDOG_TIMEOUT);
+    match feed(watchdog) {
+        Ok(task) => spawner.spawn(task),
+        Err(_) => {
+            error!("the watchdog task is already running");
+            return;
+        }
+    }
+    #[cfg(feature = "recorder")]
+    match record::drain() {
+        Ok(task) => spawner.spawn(task),
+        Err(_) => {
+            error!("the recorder task is already running");
+            return;
+        }
+    }
 
     // The compiled mission, copied to RAM: the calibration may set its sampling periods.
     static MISSION: StaticCell<fetch_tea::Mission> = StaticCell::new();
@@ -313,7 +330,10 @@ async fn main(spawner: Spawner) {
         }
     }
 
-    match runtime.run().await {
+    let outcome = runtime.run().await;
+    #[cfg(feature = "recorder")]
+    record::flush();
+    match outcome {
         Ok(report) => info!(
             "Fetch Tea: goal reached at {=u64} ms, {=u16} plan(s) started",
             Instant::now().as_millis(),

@@ -271,6 +271,8 @@ impl Log {
 
 impl TraceSink for Log {
     fn record(&mut self, at: Instant, event: &TraceEvent) {
+        #[cfg(feature = "recorder")]
+        crate::record::take(at, event);
         match *event {
             TraceEvent::SensorOn { sensor }
             | TraceEvent::SensorOff { sensor }

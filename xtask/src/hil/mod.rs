@@ -38,7 +38,7 @@ use psmpa_sim::sim::run_summary;
 use psmpa_sim::world::{Fate, ObstacleReport, Tally, WorldEvent};
 use serde::Serialize;
 
-use crate::firmware;
+use crate::{firmware, recording};
 use fault::{Expect, Fault, FaultFile};
 use harness::{Boot, Event, Harness, Stats, Symbols};
 use world::{BenchWorld, PinFault, pin};
@@ -314,9 +314,103 @@ pub struct Report {
     /// Where the bench differs from psmpa-sim for a reason of the robot's body (see
     /// `compare_with_host`).
     pub differences: Vec<String>,
+    /// The flight recording the firmware streamed, replayed on the host.
+    pub recording: Option<BenchRecording>,
     /// The firmware's log.
     #[serde(skip)]
     pub log: Vec<LogLine>,
+}
+
+/// A run's flight recording, as `psmpa-sim replay` found it.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BenchRecording {
+    /// Frames streamed over RTT.
+    pub frames: usize,
+    /// Decisions the replay compared, all equal.
+    pub decisions: usize,
+    /// The most an event came earlier or later than recorded, ms.
+    pub skew_ms: u64,
+    /// After a watchdog reset: frames the RAM ring kept from before it (the streamed
+    /// recording's last ones, checked).
+    pub ring_frames: Option<usize>,
+}
+
+/// Keeps a run's recordings in `target/recordings/bench/` and checks them: the streamed one
+/// replays on the host with every decision equal (where a reset cut it, up to its end), and
+/// after a reset the ring's frames are the streamed recording's last ones.
+fn check_recording(report: &mut Report, stem: &str) {
+    let text: String = report
+        .log
+        .iter()
+        .map(|l| format!("{} {}\n", l.level, l.text))
+        .collect();
+    let dir = recording::dir("bench");
+    let mut fail = |why: String| report.failures.push(format!("flight recording: {why}"));
+    let recs = match recording::recordings(&text) {
+        Ok(r) => r,
+        Err(e) => return fail(e),
+    };
+    if let Err(e) = std::fs::create_dir_all(&dir) {
+        return fail(format!("{}: {e}", dir.display()));
+    }
+    if recs.len() > 2 {
+        return fail(format!("{} recordings in one run's log", recs.len()));
+    }
+    let mut read = Vec::new();
+    for (i, bytes) in recs.iter().enumerate() {
+        let path = dir.join(if i == 0 {
+            format!("{stem}.rec")
+        } else {
+            format!("{stem}.ring.rec")
+        });
+        if let Err(e) = std::fs::write(&path, bytes) {
+            return fail(format!("{}: {e}", path.display()));
+        }
+        match psmpa_sim::replay::read(&path, bytes) {
+            Ok(r) => read.push(r),
+            Err(e) => return fail(e),
+        }
+    }
+    let reset = report.watchdog_resets > 0;
+    let Some(streamed) = read.first() else {
+        return fail("none in the log".to_owned());
+    };
+    let mut found = BenchRecording {
+        frames: streamed.frames.len(),
+        ..BenchRecording::default()
+    };
+    match psmpa_sim::replay::replay(streamed, None, recording::CHIP_LAG) {
+        Ok((r, _)) => {
+            let cut = reset
+                && r.divergence
+                    .as_ref()
+                    .is_some_and(|d| d.recorded.is_none() && d.event == found.frames);
+            if r.diverged && !cut {
+                fail(format!("{stem}.rec: {}", r.text().trim_end()));
+            }
+            found.decisions = r.decisions;
+            found.skew_ms = r.skew_ms;
+        }
+        Err(e) => fail(e),
+    }
+    match (reset, read.get(1)) {
+        (true, Some(ring)) => {
+            let n = ring.frames.len();
+            let tail = streamed
+                .frames
+                .get(streamed.frames.len().saturating_sub(n)..);
+            if n == 0 || tail != Some(&ring.frames[..]) {
+                fail(format!(
+                    "the ring kept {n} frames, not the streamed recording's last ones"
+                ));
+            }
+            found.ring_frames = Some(n);
+        }
+        (true, None) => fail("no ring after the reset".to_owned()),
+        (false, Some(_)) => fail("a second recording without a reset".to_owned()),
+        (false, None) => {}
+    }
+    report.recording = Some(found);
 }
 
 /// psmpa-sim's outcome of the same scenario.
@@ -704,6 +798,7 @@ fn report(
         pin_log_hash: format!("{:016x}", c.pins.hash()),
         failures,
         differences: Vec::new(),
+        recording: None,
         log: c.log,
     };
     let _ = fw;
@@ -982,7 +1077,8 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
     let mut reports = Vec::new();
     for (p, result) in plays.iter().zip(results) {
         match result {
-            Ok((report, pins)) => {
+            Ok((mut report, pins)) => {
+                check_recording(&mut report, &p.stem());
                 if !report.failures.is_empty() {
                     failed.push(p.name());
                 }
@@ -1143,6 +1239,18 @@ fn text(r: &Report) -> String {
             gap.map_or("-".to_owned(), |g| format!("{g:.3} ms")),
             re.map_or("-".to_owned(), |c| format!("{c} cycles")),
             b.map_or("-".to_owned(), |c| format!("{c} cycles")),
+        );
+    }
+    if let Some(rec) = &r.recording {
+        let _ = writeln!(
+            s,
+            "  flight recording: {} frames over RTT, {} decisions replayed on the host as recorded (within {} ms){}",
+            rec.frames,
+            rec.decisions,
+            rec.skew_ms,
+            rec.ring_frames.map_or(String::new(), |n| format!(
+                "; after the reset the RAM ring gave back its last {n}"
+            ))
         );
     }
     for d in &r.differences {
