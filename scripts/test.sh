@@ -55,7 +55,7 @@ step "the dock example, copied out of the checkout as the README says (\"Your ow
 own=$(mktemp -d)
 trap 'rm -rf "$own"' EXIT
 ln -s "$PWD" "$own/psmpa"
-sed -n '/<!-- own-robot:start -->/,/<!-- own-robot:end -->/p' README.md | sed '/^```/d;/^<!--/d' > "$own/steps.sh"
+sed -n '/<!-- own-robot:start -->/,/<!-- own-robot:end -->/p' docs/guide.md | sed '/^```/d;/^<!--/d' > "$own/steps.sh"
 # Built beside the crate outside the workspace, whose crates it shares where features agree.
 outside_target="$PWD/target/outside"
 (cd "$own" && CARGO_TARGET_DIR="$outside_target" bash -eu -o pipefail steps.sh)
