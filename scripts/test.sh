@@ -14,11 +14,18 @@ cargo fmt --all --check
 step "clippy (warnings are errors)"
 cargo clippy --workspace --all-targets -- -D warnings
 
+# Before anything writes files: a clean tree packages.
+step "the library crates package and build as published (psmpa-model, -macros, -core, -testkit, -drivers)"
+cargo publish --workspace --dry-run
+
 step "host tests"
 cargo test --workspace
 
 step "psmpa-core's defmt text: fact names reach the log as names (defmt's host encoder)"
 cargo test -p psmpa-core --features defmt,defmt/unstable-test --lib text::tests
+
+step "psmpa-core with the log facade (feature log)"
+cargo build -p psmpa-core --features log
 
 step "docs (warnings are errors)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps

@@ -131,10 +131,8 @@ pub type BenchRuntime<'r> = Runtime<'r, Platform, Caps<1, 3, 1, 3, 4>>;
 
 /// Runs the plan once on `platform`, from `mission`; returns the action steps it ran.
 pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
-    let config = Config {
-        max_violation: Duration::from_ticks(0),
-        ..Config::default()
-    };
+    let mut config = Config::default();
+    config.max_violation = Duration::from_ticks(0);
     let runtime = BenchRuntime::new(mission, platform, (), config);
     let before = platform.steps.get();
     let done = psmpa_sim::backend::simulate_split(

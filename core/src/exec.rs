@@ -51,6 +51,7 @@ use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};
 /// How sensing and acting are scheduled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum Policy {
     /// P-SMPA: sensors run in parallel with the action that needs them.
     PSmpa,
@@ -64,9 +65,11 @@ pub enum Policy {
     },
 }
 
-/// Settings of a runtime.
+/// Settings of a runtime. A setting may be added in a minor version: start from
+/// [`Config::default`] and set the fields you need.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub struct Config {
     /// The scheduling policy.
     pub policy: Policy,
@@ -410,10 +413,10 @@ impl Waiter {
 
     /// Wakes the registered task, if any.
     pub(crate) fn wake(&self) {
-        if let Ok(slot) = self.0.try_borrow() {
-            if let Some(waker) = &*slot {
-                waker.wake_by_ref();
-            }
+        if let Ok(slot) = self.0.try_borrow()
+            && let Some(waker) = &*slot
+        {
+            waker.wake_by_ref();
         }
     }
 }
@@ -943,16 +946,16 @@ impl<
             Ok(outcome) => (Some(outcome), outcome_result(action, outcome)),
             Err(failure) => (None, Err(failure)),
         };
-        if result.is_ok() {
-            if let Some(spec) = self.mission.domain.action(action) {
-                let beliefs = self.beliefs().apply(spec.add, spec.del);
-                // The effects are known, as a sample's percepts are: a percept fact an action
-                // deleted is known false, not unknown.
-                self.shared
-                    .lock(|s| s.sensed.set(s.sensed.get().union(spec.add).union(spec.del)));
-                self.set_beliefs(beliefs);
-                self.trace(TraceEvent::EffectsApplied { action, beliefs });
-            }
+        if result.is_ok()
+            && let Some(spec) = self.mission.domain.action(action)
+        {
+            let beliefs = self.beliefs().apply(spec.add, spec.del);
+            // The effects are known, as a sample's percepts are: a percept fact an action
+            // deleted is known false, not unknown.
+            self.shared
+                .lock(|s| s.sensed.set(s.sensed.get().union(spec.add).union(spec.del)));
+            self.set_beliefs(beliefs);
+            self.trace(TraceEvent::EffectsApplied { action, beliefs });
         }
         self.trace(TraceEvent::StateLeft {
             state: index,

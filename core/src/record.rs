@@ -784,7 +784,7 @@ mod tests {
             assert!(matches!(errors[0], RecordError::Corrupt { .. }), "byte {i}");
         }
         for cut in HEADER_LEN + 1..bytes.len() {
-            if (cut - HEADER_LEN) % frame_len(1) == 0 {
+            if (cut - HEADER_LEN).is_multiple_of(frame_len(1)) {
                 continue;
             }
             let last = frames::<1>(&bytes[..cut]).last().unwrap();

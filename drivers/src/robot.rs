@@ -74,10 +74,12 @@ use crate::hcsr04::{Hcsr04, Hcsr04Error, Range};
 use crate::marker::Marker;
 use crate::switch::Switch;
 
+// `missions/fetch-tea.json` here is a link to the project's, so that the published crate
+// carries the file.
 psmpa_core::include_mission!(
     /// The Fetch Tea mission, compiled in: checked when the crate builds, a `static` with
     /// no parsing at boot. 4 keys per data store (a reading and its pairs).
-    pub mod fetch_tea = "../missions/fetch-tea.json",
+    pub mod fetch_tea = "missions/fetch-tea.json",
     keys = 4
 );
 

@@ -130,7 +130,7 @@ pub fn gripper(balls: usize) -> Problem {
     init.extend((1..=balls).map(|b| at(b, "rooma")));
     let goal: Vec<String> = (1..=balls).map(|b| at(b, "roomb")).collect();
     let pairs = balls / 2;
-    let optimal = if balls % 2 == 0 {
+    let optimal = if balls.is_multiple_of(2) {
         (6 * pairs).saturating_sub(1)
     } else {
         6 * pairs + 3

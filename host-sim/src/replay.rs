@@ -554,10 +554,10 @@ impl TraceSink for Compare<'_> {
         // Across a gap no longer than the lag the clock follows the recording: where it was
         // made, computing took that time (a chip's cycles). A longer gap is a wait, which
         // the replay's own timers make.
-        if let Some(next) = self.expected.get(self.next).filter(|_| self.lag > 0) {
-            if next.ticks.saturating_sub(at.as_ticks()) <= self.lag {
-                crate::backend::advance_to(Instant::from_ticks(next.ticks));
-            }
+        if let Some(next) = self.expected.get(self.next).filter(|_| self.lag > 0)
+            && next.ticks.saturating_sub(at.as_ticks()) <= self.lag
+        {
+            crate::backend::advance_to(Instant::from_ticks(next.ticks));
         }
         self.progress.advance();
     }

@@ -359,22 +359,21 @@ pub fn record_start(
 
 /// The runtime settings of a run: only the policy differs between the architectures.
 pub fn config(scenario: &Scenario, arch: Arch) -> Config {
-    Config {
-        policy: match arch {
-            Arch::PSmpa => Policy::PSmpa,
-            Arch::Smpa => Policy::Smpa {
-                sense: Duration::from_millis(scenario.sense_ms),
-                act: Duration::from_millis(scenario.act_ms),
-            },
+    let mut config = Config::default();
+    config.policy = match arch {
+        Arch::PSmpa => Policy::PSmpa,
+        Arch::Smpa => Policy::Smpa {
+            sense: Duration::from_millis(scenario.sense_ms),
+            act: Duration::from_millis(scenario.act_ms),
         },
-        // The robot waits for an obstacle to be avoided or taken away; give up only if the
-        // path stays blocked for a minute.
-        max_violation: Duration::from_secs(60),
-        max_failures: 3,
-        max_plans: 8,
-        max_lost: 10,
-        ..Config::default()
-    }
+    };
+    // The robot waits for an obstacle to be avoided or taken away; give up only if the path
+    // stays blocked for a minute.
+    config.max_violation = Duration::from_secs(60);
+    config.max_failures = 3;
+    config.max_plans = 8;
+    config.max_lost = 10;
+    config
 }
 
 /// The reaction latency the runtime promises for one cyclic sensor

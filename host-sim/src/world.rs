@@ -680,10 +680,10 @@ impl<L: WorldLog> State<L> {
         if self.recheck_ms != u64::MAX {
             consider(self.recheck_ms);
         }
-        if let Motion::Avoiding { left_ms, .. } = self.motion {
-            if !self.held {
-                consider(now.saturating_add(left_ms.max(1)));
-            }
+        if let Motion::Avoiding { left_ms, .. } = self.motion
+            && !self.held
+        {
+            consider(now.saturating_add(left_ms.max(1)));
         }
         next
     }
@@ -711,13 +711,13 @@ impl<L: WorldLog> State<L> {
                 self.looked_how = 0;
             }
         }
-        if let Motion::Avoiding { left_ms, target } = self.motion {
-            if !self.held {
-                self.motion = Motion::Avoiding {
-                    left_ms: left_ms.saturating_sub(dt),
-                    target,
-                };
-            }
+        if let Motion::Avoiding { left_ms, target } = self.motion
+            && !self.held
+        {
+            self.motion = Motion::Avoiding {
+                left_ms: left_ms.saturating_sub(dt),
+                target,
+            };
         }
         self.now = self.now.saturating_add(dt);
     }
@@ -751,10 +751,10 @@ impl<L: WorldLog> State<L> {
         self.flags &= DIRTY;
         let now = self.now;
         if let Motion::Avoiding { left_ms: 0, target } = self.motion {
-            if let Some(i) = target.map(usize::from) {
-                if self.obstacles.get(i).is_some_and(Obstacle::blocks) {
-                    self.set_phase(i, Phase::Avoided);
-                }
+            if let Some(i) = target.map(usize::from)
+                && self.obstacles.get(i).is_some_and(Obstacle::blocks)
+            {
+                self.set_phase(i, Phase::Avoided);
             }
             self.motion = Motion::Idle;
             self.emit(WorldEvent::AvoidDone(target));

@@ -371,7 +371,7 @@ fn a_gap_spanning_a_switch_off_is_no_gap() {
     let noisy = scenario("noisy-sonar");
     let n = run_summary(&noisy, Arch::PSmpa).unwrap().tally;
     let gap = n.sample_gap_max_ms[0].unwrap();
-    assert!(gap > 100 && gap % 100 == 0, "{gap}");
+    assert!(gap > 100 && gap.is_multiple_of(100), "{gap}");
 }
 
 /// Sonar and bumper both perceive `path_clear`: a bumper sample saying "free" must not clear a

@@ -316,10 +316,10 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
         if self.sensors.iter().any(|s| same_name(s.name, sensor.name)) {
             return Err(DomainError::Duplicate(Table::Sensor));
         }
-        if let SensorMode::Cyclic { period } = sensor.mode {
-            if period.as_ticks() == 0 {
-                return Err(DomainError::ZeroPeriod);
-            }
+        if let SensorMode::Cyclic { period } = sensor.mode
+            && period.as_ticks() == 0
+        {
+            return Err(DomainError::ZeroPeriod);
         }
         let id = SensorId::new(self.sensors.len()).ok_or(full)?;
         self.sensors.push(sensor).map_err(|_| full)?;

@@ -240,11 +240,11 @@ fn relaxed<const W: usize>(
             }
             let through = pre.saturating_add(1);
             for f in a.add.iter() {
-                if let Some(c) = cost_mut(&mut cost, f) {
-                    if through < *c {
-                        *c = through;
-                        changed = true;
-                    }
+                if let Some(c) = cost_mut(&mut cost, f)
+                    && through < *c
+                {
+                    *c = through;
+                    changed = true;
                 }
             }
         }

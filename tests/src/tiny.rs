@@ -312,11 +312,10 @@ impl Actuator for TinyWorld {
 /// The default configuration for the tiny world under a policy: a long violation tolerance,
 /// so the walk waits for obstacles to go away.
 pub fn config(policy: psmpa_core::Policy) -> Config {
-    Config {
-        policy,
-        max_violation: Duration::from_secs(30),
-        ..Config::default()
-    }
+    let mut config = Config::default();
+    config.policy = policy;
+    config.max_violation = Duration::from_secs(30);
+    config
 }
 
 /// A runtime of `mission` on `world`, recording its trace, with `config`.

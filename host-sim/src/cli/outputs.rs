@@ -534,10 +534,10 @@ impl<W: Write> Timeline<W> {
             }
             _ => {}
         }
-        if matches!(e, TraceEvent::StateLeft { .. }) {
-            if let Some((label, start)) = self.phase.take() {
-                self.complete(6, label, start, t);
-            }
+        if matches!(e, TraceEvent::StateLeft { .. })
+            && let Some((label, start)) = self.phase.take()
+        {
+            self.complete(6, label, start, t);
         }
     }
 
@@ -556,10 +556,10 @@ impl<W: Write> Timeline<W> {
             }
             _ => return,
         };
-        if let Some((label, start)) = self.legs.take() {
-            if t > start {
-                self.complete(7, label, start, t);
-            }
+        if let Some((label, start)) = self.legs.take()
+            && t > start
+        {
+            self.complete(7, label, start, t);
         }
         self.legs = next.map(|l| (l, t));
     }
