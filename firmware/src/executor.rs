@@ -344,7 +344,15 @@ unsafe impl critical_section::Impl for Timed {
 /// The installed sensing side, with its type and lifetime erased ([`HighSlot`]).
 struct Installed(Erased);
 
-// SAFETY: a `Beside::preempting` installs it: the future is `Send`.
+// SAFETY: thread mode installs it and the sensing interrupt polls it, so the future crosses
+// contexts. The one installer is `Preempting::beside` in src/main.rs, through `Beside::new`,
+// which does not ask `S: Send` (the generic `Sides::beside` cannot name
+// `Beside::preempting`, which does). What makes the crossing sound: the sensing future owns
+// plain data only (no_std, no `Rc` or thread-bound handles) and reaches thread mode's data
+// only through the world, the robot and the runtime, which src/main.rs checks are `Sync` at
+// compile time (its `const _` block); the slot itself is read and written only inside
+// critical sections. Firmware that can keep its runtime `'static` needs none of this: see
+// the boards and src/bin/product.rs, a task on each executor.
 unsafe impl Send for Installed {}
 
 static INSTALLED: Mutex<Cell<Option<Installed>>> = Mutex::new(Cell::new(None));
