@@ -58,7 +58,7 @@ step "a crate outside the workspace, at its own tick rate, compiles its mission 
 cargo test --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 cargo build --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside --target thumbv7em-none-eabihf
 
-step "the dock example, copied out of the checkout as the README says (\"Your own robot\"), passes its tests there"
+step "the dock example, copied out of the checkout as docs/guide.md says (\"Your own robot\"), passes its tests there"
 own=$(mktemp -d)
 trap 'rm -rf "$own"' EXIT
 ln -s "$PWD" "$own/psmpa"

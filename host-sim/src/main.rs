@@ -1,4 +1,4 @@
-//! `psmpa-sim`: the P-SMPA simulator's command line. The contract (README.md, "The simulator"): exit
+//! `psmpa-sim`: the P-SMPA simulator's command line. The contract (docs/simulator.md): exit
 //! status 0 when the simulation ran, whatever its outcome (and when standard output was closed
 //! by its reader); 2 for bad input or an output that cannot be written, with one line on
 //! stderr naming the file and what is wrong; never a panic. Reading and writing go through
@@ -63,7 +63,7 @@ enum CheckPlatform {
 enum Command {
     /// Runs one scenario file under one architecture.
     Run {
-        /// Scenario file (JSON; the format is in README.md, "The simulator").
+        /// Scenario file (JSON; the format is in docs/simulator.md).
         scenario: PathBuf,
         /// Architecture.
         #[arg(long, value_enum)]
@@ -205,7 +205,7 @@ enum Command {
         /// Seed of the world generator.
         #[arg(long, allow_negative_numbers = true, default_value_t = 1, value_parser = whole)]
         seed: u64,
-        /// Print exactly one JSON object (README.md describes its shape).
+        /// Print exactly one JSON object (docs/simulator.md describes its shape).
         #[arg(long)]
         json: bool,
         /// Also plot detection rate and time ratio against the sense fraction (SVG).

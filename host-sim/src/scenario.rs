@@ -1,4 +1,4 @@
-//! Scenario files (a contract: README.md, "The simulator"): parsed with `serde-json-core`, validated
+//! Scenario files (a contract: docs/simulator.md): parsed with `serde-json-core`, validated
 //! field by field, converted to integer units (micrometres, milliseconds).
 //!
 //! `no_std`: the firmware parses the same files at boot with the same code.
@@ -986,7 +986,7 @@ fn positive_metres(field: Field, value: f64) -> Result<i64, ScenarioError> {
 }
 
 impl Scenario {
-    /// The contract's default values (README.md, "The simulator"): 2 m door, 0.1 m/s, 100 ms sonar with a 0.5 m
+    /// The contract's default values (docs/simulator.md): 2 m door, 0.1 m/s, 100 ms sonar with a 0.5 m
     /// threshold, 20 ms bumper, SMPA 1 s sense / 3 s act, at most 600 s.
     pub const DEFAULTS: ScenarioFile = ScenarioFile {
         name: String::new(),

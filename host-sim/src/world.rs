@@ -7,7 +7,7 @@
 //! door, a side step ends, a box comes within the sonar threshold), so results do not depend
 //! on how often anything wakes up.
 //!
-//! What counts (README.md, "What the world counts"):
+//! What counts (docs/simulator.md, "What the world counts"):
 //! * **detected**: an active sensor registered the obstacle while it was present and before the
 //!   robot touched it unregistered (sonar reading above 0 and below the threshold caused by a
 //!   box, or bumper 2). A bumper that is on registers a touch itself, so touching with the

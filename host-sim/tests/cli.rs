@@ -1,4 +1,4 @@
-//! The command-line contract (README.md, "The simulator"), checked on the real binary.
+//! The command-line contract (docs/simulator.md), checked on the real binary.
 
 mod common;
 

@@ -1124,7 +1124,7 @@ mod tests {
 
     #[test]
     fn a_search_space_costs_32_bytes_a_node() {
-        // What the README states for RAM: nodes 16 B, visited slot 4 B, open entry 12 B.
+        // What docs/guide.md states for RAM: nodes 16 B, visited slot 4 B, open entry 12 B.
         assert_eq!(core::mem::size_of::<Search<1024>>(), 32 * 1024 + 64);
     }
 

@@ -1,5 +1,5 @@
 //! A precondition fact that only an on-demand sensor perceives, as `ActionIo::violation` and
-//! the README's `max_violation_ms` describe it: at the action's start it keeps its belief from
+//! docs/guide.md's `max_violation_ms` describe it: at the action's start it keeps its belief from
 //! before (here never sensed, so false) until the behaviour asks for a sample.
 
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;

@@ -29,7 +29,7 @@ pub struct SampleGaps {
     pub bumper: Option<u64>,
 }
 
-/// The JSON object `psmpa-sim run --json` prints (the contract: README.md, "The simulator"),
+/// The JSON object `psmpa-sim run --json` prints (the contract: docs/simulator.md),
 /// field for field.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunJson {

@@ -3,7 +3,7 @@
 //! clean sensors and once with sensor faults and read latencies drawn at random.
 //!
 //! A third part runs the clean worlds again with the hazards under which P-SMPA can fail
-//! (README, "The harder world"): people who walk into the robot's path, boxes too low for the
+//! (docs/experiment.md, "The harder world"): people who walk into the robot's path, boxes too low for the
 //! sonar's cone close by, and a bumper that feels a contact only after one of its periods.
 //!
 //! World `i` depends only on the seed and `i` (its own PCG stream), and the statistics are
