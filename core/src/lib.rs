@@ -12,11 +12,20 @@
 //! | planning domain `Δ` | [`domain`] |
 //! | `p = <t(p), c(p), bd(p)>`, library `P`, BDI selection | [`plan`] |
 //! | world model `M = <ω, φ, Π>`, task `Π = <Δ, τ0, τG>` | [`model`], [`mission`] |
-//! | Algorithm 2: plan → FSM `f(Λ, T)` with parallel states | [`fsm`], run by [`exec`] and [`sense`] |
+//! | Algorithm 2: plan → FSM `f(Λ, T)` with parallel states | [`runtime::fsm`], run by [`runtime::engine`] (deciding) and [`runtime::sensing`] |
 //! | Algorithm 3: data stores `D`, mutual store | [`store`] |
-//! | Algorithm 1: the control loop | [`control`] |
-//! | the SMPA baseline | [`exec::Policy::Smpa`] |
+//! | Algorithm 1: the control loop | [`runtime::control`] |
+//! | the SMPA baseline | [`Policy::Smpa`] |
+//! | sensors and actuator behaviours | [`platform`] |
+//! | what goes wrong: faults, failures, violations | [`failure`] |
+//! | the trace, the flight recording | [`trace`], [`record`] |
 //! | worst-case reaction latency | [`timing`] |
+//!
+//! Layers, each module using only those above it: the model ([`facts`], [`action`],
+//! [`domain`], [`plan`], [`mission`], [`planner`] from psmpa-model, and [`model`]); [`store`];
+//! [`failure`]; [`platform`]; [`trace`] and [`record`]; [`runtime`] (the engine with its
+//! sensing and deciding sides, the state they share, the FSM, the control loop); [`timing`]
+//! and [`text`]. A test (`tests/layers.rs`) fails on a cycle between them.
 //!
 //! The platform (a robot, or a simulator) implements [`platform::Sensor`] and
 //! [`platform::Actuator`]. The core only exposes futures: the sensing side
@@ -126,14 +135,11 @@ macro_rules! compile_runtime {
 // The model layer (psmpa-model): facts, actions, domains, plans, tasks, the mission format.
 pub use psmpa_model::{action, domain, facts, mission, plan, planner};
 
-pub mod control;
-pub mod exec;
-pub mod fsm;
+pub mod failure;
 pub mod model;
 pub mod platform;
 pub mod record;
 pub mod runtime;
-pub mod sense;
 pub mod store;
 pub mod text;
 pub mod timing;
@@ -146,17 +152,18 @@ pub use embassy_sync;
 pub use embassy_time;
 
 pub use action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, SensorSet};
-pub use control::{ControlError, Report};
 pub use domain::{Domain, DomainError, EventId};
-pub use exec::{ActionIo, Config, Engine, Failure, Policy, Violation};
 pub use facts::{FactId, FactSet, FactSetOf};
-pub use fsm::{BehaviourState, Fsm, FsmError, Target};
+pub use failure::{Failure, SensorFault, Violation};
 pub use mission::{Bindings, LoadError, Loaded, Mission, Registry};
 pub use model::{Task, WorldModel};
 pub use plan::{Plan, PlanError, PlanId, PlanLibrary};
 pub use platform::{
-    Actuator, MAX_PAIRS, Outcome, PairRejected, Platform, Reading, Sensor, SensorFault,
+    ActionIo, Actuator, MAX_PAIRS, Outcome, PairRejected, Platform, Reading, Sensor,
 };
+pub use runtime::control::{ControlError, Report};
+pub use runtime::engine::{Config, Engine, Policy};
+pub use runtime::fsm::{BehaviourState, Fsm, FsmError, Target};
 pub use runtime::{BindingsOf, Capacity, Caps, LoadedOf, MissionOf, Runtime};
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
 pub use text::{Describe, Described, FactNames};

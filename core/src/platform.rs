@@ -6,10 +6,17 @@
 //! compiles to a jump table. Methods take `&self` because sensors and actuators run at the same
 //! time; platforms keep their state in cells or mutexes.
 
+use core::future::Future;
+use core::pin::Pin;
+use core::task::{Context, Poll};
+
+use embassy_futures::select::{Either, select};
+use embassy_time::{Duration, Instant, Timer};
+
 use crate::action::{ActionId, SensorId};
-use crate::exec::ActionIo;
 use crate::facts::FactSetOf;
-use crate::store::{Key, SAMPLE_KEY, Value};
+use crate::failure::{SensorFault, Violation};
+use crate::store::{Entry, Key, MutualStore, SAMPLE_KEY, StoreFull, Value};
 
 /// Most `(key, value)` pairs one [`Reading`] carries besides its main value.
 pub const MAX_PAIRS: usize = 4;
@@ -96,26 +103,6 @@ impl<const W: usize> Reading<W> {
     }
 }
 
-/// Why a sensor could not deliver a sample.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub enum SensorFault {
-    /// No answer within the sensor's timeout (set by the runtime).
-    Timeout,
-    /// The value lies outside what the sensor can measure.
-    OutOfRange,
-    /// The sensor keeps returning the same value where the world must have changed.
-    Stuck,
-    /// Too many samples in a row were lost ([`Config::max_lost`](crate::exec::Config::max_lost)).
-    Silent,
-    /// The device reported an error (platform-specific code).
-    Device(u8),
-    /// The platform has no sensor of this id: its [`Sensor::Id`] names another mission's
-    /// sensors (set by the runtime).
-    Unbound,
-}
-
 /// How an actuator behaviour ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -130,7 +117,7 @@ pub enum Outcome {
 
 /// The sensors of a platform (the sensing side: the paper's sensory controller).
 ///
-/// Every running sensor has a sampler of its own in [`Engine::sensing`](crate::exec::Engine::sensing):
+/// Every running sensor has a sampler of its own in [`Engine::sensing`](crate::runtime::engine::Engine::sensing):
 /// its methods are called for one sensor at a time, but calls for *different* sensors overlap.
 ///
 /// * A call may await I/O for as long as the device needs (an ultrasonic echo up to 38 ms, a
@@ -160,7 +147,7 @@ pub trait Sensor<const W: usize = 1> {
     async fn switch_off(&self, sensor: Self::Id);
     /// Takes one sample. The runtime bounds it with the sensor's timeout. `Ok(None)` means this
     /// sample was lost (an echo that never came back); the runtime keeps the previous belief
-    /// and fails the state after [`Config::max_lost`](crate::exec::Config::max_lost) losses in
+    /// and fails the state after [`Config::max_lost`](crate::runtime::engine::Config::max_lost) losses in
     /// a row.
     async fn sample(&self, sensor: Self::Id) -> Result<Option<Reading<W>>, SensorFault>;
 
@@ -236,4 +223,135 @@ pub trait Platform {
     /// `NoopRawMutex` where both run on one executor (or a host simulation),
     /// `CriticalSectionRawMutex` where sensing runs on a higher-priority executor.
     type Mutex: embassy_sync::blocking_mutex::raw::RawMutex;
+}
+
+/// What the runtime shares with a running behaviour, object safe so [`ActionIo`] needs no
+/// type parameters.
+pub(crate) trait Monitor<const W: usize> {
+    fn beliefs(&self) -> FactSetOf<W>;
+    fn violation(&self) -> Option<Violation<W>>;
+    fn version(&self) -> u32;
+    fn poll_changed(&self, cx: &mut Context<'_>, since: u32) -> Poll<u32>;
+    fn request(&self, sensor: SensorId);
+    fn user(&self, code: u16, value: i32);
+}
+
+/// What a running actuator behaviour sees: its mutual data store, the beliefs, the state of
+/// its precondition, and a way to wait for the next change (fact sets of `W` words).
+pub struct ActionIo<'io, const W: usize = 1> {
+    pub(crate) action: ActionId,
+    pub(crate) store: MutualStore<'io>,
+    pub(crate) monitor: &'io dyn Monitor<W>,
+}
+
+impl<const W: usize> ActionIo<'_, W> {
+    /// The action being run.
+    pub fn action(&self) -> ActionId {
+        self.action
+    }
+
+    /// The mutual data store `d_mutual(s_j, a_i)`.
+    pub fn store(&self) -> &MutualStore<'_> {
+        &self.store
+    }
+
+    /// The latest sample of a sensor running beside the action.
+    pub fn sample(&self, sensor: SensorId) -> Option<Entry> {
+        self.store.sample(sensor)
+    }
+
+    /// `get(d_mutual, k')`: what sensor `sensor`, running beside the action, put under `key`.
+    pub fn get(&self, sensor: SensorId, key: Key) -> Option<Entry> {
+        self.store.get(sensor, key)
+    }
+
+    /// The action's own value for `key`.
+    pub fn own(&self, key: Key) -> Option<Entry> {
+        self.store.own(key)
+    }
+
+    /// Writes into the action's own store, stamped now.
+    pub fn put(&self, key: Key, value: Value) -> Result<(), StoreFull> {
+        self.store.put(key, value, Instant::now())
+    }
+
+    /// The current beliefs `φ`.
+    pub fn beliefs(&self) -> FactSetOf<W> {
+        self.monitor.beliefs()
+    }
+
+    /// `Some` while the action's precondition is false according to the beliefs: the latest
+    /// samples, and, for a fact no sensor of this state has sampled yet, the belief from
+    /// before the state. A fact only an on-demand sensor perceives is therefore violated
+    /// from the state's start until the behaviour asks for a sample that shows it, if it was
+    /// false or never sensed before: give such an action a tolerance
+    /// ([`ActuatorAction::max_violation`](crate::ActuatorAction::max_violation)) at least as long as that request takes.
+    pub fn violation(&self) -> Option<Violation<W>> {
+        self.monitor.violation()
+    }
+
+    /// A counter that moves on every sample and every change of the precondition.
+    pub fn version(&self) -> u32 {
+        self.monitor.version()
+    }
+
+    /// Waits until [`version`](Self::version) differs from `since` and returns the new value.
+    /// Returns at once if it already differs.
+    pub fn changed(&self, since: u32) -> Changed<'_, W> {
+        // A future of its own, not an `async fn` around a `poll_fn`: a behaviour awaits it at
+        // every step, and the wrapper's state machine showed in `profile_plan`'s callgrind
+        // profile.
+        Changed {
+            monitor: self.monitor,
+            since,
+        }
+    }
+
+    /// Waits until [`version`](Self::version) differs from `since` or the instant `at` comes,
+    /// whichever is first: `Some(new version)`, or `None` at the deadline. The loop of a
+    /// behaviour that reacts to percepts and also has its own next instant.
+    pub async fn changed_until(&self, since: u32, at: Option<Instant>) -> Option<u32> {
+        let deadline = async {
+            match at {
+                Some(at) => Timer::at(at).await,
+                None => core::future::pending().await,
+            }
+        };
+        match select(self.changed(since), deadline).await {
+            Either::First(v) => Some(v),
+            Either::Second(()) => None,
+        }
+    }
+
+    /// [`changed_until`](Self::changed_until) `timeout` from now.
+    pub async fn changed_within(&self, since: u32, timeout: Duration) -> Option<u32> {
+        self.changed_until(since, Some(Instant::now().saturating_add(timeout)))
+            .await
+    }
+
+    /// Asks for a sample of an on-demand sensor running beside the action. Under SMPA the
+    /// request is served in the next sense phase.
+    pub fn request(&self, sensor: SensorId) {
+        self.monitor.request(sensor);
+    }
+
+    /// Records an application-defined trace event.
+    pub fn trace(&self, code: u16, value: i32) {
+        self.monitor.user(code, value);
+    }
+}
+
+/// The future of [`ActionIo::changed`]: the next [`version`](ActionIo::version) after `since`.
+#[must_use = "futures do nothing unless polled"]
+pub struct Changed<'io, const W: usize> {
+    monitor: &'io dyn Monitor<W>,
+    since: u32,
+}
+
+impl<const W: usize> Future for Changed<'_, W> {
+    type Output = u32;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<u32> {
+        self.monitor.poll_changed(cx, self.since)
+    }
 }

@@ -31,7 +31,8 @@ use embassy_time::Instant;
 
 use crate::action::{ActionId, SensorId};
 use crate::facts::FactSetOf;
-use crate::platform::{Outcome, SensorFault};
+use crate::failure::SensorFault;
+use crate::platform::Outcome;
 use crate::store::Value;
 use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink};
 

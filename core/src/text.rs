@@ -7,10 +7,10 @@ use core::fmt;
 pub use psmpa_model::names::FactNames;
 
 use crate::action::SensorSet;
-use crate::control::ControlError;
-use crate::exec::Failure;
+use crate::failure::Failure;
 use crate::mission::Mission;
 use crate::plan::{MAX_PLANS, PlanId, PlanSet};
+use crate::runtime::control::ControlError;
 use crate::trace::TraceEvent;
 
 /// A failure or trace event printed with a mission's names ([`Describe`]).

@@ -8,10 +8,11 @@ use embassy_time::Instant;
 
 use crate::action::{ActionId, SensorId, SensorSet};
 use crate::domain::EventId;
-use crate::exec::Failure;
 use crate::facts::FactSetOf;
+use crate::failure::Failure;
+use crate::failure::SensorFault;
 use crate::plan::PlanId;
-use crate::platform::{Outcome, SensorFault};
+use crate::platform::Outcome;
 use crate::store::Value;
 
 /// The two phases of the SMPA baseline.

@@ -425,7 +425,7 @@ mod tests {
 
     #[test]
     fn symbols_are_attributed_to_the_crate_of_their_path() {
-        assert_eq!(crate_of("psmpa_core::exec::run"), "psmpa_core");
+        assert_eq!(crate_of("psmpa_core::runtime::engine::run"), "psmpa_core");
         assert_eq!(
             crate_of("<&mut serde_json_core::de::Deserializer as serde::de::Deserializer>::f"),
             "serde_json_core"

@@ -74,7 +74,7 @@ const HOST_STEPS: &[(&str, &str)] = &[
     // The common case (holds, held) is decided inline in the sensing poll; this is a change.
     (
         "precondition check, a change",
-        "psmpa_core::sense::check_changed",
+        "psmpa_core::runtime::sensing::check_changed",
     ),
     (
         "behaviour step (one poll)",
@@ -87,7 +87,7 @@ const HOST_STEPS: &[(&str, &str)] = &[
     ("trace event (hash)", "psmpa_core::trace::TraceHash::add"),
     (
         "Algorithm 2: compile a plan",
-        "psmpa_core::fsm::Fsm<_>::compile",
+        "psmpa_core::runtime::fsm::Fsm<_>::compile",
     ),
 ];
 

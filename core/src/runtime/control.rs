@@ -13,13 +13,15 @@ use heapless::Vec;
 
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
-use crate::exec::{Engine, Failure, Mode};
 use crate::facts::FactSetOf;
+use crate::failure::Failure;
 use crate::fmt::{info, warning};
-use crate::fsm::{Fsm, FsmError};
 use crate::plan::{FailureMemory, Plan, PlanId, PlanSet};
 use crate::planner::{Found, Planner, PlanningError, Search};
 use crate::platform::{Actuator, FromId, Platform, Sensor};
+use crate::runtime::engine::Engine;
+use crate::runtime::fsm::{Fsm, FsmError};
+use crate::runtime::shared::Mode;
 use crate::trace::{TraceEvent, TraceSink};
 use core::convert::Infallible;
 
@@ -91,14 +93,14 @@ pub enum ControlError<const W: usize = 1> {
         /// sensor fault says so here.
         faulty: SensorSet,
     },
-    /// More plans failed than [`Config::max_failures`](crate::exec::Config::max_failures).
+    /// More plans failed than [`Config::max_failures`](crate::runtime::engine::Config::max_failures).
     TooManyFailures {
         /// Plans that failed.
         failures: u16,
         /// The last failure.
         last: Failure<W>,
     },
-    /// More plans ran than [`Config::max_plans`](crate::exec::Config::max_plans) without reaching
+    /// More plans ran than [`Config::max_plans`](crate::runtime::engine::Config::max_plans) without reaching
     /// the goal.
     PlanLimit {
         /// Plans started.
@@ -196,7 +198,7 @@ impl<
     /// Algorithm 1 with plans from the library only: establishes the model, then selects and
     /// executes plans until the task's goal holds. Ends with an error, never a hang, when no
     /// plan applies, every applicable plan failed, or the failure or plan limit of the
-    /// [`Config`](crate::exec::Config) is reached.
+    /// [`Config`](crate::runtime::engine::Config) is reached.
     pub async fn run(&self) -> Result<Report<W>, ControlError<W>> {
         self.control(NoPlanner).await
     }
@@ -204,7 +206,7 @@ impl<
     /// Algorithm 1 where `generatePlans` falls back on `planner` when no library plan applies,
     /// and plans again from the current beliefs after a failure. The search runs in `space`
     /// (keep it in a `static` on a microcontroller), in slices of
-    /// [`Config::plan_slice`](crate::exec::Config::plan_slice) nodes with a yield between two,
+    /// [`Config::plan_slice`](crate::runtime::engine::Config::plan_slice) nodes with a yield between two,
     /// so that on a cooperative executor it holds the deciding side's turn for one slice at a
     /// time.
     pub async fn run_planning<const N: usize>(

@@ -10,7 +10,7 @@
 //!   instant that passed while a slow read was still running is skipped, so one sensor never
 //!   samples twice at one instant and never queues up a backlog;
 //! * one-shot: once, at the start of the state (under SMPA, of its first sense phase);
-//! * on demand: whenever the running behaviour asks ([`ActionIo::request`](crate::exec::ActionIo::request)).
+//! * on demand: whenever the running behaviour asks ([`ActionIo::request`](crate::platform::ActionIo::request)).
 //!
 //! A sample's read is bounded by the sensor's timeout and awaits only that sensor's I/O:
 //! another sensor's read time, timeout, loss or fault never moves this sensor's instants, and
@@ -42,9 +42,11 @@ use pin_project_lite::pin_project;
 
 use crate::action::{ActionId, SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::Domain;
-use crate::exec::{Engine, Failure, Mode, Shared, Violation, poll_shared};
 use crate::facts::FactSetOf;
-use crate::platform::{Actuator, FromId, Platform, Reading, Sensor, SensorFault};
+use crate::failure::{Failure, SensorFault, Violation};
+use crate::platform::{Actuator, FromId, Platform, Reading, Sensor};
+use crate::runtime::engine::Engine;
+use crate::runtime::shared::{Mode, Shared, poll_shared};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
 use crate::trace::{TraceEvent, TraceSink};
 

@@ -25,9 +25,15 @@
 //! type DockRuntime = Runtime<'static, Dock, DockCaps>;
 //! ```
 
-use crate::exec::Engine;
+pub mod control;
+pub mod engine;
+pub mod fsm;
+pub mod sensing;
+pub(crate) mod shared;
+
 use crate::mission::{Bindings, Loaded, Mission};
 use crate::platform::Platform;
+use engine::Engine;
 
 /// Every capacity of a runtime in one type: `NS` sensors, `NA` actions, `NP` plans of at most
 /// `L` actions each, `K` keys per data store, and `NF` facts in fact sets of `W` 64-bit words

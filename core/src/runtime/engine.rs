@@ -3,7 +3,7 @@
 //! * **Sensing** ([`Engine::sensing`], the paper's sensory controller): one sampler per
 //!   sensor, each on its own schedule; a sample is read, stored, fused into the beliefs and
 //!   checked against the running action's precondition, and whoever waits is woken. See
-//!   [`crate::sense`].
+//!   [`crate::runtime::sensing`].
 //! * **Deciding** ([`Engine::run`], the deliberative controller): the control loop
 //!   (Algorithm 1), the FSM of the selected plan and the actuator behaviours. It switches
 //!   sensors on and off by telling the sensing side which sensors the running state needs
@@ -19,33 +19,34 @@
 //!   `pre(a_i)` false (a percept, or at the start a fact still believed false that no sensor
 //!   of the state has sampled yet, as an on-demand sensor's until it is asked) the behaviour
 //!   is told at once ([`ActionIo::violation`]); if it stays false longer
-//!   than the action's [`max_violation`](ActuatorAction::max_violation) (or
+//!   than the action's [`max_violation`](crate::ActuatorAction::max_violation) (or
 //!   [`Config::max_violation`]) the runtime stops the behaviour and takes the failure edge. The sensors are switched off when the action ends.
 //! * [`Policy::Smpa`]: the baseline. The same state alternates a sense phase (sensors on,
 //!   actuators held) and an act phase (behaviour polled, sensors off). Only the policy differs:
 //!   the actions, sensors, behaviours and precondition checks are the same code.
 //!
 //! Cost: starting or ending a state is O(NS) plus the sensors' own switching; a sample's cost
-//! on the sensing side is in [`crate::sense`].
+//! on the sensing side is in [`crate::runtime::sensing`].
 
 use core::cell::{Cell, RefCell};
-use core::future::{Future, poll_fn};
-use core::pin::{Pin, pin};
-use core::task::{Context, Poll, Waker};
+use core::future::poll_fn;
+use core::pin::pin;
+use core::task::{Context, Poll};
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Duration, Instant, Timer};
 
 use crate::action::{ActionId, ActuatorAction, SensorId, SensorSet};
 use crate::facts::FactSetOf;
+use crate::failure::{Failure, Violation};
 use crate::fmt::debug;
-use crate::fsm::{BehaviourState, Edge, Fsm, Target};
 use crate::mission::Mission;
 use crate::model::WorldModel;
-use crate::platform::{Actuator, FromId, Outcome, Platform, Sensor, SensorFault};
-use crate::store::{DataStore, Entry, Key, MutualStore, StoreFull, Value};
+use crate::platform::{ActionIo, Actuator, FromId, Monitor, Outcome, Platform, Sensor};
+use crate::runtime::fsm::{BehaviourState, Edge, Fsm, Target};
+use crate::runtime::shared::{Command, Mode, Shared, Waiter, Watch, poll_shared};
+use crate::store::{DataStore, MutualStore};
 use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};
 
 /// How sensing and acting are scheduled.
@@ -82,7 +83,7 @@ pub struct Config {
     /// Plans after which the control loop gives up even if they all succeeded (a library whose
     /// plans never reach the goal would otherwise loop forever).
     pub max_plans: u16,
-    /// Lost samples in a row after which a sensor counts as [`SensorFault::Silent`].
+    /// Lost samples in a row after which a sensor counts as [`SensorFault::Silent`](crate::SensorFault::Silent).
     pub max_lost: u8,
     /// Search nodes the planner takes in one poll of the deciding side before it yields
     /// (at least 1): on one executor, a sample waits for at most one slice of a search. A
@@ -103,389 +104,6 @@ impl Default for Config {
             max_lost: 10,
             plan_slice: 16,
         }
-    }
-}
-
-/// Why a behaviour state took its failure edge (fact sets of `W` words).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub enum Failure<const W: usize = 1> {
-    /// The behaviour returned [`Outcome::Failure`].
-    ActionFailed {
-        /// The action.
-        action: ActionId,
-    },
-    /// The behaviour returned [`Outcome::Interrupted`].
-    ActionInterrupted {
-        /// The action.
-        action: ActionId,
-    },
-    /// Facts of `pre(a)` that no sensor of the state decides did not hold when it started.
-    PreconditionUnmet {
-        /// The action.
-        action: ActionId,
-        /// The facts that did not hold.
-        missing: FactSetOf<W>,
-    },
-    /// A percept made `pre(a)` false and it stayed false longer than the action's
-    /// [`max_violation`](ActuatorAction::max_violation) (or [`Config::max_violation`]).
-    PreconditionViolated {
-        /// The action.
-        action: ActionId,
-        /// The facts that did not hold.
-        missing: FactSetOf<W>,
-    },
-    /// A sensor the state needs cannot run: it failed earlier and is out of service
-    /// ([`Engine::faulty_sensors`]), `pre(s)` does not hold, or the domain has no such sensor.
-    SensorUnavailable {
-        /// The sensor.
-        sensor: SensorId,
-    },
-    /// A sensor did not switch on, or failed to deliver a sample.
-    SensorFault {
-        /// The sensor.
-        sensor: SensorId,
-        /// What went wrong.
-        fault: SensorFault,
-    },
-    /// A sensor's store had no room for a value of its sample.
-    StoreFull {
-        /// The key that found no room.
-        key: Key,
-    },
-    /// The FSM has no state `state`, or its success edge leads to failure.
-    InvalidFsm {
-        /// The state index.
-        state: u8,
-    },
-    /// The sensing side did not answer within the sensors' own timeouts: nothing polls
-    /// [`Engine::sensing`]. Run it beside the deciding side.
-    SensingStalled,
-}
-
-/// A running action's precondition is false.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Violation<const W: usize = 1> {
-    /// The facts of `pre(a)` that do not hold.
-    pub missing: FactSetOf<W>,
-    /// When the first sample that showed it was taken.
-    pub since: Instant,
-    /// When the latest sample that showed it was taken.
-    pub last_seen: Instant,
-}
-
-/// What the runtime shares with a running behaviour, object safe so [`ActionIo`] needs no
-/// type parameters.
-trait Monitor<const W: usize> {
-    fn beliefs(&self) -> FactSetOf<W>;
-    fn violation(&self) -> Option<Violation<W>>;
-    fn version(&self) -> u32;
-    fn poll_changed(&self, cx: &mut Context<'_>, since: u32) -> Poll<u32>;
-    fn request(&self, sensor: SensorId);
-    fn user(&self, code: u16, value: i32);
-}
-
-/// What a running actuator behaviour sees: its mutual data store, the beliefs, the state of
-/// its precondition, and a way to wait for the next change (fact sets of `W` words).
-pub struct ActionIo<'io, const W: usize = 1> {
-    action: ActionId,
-    store: MutualStore<'io>,
-    monitor: &'io dyn Monitor<W>,
-}
-
-impl<const W: usize> ActionIo<'_, W> {
-    /// The action being run.
-    pub fn action(&self) -> ActionId {
-        self.action
-    }
-
-    /// The mutual data store `d_mutual(s_j, a_i)`.
-    pub fn store(&self) -> &MutualStore<'_> {
-        &self.store
-    }
-
-    /// The latest sample of a sensor running beside the action.
-    pub fn sample(&self, sensor: SensorId) -> Option<Entry> {
-        self.store.sample(sensor)
-    }
-
-    /// `get(d_mutual, k')`: what sensor `sensor`, running beside the action, put under `key`.
-    pub fn get(&self, sensor: SensorId, key: Key) -> Option<Entry> {
-        self.store.get(sensor, key)
-    }
-
-    /// The action's own value for `key`.
-    pub fn own(&self, key: Key) -> Option<Entry> {
-        self.store.own(key)
-    }
-
-    /// Writes into the action's own store, stamped now.
-    pub fn put(&self, key: Key, value: Value) -> Result<(), StoreFull> {
-        self.store.put(key, value, Instant::now())
-    }
-
-    /// The current beliefs `φ`.
-    pub fn beliefs(&self) -> FactSetOf<W> {
-        self.monitor.beliefs()
-    }
-
-    /// `Some` while the action's precondition is false according to the beliefs: the latest
-    /// samples, and, for a fact no sensor of this state has sampled yet, the belief from
-    /// before the state. A fact only an on-demand sensor perceives is therefore violated
-    /// from the state's start until the behaviour asks for a sample that shows it, if it was
-    /// false or never sensed before: give such an action a tolerance
-    /// ([`ActuatorAction::max_violation`]) at least as long as that request takes.
-    pub fn violation(&self) -> Option<Violation<W>> {
-        self.monitor.violation()
-    }
-
-    /// A counter that moves on every sample and every change of the precondition.
-    pub fn version(&self) -> u32 {
-        self.monitor.version()
-    }
-
-    /// Waits until [`version`](Self::version) differs from `since` and returns the new value.
-    /// Returns at once if it already differs.
-    pub fn changed(&self, since: u32) -> Changed<'_, W> {
-        // A future of its own, not an `async fn` around a `poll_fn`: a behaviour awaits it at
-        // every step, and the wrapper's state machine showed in `profile_plan`'s callgrind
-        // profile.
-        Changed {
-            monitor: self.monitor,
-            since,
-        }
-    }
-
-    /// Waits until [`version`](Self::version) differs from `since` or the instant `at` comes,
-    /// whichever is first: `Some(new version)`, or `None` at the deadline. The loop of a
-    /// behaviour that reacts to percepts and also has its own next instant.
-    pub async fn changed_until(&self, since: u32, at: Option<Instant>) -> Option<u32> {
-        let deadline = async {
-            match at {
-                Some(at) => Timer::at(at).await,
-                None => core::future::pending().await,
-            }
-        };
-        match select(self.changed(since), deadline).await {
-            Either::First(v) => Some(v),
-            Either::Second(()) => None,
-        }
-    }
-
-    /// [`changed_until`](Self::changed_until) `timeout` from now.
-    pub async fn changed_within(&self, since: u32, timeout: Duration) -> Option<u32> {
-        self.changed_until(since, Some(Instant::now().saturating_add(timeout)))
-            .await
-    }
-
-    /// Asks for a sample of an on-demand sensor running beside the action. Under SMPA the
-    /// request is served in the next sense phase.
-    pub fn request(&self, sensor: SensorId) {
-        self.monitor.request(sensor);
-    }
-
-    /// Records an application-defined trace event.
-    pub fn trace(&self, code: u16, value: i32) {
-        self.monitor.user(code, value);
-    }
-}
-
-/// The future of [`ActionIo::changed`]: the next [`version`](ActionIo::version) after `since`.
-#[must_use = "futures do nothing unless polled"]
-pub struct Changed<'io, const W: usize> {
-    monitor: &'io dyn Monitor<W>,
-    since: u32,
-}
-
-impl<const W: usize> Future for Changed<'_, W> {
-    type Output = u32;
-
-    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<u32> {
-        self.monitor.poll_changed(cx, self.since)
-    }
-}
-
-/// What the deciding side asks of the sensing side: the sensors to run and how.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Command<const W: usize> {
-    /// Moves on with every command; a sampler serves one epoch at a time.
-    pub(crate) epoch: u32,
-    pub(crate) sensors: SensorSet,
-    pub(crate) mode: Mode,
-    /// The running action and its precondition, checked after every sample.
-    pub(crate) watch: Option<(ActionId, FactSetOf<W>)>,
-    /// Cyclic sensors are due at this instant first.
-    pub(crate) start: Instant,
-}
-
-/// How the commanded sensors sample.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Mode {
-    /// Beside an action: cyclic sensors every period, one-shot ones once at the start,
-    /// on-demand ones on request.
-    Parallel,
-    /// An SMPA sense phase: as `Parallel`, with one-shot sensors only in the first phase.
-    Phase { first: bool },
-    /// The initial model: every commanded sensor samples once.
-    Once,
-}
-
-/// State the two sides share. Only `Cell`s, so reads and writes cannot fail; the waker lists
-/// are the `RefCell`s, never borrowed across a call out.
-pub(crate) struct Shared<const NS: usize, const W: usize> {
-    pub(crate) beliefs: Cell<FactSetOf<W>>,
-    pub(crate) percepts: [Cell<Option<Entry>>; NS],
-    /// What each sensor's latest sample says of its `per(s)`.
-    pub(crate) holds: [Cell<FactSetOf<W>>; NS],
-    /// The sensors switched on.
-    pub(crate) running: Cell<SensorSet>,
-    /// The running sensors that have sampled since they were switched on.
-    pub(crate) fresh: Cell<SensorSet>,
-    /// Samples lost in a row, per sensor.
-    pub(crate) lost: [Cell<u8>; NS],
-    /// When each sensor's latest read started.
-    pub(crate) last_read: [Cell<Option<Instant>>; NS],
-    /// Facts some sample has decided (true or false) since the start.
-    pub(crate) sensed: Cell<FactSetOf<W>>,
-    /// Sensors that failed: out of service until [`Engine::clear_faults`].
-    pub(crate) faulty: Cell<SensorSet>,
-    pub(crate) violation: Cell<Option<Violation<W>>>,
-    pub(crate) requests: Cell<SensorSet>,
-    pub(crate) version: Cell<u32>,
-    pub(crate) command: Cell<Command<W>>,
-    /// The command's epoch, apart: samplers read it at every await.
-    pub(crate) epoch: Cell<u32>,
-    /// Sensors of the current command that are on and have taken the samples due at its start.
-    pub(crate) ready: Cell<SensorSet>,
-    /// Sensors whose sampler is between switching on and having switched off.
-    pub(crate) active: Cell<SensorSet>,
-    /// The first failure under the command of that epoch.
-    pub(crate) failure: Cell<Option<(u32, Failure<W>)>>,
-    /// The deciding side's task (behaviours, the precondition watch and the control loop).
-    /// One task per side: a registration of another waker wakes the one it replaces.
-    pub(crate) deciding: Waiter,
-    /// The sensing side's task (the samplers).
-    pub(crate) sensing: Waiter,
-}
-
-impl<const NS: usize, const W: usize> Shared<NS, W> {
-    /// Something the deciding side may wait for changed: bump the version and wake it.
-    pub(crate) fn notify(&self) {
-        self.version.set(self.version.get().wrapping_add(1));
-        self.deciding.wake();
-    }
-
-    /// A read of `sensor` started at `at`.
-    pub(crate) fn record_read(&self, sensor: SensorId, at: Instant) {
-        if let Some(r) = self.last_read.get(sensor.index()) {
-            r.set(Some(at));
-        }
-    }
-}
-
-/// The waker of one side's task. Unlike embassy-sync's `WakerRegistration` it keeps the waker
-/// when it wakes it: a side registers again at nearly every poll, and a kept waker makes that a
-/// comparison instead of a clone. A later wake of a task that waits for something else is a
-/// spurious wake, which futures allow.
-pub(crate) struct Waiter(RefCell<Option<Waker>>);
-
-impl Waiter {
-    const fn new() -> Self {
-        Self(RefCell::new(None))
-    }
-
-    /// Makes `waker` the one woken. One task per side: a different waker replaces the one
-    /// registered, which is woken so that it can register again.
-    pub(crate) fn register(&self, waker: &Waker) {
-        let replaced = match self.0.try_borrow_mut() {
-            Ok(mut slot) => match &*slot {
-                Some(kept) if kept.will_wake(waker) => None,
-                _ => slot.replace(waker.clone()),
-            },
-            Err(_) => None,
-        };
-        if let Some(replaced) = replaced {
-            replaced.wake();
-        }
-    }
-
-    /// Wakes the registered task, if any.
-    pub(crate) fn wake(&self) {
-        if let Ok(slot) = self.0.try_borrow()
-            && let Some(waker) = &*slot
-        {
-            waker.wake_by_ref();
-        }
-    }
-}
-
-/// A wait on the shared state `shared`: `done` decides, and when it says not yet the waker is
-/// registered with the side's wakers (`wakers`), in the same lock, so that a side that preempts
-/// in between cannot wake nobody.
-pub(crate) fn poll_shared<M: RawMutex, const NS: usize, const W: usize, R>(
-    shared: &Mutex<M, Shared<NS, W>>,
-    cx: &Context<'_>,
-    wakers: impl FnOnce(&Shared<NS, W>) -> &Waiter,
-    done: impl FnOnce(&Shared<NS, W>) -> Option<R>,
-) -> Poll<R> {
-    shared.lock(|s| match done(s) {
-        Some(r) => Poll::Ready(r),
-        None => {
-            wakers(s).register(cx.waker());
-            Poll::Pending
-        }
-    })
-}
-
-/// The future of [`Engine::watch`]: polled before the behaviour at every step of it, so a
-/// future of its own rather than an `async fn` around a `poll_fn`.
-struct Watch<'s, M: RawMutex, const NS: usize, const W: usize> {
-    shared: &'s Mutex<M, Shared<NS, W>>,
-    epoch: u32,
-    action: ActionId,
-    max: Duration,
-    /// The timer of the current violation's deadline.
-    alarm: Option<(Instant, Timer)>,
-}
-
-impl<M: RawMutex, const NS: usize, const W: usize> Future for Watch<'_, M, NS, W> {
-    type Output = Failure<W>;
-
-    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Failure<W>> {
-        let this = self.get_mut();
-        let epoch = this.epoch;
-        // Registered in the same lock as the check: a delivery in between cannot be missed.
-        let seen = this.shared.lock(|s| {
-            s.deciding.register(cx.waker());
-            match s.failure.get() {
-                Some((e, failure)) if e == epoch => Err(failure),
-                _ => Ok(s.violation.get()),
-            }
-        });
-        let violation = match seen {
-            Err(failure) => return Poll::Ready(failure),
-            Ok(None) => {
-                this.alarm = None;
-                return Poll::Pending;
-            }
-            Ok(Some(v)) => v,
-        };
-        let deadline = violation.since.saturating_add(this.max);
-        if Instant::now() >= deadline {
-            return Poll::Ready(Failure::PreconditionViolated {
-                action: this.action,
-                missing: violation.missing,
-            });
-        }
-        let timer = match &mut this.alarm {
-            Some((at, timer)) if *at == deadline => timer,
-            slot => &mut slot.insert((deadline, Timer::at(deadline))).1,
-        };
-        // Pending: the timer wakes this task at the deadline.
-        let _ = Pin::new(timer).poll(cx);
-        Poll::Pending
     }
 }
 
