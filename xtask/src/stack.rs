@@ -21,6 +21,9 @@
 //!
 //! What it cannot see: a jump table landing between a load and its call (the look-back would
 //! then pick one of two loads); stack used by inline assembly outside the frame.
+//!
+//! Only [`program`] and [`analyse`] run tools and read files; [`Program::new`] and
+//! [`Analysis`] are pure, so `stack/tests.rs` checks the rules on hand-written images.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -336,11 +339,16 @@ struct Image {
     /// The label and poll function of the task reported on its own.
     task: (&'static str, Task),
     levels: &'static [Level],
+    rules: Rules,
+    /// What an exception stacks.
+    exception_frame: u64,
+}
+
+/// An image's rules: what the code bounds or guarantees that the call graph cannot show.
+struct Rules {
     only_from: &'static [OnlyFrom],
     only_to: &'static [OnlyTo],
     recursion: &'static [Recursion],
-    /// What an exception stacks.
-    exception_frame: u64,
 }
 
 /// The QEMU firmware (mps2-an386).
@@ -357,9 +365,11 @@ const FIRMWARE: Image = Image {
         },
     ),
     levels: LEVELS,
-    only_from: ONLY_FROM,
-    only_to: &[FORMATTER_OUTPUT],
-    recursion: BOUNDED_RECURSION,
+    rules: Rules {
+        only_from: ONLY_FROM,
+        only_to: &[FORMATTER_OUTPUT],
+        recursion: BOUNDED_RECURSION,
+    },
     exception_frame: EXCEPTION_FRAME,
 };
 
@@ -378,9 +388,11 @@ const PICO2: Image = Image {
     ],
     task: ("main task (one deciding poll)", PICO2_MAIN_TASK),
     levels: PICO2_LEVELS,
-    only_from: PICO2_ONLY_FROM,
-    only_to: &[FORMATTER_OUTPUT],
-    recursion: PICO2_RECURSION,
+    rules: Rules {
+        only_from: PICO2_ONLY_FROM,
+        only_to: &[FORMATTER_OUTPUT],
+        recursion: PICO2_RECURSION,
+    },
     exception_frame: EXCEPTION_FRAME,
 };
 
@@ -399,9 +411,11 @@ const PICO: Image = Image {
     ],
     task: ("main task (one deciding poll)", PICO2_MAIN_TASK),
     levels: PICO_LEVELS,
-    only_from: PICO2_ONLY_FROM,
-    only_to: &[FORMATTER_OUTPUT],
-    recursion: PICO2_RECURSION,
+    rules: Rules {
+        only_from: PICO2_ONLY_FROM,
+        only_to: &[FORMATTER_OUTPUT],
+        recursion: PICO2_RECURSION,
+    },
     exception_frame: EXCEPTION_FRAME_M0,
 };
 
@@ -992,34 +1006,43 @@ fn resolve(
     out
 }
 
+/// What the analysis reads from an image and its disassembly, before it interprets any of it
+/// (the tests build one by hand).
+struct Binary<'a> {
+    /// Function symbols in the ELF's order: (demangled name, address, size). A symbol of size
+    /// 0 only names an address (cortex-m-rt's `HardFault`).
+    symbols: Vec<(String, u64, u64)>,
+    /// LLVM's frame sizes by function address.
+    frames: HashMap<u64, u64>,
+    /// Relocated words of allocated sections other than the code, by address (the vector
+    /// table aside: only the hardware calls through it).
+    relocated: BTreeMap<u64, u64>,
+    /// Relocated words in the code (literal pools), by address.
+    text_words: BTreeMap<u64, u64>,
+    /// `movw`/`movt` instructions that the linker filled with an address's halves (Armv8-M
+    /// code builds addresses so, where Armv7-M code loads them from literal pools).
+    movw: BTreeSet<u64>,
+    movt: BTreeSet<u64>,
+    /// Every section but the code, (address, bytes): where a referenced word may be zero.
+    data: Vec<(u64, &'a [u8])>,
+    /// The disassembly, in address order.
+    code: Vec<Insn>,
+}
+
 /// Reads the ELF: functions, frames, tables of function pointers and the disassembly.
 fn program(elf_path: &Path) -> Result<Program, String> {
     let data = std::fs::read(elf_path).map_err(|e| e.to_string())?;
     let elf = object::File::parse(&*data).map_err(|e| e.to_string())?;
-    let sizes = stack_sizes(&elf)?;
-    let mut funcs: BTreeMap<u64, Function> = BTreeMap::new();
-    let mut names = BTreeMap::new();
-    for sym in elf.symbols().filter(|s| s.kind() == SymbolKind::Text) {
-        // Aliases without a size of their own too (cortex-m-rt's `HardFault`).
-        names.insert(demangle(sym.name().unwrap_or("?")), sym.address() & !1);
-    }
-    for sym in elf.symbols() {
-        if sym.kind() == SymbolKind::Text && sym.size() > 0 {
-            let addr = sym.address() & !1;
-            funcs.entry(addr).or_insert_with(|| Function {
-                name: demangle(sym.name().unwrap_or("?")),
-                frame: sizes.get(&addr).copied(),
-                ..Function::default()
-            });
-        }
-    }
+    let frames = stack_sizes(&elf)?;
+    // Aliases without a size of their own too (cortex-m-rt's `HardFault`).
+    let symbols = elf
+        .symbols()
+        .filter(|s| s.kind() == SymbolKind::Text)
+        .map(|s| (demangle(s.name().unwrap_or("?")), s.address(), s.size()))
+        .collect();
 
-    // Every relocated word of an allocated section (the vector table aside: only the
-    // hardware calls through it).
     let mut relocated: BTreeMap<u64, u64> = BTreeMap::new();
     let mut text_words: BTreeMap<u64, u64> = BTreeMap::new();
-    // `movw`/`movt` instructions that the linker filled with an address's halves (Armv8-M
-    // code builds addresses so, where Armv7-M code loads them from literal pools).
     let (mut movw, mut movt) = (BTreeSet::new(), BTreeSet::new());
     for section in elf.sections() {
         let allocated = matches!(
@@ -1063,7 +1086,6 @@ fn program(elf_path: &Path) -> Result<Program, String> {
     if relocated.is_empty() && text_words.is_empty() {
         return Err("no relocations in the ELF: was it linked with --emit-relocs?".to_owned());
     }
-    let starts: BTreeSet<u64> = funcs.keys().copied().collect();
     let out = Command::new("arm-none-eabi-objdump")
         .args(["-d", "--no-show-raw-insn"])
         .arg(elf_path)
@@ -1072,9 +1094,26 @@ fn program(elf_path: &Path) -> Result<Program, String> {
     if !out.status.success() {
         return Err("arm-none-eabi-objdump failed".to_owned());
     }
-    let text = String::from_utf8_lossy(&out.stdout);
-    let owner = |addr: u64| starts.range(..=addr).next_back().copied();
-    let mut bodies: BTreeMap<u64, Vec<Insn>> = BTreeMap::new();
+    let sections = elf
+        .sections()
+        .filter(|s| s.name() != Ok(".text"))
+        .map(|s| (s.address(), s.data().unwrap_or_default()))
+        .collect();
+    Program::new(Binary {
+        symbols,
+        frames,
+        relocated,
+        text_words,
+        movw,
+        movt,
+        data: sections,
+        code: disassembly(&String::from_utf8_lossy(&out.stdout)),
+    })
+}
+
+/// The instructions of `objdump -d --no-show-raw-insn`'s output (`  addr:\tmnemonic\targs`).
+fn disassembly(text: &str) -> Vec<Insn> {
+    let mut code = Vec::new();
     for line in text.lines() {
         let Some((addr, rest)) = line.trim_start().split_once(":\t") else {
             continue;
@@ -1085,163 +1124,198 @@ fn program(elf_path: &Path) -> Result<Program, String> {
         let mut parts = rest.trim().splitn(2, char::is_whitespace);
         let mnemonic = parts.next().unwrap_or("").to_owned();
         let args = parts.next().unwrap_or("").trim().to_owned();
-        if let Some(f) = owner(addr) {
-            bodies.entry(f).or_default().push(Insn {
-                addr,
-                mnemonic,
-                args,
-            });
-        }
+        code.push(Insn {
+            addr,
+            mnemonic,
+            args,
+        });
     }
+    code
+}
 
-    // An address built by a relocated `movw` and `movt` pair, as a word at the `movt`: the
-    // pair's `movw` is the last write of the register before it.
-    for code in bodies.values() {
-        for (j, insn) in code.iter().enumerate() {
-            if !movt.contains(&insn.addr) {
-                continue;
-            }
-            let reg = insn.args.split(',').next().unwrap_or("").trim();
-            let imm = |i: &Insn| i.args.split('#').nth(1).and_then(parse_imm);
-            let low = code
-                .get(..j)
-                .unwrap_or_default()
-                .iter()
-                .rev()
-                .find(|i| writes(i).iter().any(|w| w == reg))
-                .filter(|i| movw.contains(&i.addr))
-                .and_then(imm);
-            if let Some((low, high)) = low.zip(imm(insn)) {
-                text_words.insert(insn.addr, high << 16 | low);
+impl Program {
+    /// The call graph and the tables of a binary: no tool runs, no file is read.
+    fn new(binary: Binary<'_>) -> Result<Program, String> {
+        let Binary {
+            symbols,
+            frames,
+            relocated,
+            mut text_words,
+            movw,
+            movt,
+            data,
+            code,
+        } = binary;
+        let mut funcs: BTreeMap<u64, Function> = BTreeMap::new();
+        let mut names = BTreeMap::new();
+        for (name, addr, _) in &symbols {
+            names.insert(name.clone(), addr & !1);
+        }
+        for (name, addr, size) in &symbols {
+            if *size > 0 {
+                let addr = addr & !1;
+                funcs.entry(addr).or_insert_with(|| Function {
+                    name: name.clone(),
+                    frame: frames.get(&addr).copied(),
+                    ..Function::default()
+                });
             }
         }
-    }
-    let is_function = |v: u64| v & 1 == 1 && starts.contains(&(v & !1));
-    let table_words = relocated
-        .iter()
-        .filter(|(_, v)| is_function(**v))
-        .map(|(at, v)| (*at, *v & !1))
-        .collect();
-    let referenced: BTreeSet<u64> = relocated
-        .values()
-        .chain(text_words.values())
-        .copied()
-        .collect();
-    let zero = elf
-        .sections()
-        .filter(|s| s.name() != Ok(".text"))
-        .flat_map(|s| {
-            let base = s.address();
-            let bytes = s.data().unwrap_or_default();
-            referenced
-                .iter()
-                .filter(move |r| (base..base + bytes.len() as u64).contains(r))
-                .filter(move |r| {
-                    let at = (*r - base) as usize;
-                    bytes.get(at..at + 4) == Some(&[0u8; 4][..])
-                })
-                .copied()
-                .collect::<Vec<_>>()
-        })
-        .collect();
+        let starts: BTreeSet<u64> = funcs.keys().copied().collect();
+        let owner = |addr: u64| starts.range(..=addr).next_back().copied();
+        let mut bodies: BTreeMap<u64, Vec<Insn>> = BTreeMap::new();
+        for insn in code {
+            if let Some(f) = owner(insn.addr) {
+                bodies.entry(f).or_default().push(insn);
+            }
+        }
 
-    let word = |addr: u64| text_words.get(&addr).copied();
-    let mut literal_loads: BTreeMap<u64, u64> = BTreeMap::new();
-    let mut used_literals = BTreeSet::new();
-    for (start, code) in &bodies {
-        let end = funcs
-            .range(start + 1..)
-            .next()
-            .map_or(u64::MAX, |(a, _)| *a);
-        let target_of = |insn: &Insn| {
-            let args = insn.args.split('@').next().unwrap_or("");
-            let last = args.rsplit(',').next().unwrap_or("").trim();
-            let hex = last.split_whitespace().next().unwrap_or("");
-            u64::from_str_radix(hex, 16).ok().map(|t| t & !1)
-        };
-        let is_branch = |m: &str| {
-            let m = m.split('.').next().unwrap_or("");
-            m == "cbz"
-                || m == "cbnz"
-                || (m.starts_with('b') && m.len() <= 3 && m != "bic" && m != "bl")
-        };
-        let mut branches_to: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
-        for (i, c) in code.iter().enumerate() {
-            if is_branch(&c.mnemonic)
-                && let Some(t) = target_of(c)
-            {
-                branches_to.entry(t).or_default().push(i);
+        // An address built by a relocated `movw` and `movt` pair, as a word at the `movt`: the
+        // pair's `movw` is the last write of the register before it.
+        for code in bodies.values() {
+            for (j, insn) in code.iter().enumerate() {
+                if !movt.contains(&insn.addr) {
+                    continue;
+                }
+                let reg = insn.args.split(',').next().unwrap_or("").trim();
+                let imm = |i: &Insn| i.args.split('#').nth(1).and_then(parse_imm);
+                let low = code
+                    .get(..j)
+                    .unwrap_or_default()
+                    .iter()
+                    .rev()
+                    .find(|i| writes(i).iter().any(|w| w == reg))
+                    .filter(|i| movw.contains(&i.addr))
+                    .and_then(imm);
+                if let Some((low, high)) = low.zip(imm(insn)) {
+                    text_words.insert(insn.addr, high << 16 | low);
+                }
             }
         }
-        let f = funcs.get_mut(start).ok_or("function vanished")?;
-        if f.frame.is_none() {
-            f.frame = prologue(code);
-            f.from_prologue = f.frame.is_some();
-        }
-        for (i, insn) in code.iter().enumerate() {
-            let m = insn.mnemonic.split('.').next().unwrap_or("");
-            if m == "ldr"
-                && insn.args.contains("[pc")
-                && let Some(v) = comment_address(&insn.args).and_then(word)
-                && is_function(v)
-            {
-                literal_loads.insert(insn.addr, v & !1);
+        let is_function = |v: u64| v & 1 == 1 && starts.contains(&(v & !1));
+        let table_words = relocated
+            .iter()
+            .filter(|(_, v)| is_function(**v))
+            .map(|(at, v)| (*at, *v & !1))
+            .collect();
+        let referenced: BTreeSet<u64> = relocated
+            .values()
+            .chain(text_words.values())
+            .copied()
+            .collect();
+        let zero = data
+            .iter()
+            .flat_map(|&(base, bytes)| {
+                referenced
+                    .iter()
+                    .filter(move |r| (base..base + bytes.len() as u64).contains(r))
+                    .filter(move |r| {
+                        let at = (*r - base) as usize;
+                        bytes.get(at..at + 4) == Some(&[0u8; 4][..])
+                    })
+                    .copied()
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+
+        let word = |addr: u64| text_words.get(&addr).copied();
+        let mut literal_loads: BTreeMap<u64, u64> = BTreeMap::new();
+        let mut used_literals = BTreeSet::new();
+        for (start, code) in &bodies {
+            let end = funcs
+                .range(start + 1..)
+                .next()
+                .map_or(u64::MAX, |(a, _)| *a);
+            let target_of = |insn: &Insn| {
+                let args = insn.args.split('@').next().unwrap_or("");
+                let last = args.rsplit(',').next().unwrap_or("").trim();
+                let hex = last.split_whitespace().next().unwrap_or("");
+                u64::from_str_radix(hex, 16).ok().map(|t| t & !1)
+            };
+            let is_branch = |m: &str| {
+                let m = m.split('.').next().unwrap_or("");
+                m == "cbz"
+                    || m == "cbnz"
+                    || (m.starts_with('b') && m.len() <= 3 && m != "bic" && m != "bl")
+            };
+            let mut branches_to: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
+            for (i, c) in code.iter().enumerate() {
+                if is_branch(&c.mnemonic)
+                    && let Some(t) = target_of(c)
+                {
+                    branches_to.entry(t).or_default().push(i);
+                }
             }
-            if m == "movt"
-                && let Some(v) = word(insn.addr)
-                && is_function(v)
-            {
-                literal_loads.insert(insn.addr, v & !1);
+            let f = funcs.get_mut(start).ok_or("function vanished")?;
+            if f.frame.is_none() {
+                f.frame = prologue(code);
+                f.from_prologue = f.frame.is_some();
             }
-            let reg = insn.args.split_whitespace().next().unwrap_or("");
-            let through_register =
-                (m == "blx" || m == "bx") && reg != "lr" && target_of(insn).is_none();
-            let loads_pc = m.starts_with("ldr") && insn.args.starts_with("pc,");
-            let call = m == "bl" || m == "blx";
-            // A call, or a branch out of the function: a tail call.
-            let leaves = |t: &u64| call || !(*start..end).contains(t);
-            if (call || is_branch(m))
-                && let Some(t) = target_of(insn).filter(leaves)
-            {
-                f.calls.insert(t);
-                continue;
-            }
-            if through_register {
-                for r in resolve(code, i, reg, &branches_to, &word, &mut used_literals) {
-                    match r {
-                        Resolved::Direct(t) => {
-                            f.calls.insert(t);
-                        }
-                        Resolved::Site(site) => {
-                            f.sites.insert(site);
-                        }
-                        // `resolve` follows every spill to its store.
-                        Resolved::Spill(_) => {
-                            f.sites.insert(Site::Unknown(insn.addr));
+            for (i, insn) in code.iter().enumerate() {
+                let m = insn.mnemonic.split('.').next().unwrap_or("");
+                if m == "ldr"
+                    && insn.args.contains("[pc")
+                    && let Some(v) = comment_address(&insn.args).and_then(word)
+                    && is_function(v)
+                {
+                    literal_loads.insert(insn.addr, v & !1);
+                }
+                if m == "movt"
+                    && let Some(v) = word(insn.addr)
+                    && is_function(v)
+                {
+                    literal_loads.insert(insn.addr, v & !1);
+                }
+                let reg = insn.args.split_whitespace().next().unwrap_or("");
+                let through_register =
+                    (m == "blx" || m == "bx") && reg != "lr" && target_of(insn).is_none();
+                let loads_pc = m.starts_with("ldr") && insn.args.starts_with("pc,");
+                let call = m == "bl" || m == "blx";
+                // A call, or a branch out of the function: a tail call.
+                let leaves = |t: &u64| call || !(*start..end).contains(t);
+                if (call || is_branch(m))
+                    && let Some(t) = target_of(insn).filter(leaves)
+                {
+                    f.calls.insert(t);
+                    continue;
+                }
+                if through_register {
+                    for r in resolve(code, i, reg, &branches_to, &word, &mut used_literals) {
+                        match r {
+                            Resolved::Direct(t) => {
+                                f.calls.insert(t);
+                            }
+                            Resolved::Site(site) => {
+                                f.sites.insert(site);
+                            }
+                            // `resolve` follows every spill to its store.
+                            Resolved::Spill(_) => {
+                                f.sites.insert(Site::Unknown(insn.addr));
+                            }
                         }
                     }
+                } else if (loads_pc || (m == "mov" && insn.args.starts_with("pc,")))
+                    && !jump_table(code, i, *start..end)
+                {
+                    f.sites.insert(Site::Unknown(insn.addr));
                 }
-            } else if (loads_pc || (m == "mov" && insn.args.starts_with("pc,")))
-                && !jump_table(code, i, *start..end)
-            {
-                f.sites.insert(Site::Unknown(insn.addr));
             }
         }
+        let stored = literal_loads
+            .iter()
+            .filter(|(at, _)| !used_literals.contains(*at))
+            .map(|(_, f)| *f)
+            .collect();
+        Ok(Program {
+            funcs,
+            names,
+            table_words,
+            referenced,
+            relocated,
+            zero,
+            stored,
+        })
     }
-    let stored = literal_loads
-        .iter()
-        .filter(|(at, _)| !used_literals.contains(*at))
-        .map(|(_, f)| *f)
-        .collect();
-    Ok(Program {
-        funcs,
-        names,
-        table_words,
-        referenced,
-        relocated,
-        zero,
-        stored,
-    })
 }
 
 /// The worst stack below each function.
@@ -1257,7 +1331,22 @@ struct Analysis<'a> {
     /// A task this level never calls through a pointer.
     excluded: Task,
     /// The image's rules.
-    image: &'static Image,
+    rules: &'a Rules,
+}
+
+impl<'a> Analysis<'a> {
+    fn new(program: &'a Program, rules: &'a Rules, excluded: Task) -> Self {
+        Analysis {
+            program,
+            memo: HashMap::new(),
+            path: Vec::new(),
+            recursion: BTreeSet::new(),
+            unknown_frame: BTreeSet::new(),
+            indirect: BTreeMap::new(),
+            excluded,
+            rules,
+        }
+    }
 }
 
 impl Analysis<'_> {
@@ -1287,10 +1376,10 @@ impl Analysis<'_> {
         let allowed = |t: &u64| {
             let name = self.name(*t);
             !self.is_task(*t, self.excluded)
-                && self.image.only_from.iter().all(|(callee, only, _)| {
+                && self.rules.only_from.iter().all(|(callee, only, _)| {
                     !name.contains(callee) || only.iter().any(|o| caller.contains(o))
                 })
-                && self.image.only_to.iter().all(|(callers, to, _)| {
+                && self.rules.only_to.iter().all(|(callers, to, _)| {
                     !callers.iter().any(|c| caller.contains(c))
                         || to.iter().any(|t| name.contains(t))
                 })
@@ -1319,7 +1408,7 @@ impl Analysis<'_> {
         if let Some(i) = self.path.iter().position(|a| *a == addr) {
             let bounded = self.path.get(i..).unwrap_or_default().iter().any(|a| {
                 let n = self.name(*a);
-                self.image.recursion.iter().any(|(p, _, _)| n.contains(p))
+                self.rules.recursion.iter().any(|(p, _, _)| n.contains(p))
             });
             if bounded {
                 // The repetitions are paid for where the bounded function multiplies.
@@ -1354,7 +1443,7 @@ impl Analysis<'_> {
         self.path.pop();
         let mut w = f.frame.zip(deepest).map(|(a, b)| a + b);
         if let Some((_, depth, _)) = self
-            .image
+            .rules
             .recursion
             .iter()
             .find(|(p, _, _)| f.name.contains(p))
@@ -1479,16 +1568,7 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
     }
     let program = program(&elf)?;
     let funcs = &program.funcs;
-    let analysis = |excluded: Task| Analysis {
-        program: &program,
-        memo: HashMap::new(),
-        path: Vec::new(),
-        recursion: BTreeSet::new(),
-        unknown_frame: BTreeSet::new(),
-        indirect: BTreeMap::new(),
-        excluded,
-        image,
-    };
+    let analysis = |excluded: Task| Analysis::new(&program, &image.rules, excluded);
     println!("{:<46} {:>10}", "entry", "worst stack");
     let (task_label, task) = image.task;
     let task = funcs
@@ -1556,14 +1636,14 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
             funcs.get(f).map_or("?", |f| f.name.as_str())
         );
     }
-    for (pattern, depth, why) in image.recursion {
+    for (pattern, depth, why) in image.rules.recursion {
         println!("recursion through `{pattern}` bounded by {depth}: {why}");
     }
-    for (callee, only, why) in image.only_from {
+    for (callee, only, why) in image.rules.only_from {
         let only = only.join("` or `");
         println!("`{callee}` is called through a pointer from `{only}` only: {why}");
     }
-    for (callers, to, why) in image.only_to {
+    for (callers, to, why) in image.rules.only_to {
         let (callers, to) = (callers.join("` or `"), to.join("` or `"));
         println!("`{callers}` calls through a vtable only `{to}`: {why}");
     }
@@ -1678,41 +1758,4 @@ pub fn run() -> Result<(), String> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::{Insn, jump_table};
-
-    fn insn(addr: u64, mnemonic: &str, args: &str) -> Insn {
-        Insn {
-            addr,
-            mnemonic: mnemonic.to_owned(),
-            args: args.to_owned(),
-        }
-    }
-
-    /// A Cortex-M0+ switch, as objdump prints one of `Engine::trace`'s.
-    fn switch(table_at: u64) -> Vec<Insn> {
-        vec![
-            insn(
-                0x1000,
-                "add",
-                &format!("r2, pc, #8\t@ (adr r2, {table_at:x} <f+0x10>)"),
-            ),
-            insn(0x1002, "ldr", "r4, [r2, r1]"),
-            insn(0x1004, "ldr", "r2, [sp, #36]\t@ 0x24"),
-            insn(0x1006, "mov", "r1, r2"),
-            insn(0x1008, "mov", "pc, r4"),
-        ]
-    }
-
-    #[test]
-    fn a_switch_through_a_table_in_the_function_is_a_branch_not_a_call() {
-        let code = switch(0x1010);
-        assert!(jump_table(&code, 4, 0x1000..0x1100));
-        // A table outside the function, or a jump through a register loaded otherwise, is a
-        // call the analysis cannot follow.
-        assert!(!jump_table(&code, 4, 0x0f00..0x1000));
-        let mut other = switch(0x1010);
-        other[1] = insn(0x1002, "ldr", "r4, [r0, #4]");
-        assert!(!jump_table(&other, 4, 0x1000..0x1100));
-    }
-}
+mod tests;
