@@ -460,9 +460,7 @@ impl<O: RecordOut> Recorder<O> {
     pub fn into_inner(self) -> O {
         self.out
     }
-}
 
-impl<O: RecordOut> Recorder<O> {
     /// Encodes and writes `frame`: for a recorder that takes frames on the runtime's path
     /// ([`Frame::of`], a copy of the event's words) and encodes them later, in idle time.
     pub fn write_frame<const W: usize>(&mut self, frame: &Frame<W>) {
@@ -624,7 +622,7 @@ impl<const N: usize> Ring<N> {
     /// The byte `i` places after the oldest held.
     fn byte(&self, i: usize) -> u8 {
         let held = self.held();
-        // head < N and held <= N: no overflow; N.max(1): no division by zero.
+        // head < N and held <= N: no overflow; checked_rem: no division by zero when N is 0.
         let oldest = (self.head as usize)
             .wrapping_add(N.wrapping_sub(held))
             .checked_rem(N)
@@ -703,6 +701,29 @@ impl<const N: usize> RecordOut for Ring<N> {
         self.head = head as u32;
         self.len = (self.len as usize).saturating_add(bytes.len()).min(N) as u32;
     }
+}
+
+/// An output lent to a recorder.
+impl<T: RecordOut + ?Sized> RecordOut for &mut T {
+    fn write(&mut self, bytes: &[u8]) {
+        (**self).write(bytes);
+    }
+}
+
+/// Writes a recording's start to `out`: `header`, then a tool's prologue: the length of
+/// `body` (`u32`), `body`, a `kind` byte (what the body is), and a CRC-32 of the three.
+pub fn write_start(out: &mut impl RecordOut, header: &Header, body: &[u8], kind: u8) {
+    let len = (body.len() as u32).to_le_bytes();
+    let kind = [kind];
+    let mut crc = Crc32::new();
+    for part in [&len[..], body, &kind] {
+        crc.update(part);
+    }
+    out.write(&header.encode());
+    out.write(&len);
+    out.write(body);
+    out.write(&kind);
+    out.write(&crc.finish().to_le_bytes());
 }
 
 /// Two outputs at once: a stream and a ring, for example.

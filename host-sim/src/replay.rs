@@ -39,19 +39,13 @@ use crate::sim::Prioritized;
 /// shipped scenario's, tens of kB).
 pub const MAX_RECORDING: u64 = 256 << 20;
 
-/// What a recording's decisions depend on: [`robot::mission_hash`] of this psmpa-sim's Fetch
-/// Tea mission.
-pub fn mission_hash(scenario_json: &[u8], arch: Arch) -> u64 {
-    robot::mission_hash(scenario_json, arch)
-}
-
 /// A recording's bytes before its frames: the core's header and the prologue
 /// ([`robot::record_start`]).
 pub fn start(scenario_json: &[u8], arch: Arch) -> Vec<u8> {
     let mut out = Bytes(Vec::new());
     robot::record_start(
         &mut out,
-        mission_hash(scenario_json, arch),
+        robot::mission_hash(scenario_json, arch),
         scenario_json,
         arch,
     );
@@ -232,7 +226,7 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
         byte @ (0 | 1) => {
             let arch = if byte == 0 { Arch::PSmpa } else { Arch::Smpa };
             let scenario_json = prologue.to_vec();
-            if header.mission != mission_hash(&scenario_json, arch) {
+            if header.mission != robot::mission_hash(&scenario_json, arch) {
                 return Err(fail(
                     "recorded with another mission than this psmpa-sim's Fetch Tea: refused".into(),
                 ));
@@ -344,26 +338,6 @@ struct Replay<'f> {
 }
 
 impl Replay<'_> {
-    /// The first recorded frame at or after `ticks` with an input `matching`.
-    fn next(
-        &self,
-        ticks: u64,
-        matching: impl Fn(&Input<1>) -> bool,
-    ) -> Option<(usize, u64, Input<1>)> {
-        // The next not traced again, whatever its instant: where the recording was made, a
-        // sampler's period may be anchored a tick later or earlier than here (the chip's
-        // computing before it started), and its sample is still this one.
-        let _ = ticks;
-        let from = self.progress.traced.get();
-        // Past the recording's end (the replay went on) there is nothing more to feed.
-        let rest = self.frames.get(from..).unwrap_or_default();
-        rest.iter().enumerate().find_map(|(i, f)| {
-            f.input()
-                .filter(|input| matching(input))
-                .map(|input| (from + i, f.ticks, input))
-        })
-    }
-
     fn on_demand(&self, sensor: SensorId) -> bool {
         self.on_demand.get(sensor.index()).copied().unwrap_or(false)
     }
@@ -424,13 +398,23 @@ impl Sensor for Replay<'_> {
 }
 
 impl Replay<'_> {
-    /// The next recorded reading, loss or fault of `sensor` not yet traced again.
+    /// The next recorded reading, loss or fault of `sensor` not yet traced again, whatever
+    /// its instant: where the recording was made, a sampler's period may be anchored a tick
+    /// later or earlier than here (the chip's computing before it started), and its sample is
+    /// still this one. Its index, instant and input.
     fn next_of(&self, sensor: SensorId) -> Option<(usize, u64, Input<1>)> {
-        self.next(0, |input| match *input {
-            Input::Sample { sensor: s, .. }
+        let from = self.progress.traced.get();
+        // Past the recording's end (the replay went on) there is nothing more to feed.
+        let rest = self.frames.get(from..).unwrap_or_default();
+        rest.iter().enumerate().find_map(|(i, f)| match f.input()? {
+            input @ (Input::Sample { sensor: s, .. }
             | Input::Lost { sensor: s }
-            | Input::Fault { sensor: s, .. } => s == sensor,
-            _ => false,
+            | Input::Fault { sensor: s, .. })
+                if s == sensor =>
+            {
+                Some((from + i, f.ticks, input))
+            }
+            _ => None,
         })
     }
 }

@@ -335,8 +335,8 @@ impl Arch {
 }
 
 /// Writes a recording's start to `out`: the core's header (`mission`, from [`mission_hash`])
-/// and the prologue: the scenario's length (`u32`), bytes and the architecture's byte, with
-/// a CRC-32. The frames follow.
+/// and the prologue, the scenario's bytes with the architecture's byte as its kind
+/// ([`psmpa_core::record::write_start`]). The frames follow.
 pub fn record_start(
     out: &mut impl psmpa_core::record::RecordOut,
     mission: u64,
@@ -344,17 +344,7 @@ pub fn record_start(
     arch: Arch,
 ) {
     use psmpa_core::record::{self, Header};
-    out.write(&Header::new(1, mission).encode());
-    let len = (scenario.len() as u32).to_le_bytes();
-    let byte = [arch.byte()];
-    out.write(&len);
-    out.write(scenario);
-    out.write(&byte);
-    let mut crc = record::Crc32::new();
-    for part in [&len[..], scenario, &byte] {
-        crc.update(part);
-    }
-    out.write(&crc.finish().to_le_bytes());
+    record::write_start(out, &Header::new(1, mission), scenario, arch.byte());
 }
 
 /// The runtime settings of a run: only the policy differs between the architectures.

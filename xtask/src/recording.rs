@@ -13,11 +13,6 @@ use psmpa_sim::replay;
 /// the chip computes for a few ticks where the host takes none (`replay::replay`).
 pub const CHIP_LAG: Duration = Duration::from_millis(2);
 
-/// The recordings in a firmware's decoded log ([`replay::from_log`]).
-pub fn recordings(log: &str) -> Result<Vec<Vec<u8>>, String> {
-    replay::from_log(log)
-}
-
 /// What replaying a log's recordings found.
 #[derive(Debug, Default)]
 pub struct Replays {
@@ -39,7 +34,7 @@ pub struct Replays {
 /// is given, else `SCENARIO.ARCH.rec` (`-N` after the first).
 pub fn replay_log(log: &str, dir: &Path, lag: Duration, name: Option<&str>) -> Replays {
     let mut result = Replays::default();
-    let recs = match recordings(log) {
+    let recs = match replay::from_log(log) {
         Ok(r) => r,
         Err(e) => {
             result.failures.push(e);
@@ -106,11 +101,11 @@ mod tests {
     #[test]
     fn pieces_gather_into_one_recording_a_header() {
         let log = "0.1 INFO  rec [80, 83, 77, 80, 65, 82, 69, 67, 1]\n0.1 INFO  w 0 0 0 0 0\n0.2 INFO  rec [7, 8]\n0.3 INFO  rec [80, 83, 77, 80, 65, 82, 69, 67, 2]\n";
-        let recs = recordings(log).unwrap();
+        let recs = replay::from_log(log).unwrap();
         assert_eq!(recs.len(), 2);
         assert_eq!(recs[0][8..], [1, 7, 8]);
         assert_eq!(recs[1][8..], [2]);
-        assert!(recordings("0.1 INFO  rec [7]\n").is_err());
-        assert!(recordings("0.1 INFO  rec [700]\n").is_err());
+        assert!(replay::from_log("0.1 INFO  rec [7]\n").is_err());
+        assert!(replay::from_log("0.1 INFO  rec [700]\n").is_err());
     }
 }

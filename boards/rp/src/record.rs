@@ -27,9 +27,9 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
 use embassy_time::Instant;
 use heapless::Deque;
-use portable_atomic::{AtomicU32, Ordering};
+use portable_atomic::Ordering;
 use psmpa_core::TraceEvent;
-use psmpa_core::record::{self, Crc32, Frame, Header, MAX_FRAME, RecordOut, Ring};
+use psmpa_core::record::{self, Frame, Header, MAX_FRAME, RecordOut, Recorder, Ring};
 use psmpa_drivers::robot::{Settings, fetch_tea};
 
 /// Bytes of the ring: about 140 one-word frames.
@@ -63,6 +63,11 @@ struct State {
     in_flight: Option<Frame<1>>,
     /// `None` until the recording starts (and after a watchdog reset, when it does not).
     ring: Option<&'static mut Ring<RING_BYTES>>,
+    /// Frames taken, the most queued at once, and those sent on the runtime's path because
+    /// the queue was full: counted under the lock the path holds anyway.
+    taken: u32,
+    queued_max: u32,
+    inline: u32,
 }
 
 /// All zeros at first: in `.bss`, no initial values in flash.
@@ -70,24 +75,17 @@ static STATE: Mutex<CriticalSectionRawMutex, RefCell<State>> = Mutex::new(RefCel
     queue: Deque::new(),
     in_flight: None,
     ring: None,
+    taken: 0,
+    queued_max: 0,
+    inline: 0,
 }));
 
 /// Frames are queued.
 static QUEUED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
-/// Frames encoded on the runtime's path because the queue was full, and the most queued.
-pub static INLINE: AtomicU32 = AtomicU32::new(0);
-/// The most frames queued at once.
-pub static QUEUED_MAX: AtomicU32 = AtomicU32::new(0);
-
 /// Encodes `frame` and sends it (RTT, and the ring).
 fn send(frame: &Frame<1>, ring: &mut Ring<RING_BYTES>) {
-    let mut buf = [0u8; MAX_FRAME];
-    if let Ok(n) = frame.encode(&mut buf) {
-        let bytes = buf.get(..n).unwrap_or(&[]);
-        Rtt.write(bytes);
-        ring.write(bytes);
-    }
+    Recorder::frames_only((Rtt, ring)).write_frame(frame);
 }
 
 /// The ring, taken once at boot; `None` on a second call.
@@ -113,11 +111,9 @@ pub fn start(settings: &Settings, after_reset: bool) {
         let mut frames = 0u32;
         let (mut first, mut last) = (0, 0);
         begin(&mut Rtt, settings);
+        let mut rtt = Recorder::frames_only(Rtt);
         for frame in ring.recovered::<1>() {
-            let mut buf = [0u8; MAX_FRAME];
-            if let Ok(n) = frame.encode(&mut buf) {
-                Rtt.write(buf.get(..n).unwrap_or(&[]));
-            }
+            rtt.write_frame(&frame);
             if frames == 0 {
                 first = frame.ticks;
             }
@@ -139,24 +135,17 @@ pub fn start(settings: &Settings, after_reset: bool) {
     critical_section::with(|cs| STATE.borrow(cs).borrow_mut().ring = Some(ring));
 }
 
-/// A recording's header and prologue into `out`.
+/// A recording's header and prologue into `out`: the calibration record's bytes, kind
+/// [`BOARD`].
 fn begin(out: &mut impl RecordOut, settings: &Settings) {
-    let mut prologue = [0u8; 4 + 4 * psmpa_drivers::robot::RECORD_WORDS + 1];
-    let words = settings.to_record();
-    let len = (4 * words.len()) as u32;
-    for (slot, byte) in prologue.iter_mut().zip(
-        len.to_le_bytes()
-            .into_iter()
-            .chain(words.iter().flat_map(|w| w.to_le_bytes()))
-            .chain([BOARD]),
-    ) {
+    let mut body = [0u8; 4 * psmpa_drivers::robot::RECORD_WORDS];
+    for (slot, byte) in body
+        .iter_mut()
+        .zip(settings.to_record().iter().flat_map(|w| w.to_le_bytes()))
+    {
         *slot = byte;
     }
-    let mut crc = Crc32::new();
-    crc.update(&prologue);
-    out.write(&Header::new(1, fetch_tea::HASH).encode());
-    out.write(&prologue);
-    out.write(&crc.finish().to_le_bytes());
+    record::write_start(out, &Header::new(1, fetch_tea::HASH), &body, BOARD);
 }
 
 /// The runtime's path: queues the event's frame (the trace sink calls it inside its lock).
@@ -168,19 +157,22 @@ pub fn take(at: Instant, event: &TraceEvent) {
             queue,
             in_flight,
             ring: Some(ring),
+            taken,
+            queued_max,
+            inline,
         } = &mut *state
         else {
             return;
         };
         if queue.is_full() {
             for frame in [in_flight.take(), queue.pop_front()].into_iter().flatten() {
-                INLINE.fetch_add(1, Ordering::Relaxed);
+                *inline += 1;
                 send(&frame, ring);
             }
         }
         let _ = queue.push_back(frame);
-        TAKEN.fetch_add(1, Ordering::Relaxed);
-        QUEUED_MAX.fetch_max(queue.len() as u32, Ordering::Relaxed);
+        *taken += 1;
+        *queued_max = (*queued_max).max(queue.len() as u32);
     });
     QUEUED.signal(());
 }
@@ -225,17 +217,16 @@ pub async fn drain() {
     }
 }
 
-/// Frames taken.
-pub static TAKEN: AtomicU32 = AtomicU32::new(0);
-
 /// Sends whatever is queued at once, and says what the recorder did: before the board stops
 /// (the task's end).
 pub fn flush() {
+    let (taken, queued_max, inline) = critical_section::with(|cs| {
+        let s = STATE.borrow(cs).borrow();
+        (s.taken, s.queued_max, s.inline)
+    });
     info!(
         "flight recorder: {=u32} frames, at most {=u32} queued, {=u32} sent on the runtime's path for a full queue",
-        TAKEN.load(Ordering::Relaxed),
-        QUEUED_MAX.load(Ordering::Relaxed),
-        INLINE.load(Ordering::Relaxed)
+        taken, queued_max, inline
     );
     // A frame a critical section, as the drain task sends them.
     while critical_section::with(|cs| {
@@ -244,6 +235,7 @@ pub fn flush() {
             queue,
             in_flight,
             ring: Some(ring),
+            ..
         } = &mut *state
         else {
             return false;
@@ -257,5 +249,3 @@ pub fn flush() {
         }
     }) {}
 }
-
-const _: () = assert!(record::frame_len(1) <= MAX_FRAME);

@@ -346,7 +346,7 @@ fn check_recording(report: &mut Report, stem: &str) {
         .collect();
     let dir = recording::dir("bench");
     let mut fail = |why: String| report.failures.push(format!("flight recording: {why}"));
-    let recs = match recording::recordings(&text) {
+    let recs = match psmpa_sim::replay::from_log(&text) {
         Ok(r) => r,
         Err(e) => return fail(e),
     };
