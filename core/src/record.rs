@@ -264,6 +264,8 @@ pub mod kind {
     pub const STATE_LEFT: u8 = 5;
     /// `PhaseStarted`.
     pub const PHASE_STARTED: u8 = 6;
+    /// `SensorOn`.
+    pub const SENSOR_ON: u8 = 7;
     /// `SensorOff`.
     pub const SENSOR_OFF: u8 = 8;
     /// `Sample`.
@@ -344,6 +346,17 @@ impl<const W: usize> Frame<W> {
             (kind::PHASE_STARTED, 1) => Some(Phase::Act),
             _ => None,
         }
+    }
+
+    /// The sensor a `SensorOn` (`true`) or `SensorOff` (`false`) frame switches, `None` for
+    /// any other frame: when a sensor was on, as the robot itself recorded it.
+    pub fn power(&self) -> Option<(SensorId, bool)> {
+        let on = match self.kind() {
+            kind::SENSOR_ON => true,
+            kind::SENSOR_OFF => false,
+            _ => return None,
+        };
+        Some((SensorId::new(usize::from(self.field(1)))?, on))
     }
 
     /// The input this frame records, if it is one ([`Input`]); `None` for the runtime's own
@@ -767,6 +780,19 @@ mod tests {
             TraceSink::<1>::record(&mut rec, Instant::from_ticks(t), &e);
         }
         rec.into_inner()
+    }
+
+    #[test]
+    fn a_switch_frame_says_which_sensor_went_on_or_off() {
+        let frames: Vec<Frame<1>> = frames(&recording()).map(Result::unwrap).collect();
+        let sonar = SensorId::new(0).unwrap();
+        let powers: Vec<_> = frames.iter().map(Frame::power).collect();
+        assert_eq!(powers, [Some((sonar, true)), None, None]);
+        let off = Frame::<1>::of(
+            Instant::from_ticks(5),
+            &TraceEvent::SensorOff { sensor: sonar },
+        );
+        assert_eq!(off.power(), Some((sonar, false)));
     }
 
     #[test]

@@ -79,7 +79,7 @@ pub fn recorder(out: Output, scenario_json: &[u8], arch: Arch) -> Recorder<Recor
 }
 
 /// The bytes of one `rec [..]` line of a decoded defmt log, or `None` for another line.
-fn rec_bytes(line: &str) -> Option<Result<Vec<u8>, String>> {
+pub fn rec_bytes(line: &str) -> Option<Result<Vec<u8>, String>> {
     let list = match line.split_once(" rec [") {
         Some((_, list)) => list,
         None => line.strip_prefix("rec [")?,

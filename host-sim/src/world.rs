@@ -1319,6 +1319,14 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         })
     }
 
+    /// [`bumper_deliver`](Self::bumper_deliver) of what the robot's switch read, `pressed`,
+    /// rather than the world's contact: a read that found the switch open registers nothing,
+    /// whatever touched the robot (the bench's firmware reads its pin through a debounce).
+    pub fn bumper_deliver_measured(&self, touch: Touch, pressed: bool) -> u8 {
+        let touching = if pressed { touch.touching } else { 0 };
+        self.bumper_deliver(Touch { touching })
+    }
+
     /// The robot accepted a delivered sample of `device` (its driver found it plausible):
     /// counted for the largest gap between samples. The camera and the handle count theirs
     /// themselves.
