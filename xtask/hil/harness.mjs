@@ -13,7 +13,9 @@
 //   {"cmd":"boot","flash":PATH,"symbols":{...},"health_words":N,"outputs":[..],"pwm":[..],
 //    "inputs":{pin:level}}                       the flash image (from 0x1000_0000) and where
 //                                                its RTT block, health block and test points are
-//   {"cmd":"set","pin":P,"level":0|1,"at":NS}    an input's level from NS on (NS >= now)
+//   {"cmd":"set","pin":P,"level":0|1|null,"at":NS}  an input driven low or high from NS on (NS >=
+//                                                now), or left open (null): it then reads what
+//                                                its pad gives it (see "Pads" below)
 //   {"cmd":"run","until":NS}                     runs until NS or until something happens
 //   {"cmd":"inject","what":"panic"|"hang"}       thread mode calls that test point next
 //   {"cmd":"stats"}                              the cycle accounts so far
@@ -26,6 +28,9 @@
 //   {"ev":"health","words":[...]}       the firmware's PSMPA_HEALTH block, when it changes
 //   {"ev":"rtt","data":HEX}          bytes of the defmt log
 //   {"ev":"reset","cause":"watchdog"}   the watchdog fired: the chip was reset, the world kept
+//   {"ev":"warning","message":M,"pc":PC} rp2040js warned (an access to unmapped memory, an
+//                                       unimplemented register or instruction), not one of the
+//                                       registers silicon has and the emulator does not model
 //   {"ev":"at"}                         the run stopped here (after its events)
 //
 // rp2040js's pitfalls, and what this file does about them (boards/README.md, "What the bench
@@ -37,7 +42,13 @@
 //   the same SRAM, as a reset leaves it).
 // * The boot ROM's path halts: the image is started from its vector table (VTOR, SP, PC);
 //   the ROM is zeros (the firmware calls no ROM routine).
-// * Inputs do not follow pull-ups: the world drives every input's level.
+// * Inputs do not follow pull-ups: an input the world leaves open reads what its pad's
+//   configuration (PADS_BANK0) gives it, resolved here: its pull-up, its pull-down, the level
+//   it held under both (the bus keeper), or with neither a floating level: a seeded
+//   pseudo-random level drawn again every millisecond, as a pin picking up noise.
+// * Its warnings (an access to unmapped memory reads 0xffffffff where silicon raises a bus
+//   fault) are reported, except for the registers that silicon has and rp2040js does not
+//   model, listed in SILICON_ONLY with what they are.
 
 import { createInterface } from 'node:readline';
 import { readFileSync } from 'node:fs';
@@ -49,6 +60,29 @@ const WATCHDOG_REASON_TIMER = 1;
 const SIO_SPINLOCK31 = 0x17c; // embassy-rp's critical section takes spinlock 31
 const VECTOR_TABLE = 0x10000100; // after the 256 B second-stage bootloader
 const EXC_HARDFAULT = 3;
+/** How often a floating input takes a new level, ns. */
+const FLOAT_NS = 1_000_000;
+
+/**
+ * Registers that exist on the RP2040 and that rp2040js does not model (it warns and reads
+ * zero): the firmware's accesses to them are its HAL's ordinary start-up, not faults.
+ */
+const SILICON_ONLY = new Set([
+  'PPB read 0xd94', // MPU_TYPE: rp2040js has no MPU; the stack guard finds none and says so
+  'ROSC_BASE write 0x0', // the ring oscillator's CTRL, FREQA, FREQB, DIV: clock set-up
+  'ROSC_BASE write 0x4',
+  'ROSC_BASE write 0x8',
+  'ROSC_BASE write 0x10',
+  'VREG_AND_CHIP_RESET_BASE read 0x0', // the regulator's VREG and the brown-out detector's BOD
+  'VREG_AND_CHIP_RESET_BASE write 0x0',
+  'VREG_AND_CHIP_RESET_BASE write 0x4',
+]);
+
+/** The key of an unimplemented register's warning in SILICON_ONLY, or null. */
+function registerKey(component, message) {
+  const m = /^Unimplemented peripheral (read from|write to) (0x[0-9a-f]+)/.exec(message);
+  return m ? `${component} ${m[1] === 'read from' ? 'read' : 'write'} ${m[2]}` : null;
+}
 
 const out = (event) => process.stdout.write(JSON.stringify(event) + '\n');
 
@@ -75,7 +109,9 @@ class Bench {
     this.config = config;
     this.image = readFileSync(config.flash);
     this.base = 0; // ns of emulated time before the current chip booted
+    // What the world does to each input: 0 or 1 driven, null open.
     this.inputs = new Map(Object.entries(config.inputs).map(([p, l]) => [Number(p), l]));
+    this.noise = (BigInt(config.seed) ^ 0x5851f42d4c957f2dn) & 0xffffffffffffffffn;
     this.schedule = []; // [{at, pin, level}], sorted by at
     this.events = [];
     this.accounts = new Accounts();
@@ -104,7 +140,10 @@ class Bench {
       info: (_, message) => {
         if (message === 'SEV') core.eventRegistered = true;
       },
-      warn() {},
+      warn: (component, message) => {
+        if (SILICON_ONLY.has(registerKey(component, message))) return;
+        this.events.push({ ev: 'warning', message: `${component}: ${message}`, pc: core.PC, ns: this.now });
+      },
       error: (component, message) => this.events.push({ ev: 'error', component, message }),
     };
     // UDF and BKPT: rp2040js calls this hook (for a debugger) and runs on; a chip with no
@@ -123,7 +162,13 @@ class Bench {
     };
     this.watchCycles(core);
     this.watchSpinlock(mcu);
-    for (const [pin, level] of this.inputs) mcu.gpio[pin].setInputValue(level === 1);
+    for (const pin of this.inputs.keys()) {
+      // A pad's pull changed (the firmware configured it): an open input follows.
+      mcu.gpio[pin].addListener(() => this.apply(pin));
+      this.apply(pin);
+    }
+    this.floatAlarm = this.sim.clock.createAlarm(() => this.refloat());
+    this.floatAlarm.schedule(FLOAT_NS);
     for (const pin of this.config.outputs) {
       mcu.gpio[pin].addListener((state) => this.output(pin, state));
       if (afterWatchdog) this.output(pin, GPIOPinState.Input);
@@ -141,6 +186,38 @@ class Bench {
     this.rtt = null;
     this.healthSeen = -1;
     this.busySince = null;
+  }
+
+  /** A pseudo-random bit (xorshift64), the same sequence for the same seed. */
+  bit() {
+    let x = this.noise;
+    x ^= (x << 13n) & 0xffffffffffffffffn;
+    x ^= x >> 7n;
+    x ^= (x << 17n) & 0xffffffffffffffffn;
+    this.noise = x;
+    return (x & 1n) === 1n;
+  }
+
+  /** An input's level: the world's drive, or what its pad gives an open pin. */
+  apply(pin) {
+    const gpio = this.mcu.gpio[pin];
+    const drive = this.inputs.get(pin);
+    let level;
+    if (drive === 0 || drive === 1) level = drive === 1;
+    else if (gpio.pullupEnabled && gpio.pulldownEnabled) level = gpio.rawInputValue; // bus keeper
+    else if (gpio.pullupEnabled) level = true;
+    else if (gpio.pulldownEnabled) level = false;
+    else level = this.bit(); // floating
+    if (level !== gpio.rawInputValue) gpio.setInputValue(level);
+  }
+
+  /** Floating inputs take a new level. */
+  refloat() {
+    for (const [pin, drive] of this.inputs) {
+      const gpio = this.mcu.gpio[pin];
+      if (drive === null && !gpio.pullupEnabled && !gpio.pulldownEnabled) this.apply(pin);
+    }
+    this.floatAlarm.schedule(FLOAT_NS);
   }
 
   output(pin, state) {
@@ -304,7 +381,7 @@ class Bench {
       while (this.schedule.length && this.schedule[0].at <= this.now) {
         const { pin, level } = this.schedule.shift();
         this.inputs.set(pin, level);
-        this.mcu.gpio[pin].setInputValue(level === 1);
+        this.apply(pin);
       }
       if (this.injection !== undefined && core.IPSR === 0 && !core.PM) {
         // Thread mode calls the test point now, abandoning what it was doing (never inside a

@@ -88,6 +88,15 @@ enum Task {
         /// Print one JSON object a run on stdout, nothing else.
         #[arg(long)]
         json: bool,
+        /// Measure the step costs over every shipped scenario and fault and rewrite the
+        /// committed budget the bench judges by (boards/pico/bench-budget.json), printing the
+        /// old and new figures side by side.
+        #[arg(long, conflicts_with_all = ["files", "mutants"])]
+        calibrate: bool,
+        /// Play the bench on images with planted bugs (a deaf sonar, a missing pull-up, a slow
+        /// brake ...): exit 0 only when every one fails it; a table of what caught each.
+        #[arg(long, conflicts_with_all = ["files"])]
+        mutants: bool,
     },
     /// Response-time analysis from step costs measured in QEMU on both machines: a latency
     /// bound per sensor, checked against every measured reaction; the tables also go to a
@@ -108,8 +117,21 @@ enum Task {
 
 fn main() -> ExitCode {
     let task = Cli::parse().task;
-    if let Task::Hil { files, json } = &task {
-        return match hil::run(files, *json) {
+    if let Task::Hil {
+        files,
+        json,
+        calibrate,
+        mutants,
+    } = &task
+    {
+        let mode = if *calibrate {
+            hil::Mode::Calibrate
+        } else if *mutants {
+            hil::Mode::Mutants
+        } else {
+            hil::Mode::Check
+        };
+        return match hil::run(files, *json, mode) {
             hil::Ending::Passed => ExitCode::SUCCESS,
             hil::Ending::Failed(e) => {
                 eprintln!("xtask hil: {e}");

@@ -13,7 +13,14 @@
 //!   the next periodic sample), reads for a debounce time (a read latency) and reacts: that
 //!   wait plus the analysis of the bumper's job with the debounce as its read latency.
 //!
-//! Costs, all measured (the worst over the run, cycles of the 125 MHz clock): a sensing
+//! Costs come from the committed budget ([`Budget`], `boards/pico/bench-budget.json`), never
+//! from the run being judged: `cargo xtask hil --calibrate` measures them once over every
+//! shipped scenario and fault and writes the worst of each with a margin; a run whose measured
+//! costs exceed the budget fails, and so does one whose reactions exceed the bound computed
+//! from it. The deciding side's budget is its step without the planning time a scenario
+//! declares (`plan_us`): a scenario's bound adds its own.
+//!
+//! The costs (cycles of the 125 MHz clock): a sensing
 //! segment is the longest activation of the sensing executor (`SWI_IRQ_1`) plus the longest
 //! interrupt that releases one (the alarm `TIMER_IRQ_0`, or `IO_IRQ_BANK0` for an edge). A
 //! sample is [`SONAR_SEGMENTS`] or [`BUMPER_SEGMENTS`] of them: every wait of the driver and
@@ -25,7 +32,7 @@
 
 use psmpa_core::timing::{self, Blocking, Job, TimingError};
 use psmpa_drivers::switch::DEBOUNCE;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::harness::Stats;
 
@@ -46,8 +53,9 @@ pub const BUMPER_SEGMENTS: u64 = 4;
 /// Nanoseconds a cycle at 125 MHz.
 const NS: u64 = 8;
 
-/// The step costs the bench measured, cycles.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
+/// Step costs, cycles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
 pub struct Costs {
     /// The longest activation of the sensing executor.
     pub sensing_poll: u64,
@@ -74,8 +82,139 @@ impl Costs {
         }
     }
 
-    fn segment(&self) -> u64 {
+    /// A sensing segment: the longest sensing poll and the interrupt that released it.
+    pub fn segment(&self) -> u64 {
         self.sensing_poll + self.alarm.max(self.gpio)
+    }
+
+    /// These costs with `plan` cycles of declared planning added to the deciding step.
+    pub fn with_plan(self, plan: u64) -> Self {
+        Self {
+            deciding: self.deciding.saturating_add(plan),
+            ..self
+        }
+    }
+
+    /// Each cost, by name.
+    pub fn named(&self) -> [(&'static str, u64); 5] {
+        [
+            ("sensing_poll", self.sensing_poll),
+            ("alarm", self.alarm),
+            ("gpio", self.gpio),
+            ("deciding", self.deciding),
+            ("critical", self.critical),
+        ]
+    }
+
+    /// The worst of both, cost by cost.
+    pub fn max(self, other: Self) -> Self {
+        Self {
+            sensing_poll: self.sensing_poll.max(other.sensing_poll),
+            alarm: self.alarm.max(other.alarm),
+            gpio: self.gpio.max(other.gpio),
+            deciding: self.deciding.max(other.deciding),
+            critical: self.critical.max(other.critical),
+        }
+    }
+
+    /// Each cost with `percent` more, rounded up.
+    pub fn with_margin(self, percent: u64) -> Self {
+        let up = |c: u64| (c * (100 + percent)).div_ceil(100);
+        Self {
+            sensing_poll: up(self.sensing_poll),
+            alarm: up(self.alarm),
+            gpio: up(self.gpio),
+            deciding: up(self.deciding),
+            critical: up(self.critical),
+        }
+    }
+
+    /// The costs of these that exceed `budget`'s, in words.
+    pub fn over(&self, budget: &Self) -> Vec<String> {
+        self.named()
+            .iter()
+            .zip(budget.named())
+            .filter(|((_, c), (_, b))| c > b)
+            .map(|((name, c), (_, b))| {
+                format!("the {name} cost of {c} cycles exceeds its budget of {b} cycles")
+            })
+            .collect()
+    }
+}
+
+/// Cycles of the 125 MHz clock in `us` microseconds: a scenario's declared planning time.
+pub fn cycles_of_us(us: u64) -> u64 {
+    us.saturating_mul(1_000) / NS
+}
+
+/// The committed cost budget of the Pico's image (`boards/pico/bench-budget.json`).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Budget {
+    /// What the file is.
+    pub about: String,
+    /// The margin over the worst measured, percent.
+    pub margin_percent: u64,
+    /// The worst of each cost over the calibration's runs (the deciding step without the
+    /// scenarios' declared planning).
+    pub measured: Costs,
+    /// The budget: `measured` with the margin, rounded up.
+    pub budget: Costs,
+}
+
+/// The margin a calibration adds to the worst measured costs, percent.
+pub const MARGIN_PERCENT: u64 = 25;
+
+impl Budget {
+    /// The file.
+    pub fn path() -> std::path::PathBuf {
+        crate::firmware::root().join("boards/pico/bench-budget.json")
+    }
+
+    /// Reads the committed budget.
+    pub fn load() -> Result<Self, String> {
+        let path = Self::path();
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            format!(
+                "{}: {e} (cargo xtask hil --calibrate writes it)",
+                path.display()
+            )
+        })?;
+        let budget: Self =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        budget
+            .check()
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(budget)
+    }
+
+    /// Whether the budget is its measured costs with its margin, as a calibration writes it.
+    pub fn check(&self) -> Result<(), String> {
+        if self.budget == self.measured.with_margin(self.margin_percent) {
+            Ok(())
+        } else {
+            Err(format!(
+                "its budget is not its measured costs with a {} % margin: write it with cargo xtask hil --calibrate",
+                self.margin_percent
+            ))
+        }
+    }
+
+    /// The budget of `measured`, the worst costs of a calibration.
+    pub fn of(measured: Costs) -> Self {
+        Self {
+            about: "Worst step costs of the Pico's image (cycles at 125 MHz) over every shipped bench scenario and fault, and the budget the bench judges by: written by cargo xtask hil --calibrate, never by hand".to_owned(),
+            margin_percent: MARGIN_PERCENT,
+            measured,
+            budget: measured.with_margin(MARGIN_PERCENT),
+        }
+    }
+
+    /// The sonar's timing error a sensing segment of the budget may cause, mm: an edge served
+    /// that much late moves the reading by 0.1715 mm a microsecond; one more for rounding.
+    pub fn tolerance_mm(&self) -> u32 {
+        let ns = self.budget.segment() * NS;
+        u32::try_from((ns * 343).div_ceil(2_000_000) + 1).unwrap_or(u32::MAX)
     }
 }
 

@@ -17,7 +17,9 @@
 //! Expectations (`expect`, each optional): `reached_door`, `collisions`, `watchdog_resets`;
 //! `still`: once the fault has struck (the firmware fails a sensor, resets or panics) the
 //! motors never drive again; `motors_off_first`: after a panic the motors are off before the
-//! firmware's log says a word; `log`: lines the log must hold (substrings);
+//! firmware's log says a word; `stops_within_ms`: the motors drive when the fault is
+//! injected and stop within that many ms after it (for a hang: the watchdog's timeout and a
+//! sensor period), not before it; `log`: lines the log must hold (substrings);
 //! `sample_gap_max_ms`: the most each sensor's samples may lie apart.
 
 use std::collections::BTreeMap;
@@ -138,6 +140,9 @@ pub struct Expect {
     /// After a panic, the motors are off before the log says a word.
     #[serde(default)]
     pub motors_off_first: bool,
+    /// The motors drive when the fault is injected through a test point and stop this many
+    /// ms after it at most (and not before it).
+    pub stops_within_ms: Option<u64>,
     /// Lines the log must hold (substrings).
     #[serde(default)]
     pub log: Vec<String>,

@@ -21,8 +21,11 @@ pub struct Boot {
     pub outputs: Vec<u8>,
     /// PWM outputs whose duty is reported.
     pub pwm: Vec<u8>,
-    /// Input pins and their levels at reset.
-    pub inputs: BTreeMap<u8, u8>,
+    /// Input pins and what the world does to them at reset: driven 0 or 1, or open (`None`).
+    pub inputs: BTreeMap<u8, Option<u8>>,
+    /// Seeds the floating level of an open input with no pull (a decimal string: JSON's
+    /// numbers are doubles in JavaScript).
+    pub seed: String,
 }
 
 /// Addresses in the firmware image.
@@ -112,6 +115,16 @@ pub enum Event {
     Reset {
         /// Why.
         cause: String,
+        /// When, ns.
+        ns: u64,
+    },
+    /// rp2040js warned: an access to unmapped memory or to a register or instruction it does
+    /// not implement (beyond the registers silicon has and it does not model).
+    Warning {
+        /// What.
+        message: String,
+        /// The program counter when it warned.
+        pc: u32,
         /// When, ns.
         ns: u64,
     },
@@ -212,10 +225,10 @@ impl Harness {
         }
     }
 
-    /// Sets input `pin` to `level` from `at_ns` on.
-    pub fn set(&mut self, pin: u8, level: bool, at_ns: u64) -> Result<(), String> {
+    /// Drives input `pin` to `level` from `at_ns` on, or leaves it open (`None`).
+    pub fn set(&mut self, pin: u8, level: Option<bool>, at_ns: u64) -> Result<(), String> {
         self.send(
-            &serde_json::json!({"cmd": "set", "pin": pin, "level": u8::from(level), "at": at_ns}),
+            &serde_json::json!({"cmd": "set", "pin": pin, "level": level.map(u8::from), "at": at_ns}),
         )
     }
 

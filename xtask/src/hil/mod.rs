@@ -8,16 +8,23 @@
 //! triggers with echoes, closes its bump switch, shows it the door's marker. The firmware's
 //! defmt log comes off the chip's RTT buffer and is decoded with its own table.
 //!
-//! Every run is checked: the outcome (detections, collisions, reaching the door) against
-//! `psmpa-sim run` of the same scenario; every reaction (from the pin edge that showed an
-//! obstacle to the motors stopping) against the response-time bound that
-//! [`psmpa_core::timing`] gives from the step costs the bench measured ([`bound`]); the
-//! bench's fault scenarios (`boards/faults/`) against what they expect ([`fault`]). The first
-//! run is played twice: the same pin log both times.
+//! The judge sees what a test rig sees: the pins and the chip's own flight recording
+//! ([`chip`]), decoded as it comes off RTT. Every run is checked: each reading the robot
+//! recorded against what the rig put on its pins; the outcome (detections and the sensor
+//! that made each, collisions, reaching the door) against `psmpa-sim run` of the same
+//! scenario; the sampling periods, from the trigger pin and the recording; every reaction
+//! (from the pin edge that showed an obstacle to the motors stopping) against the
+//! response-time bound that [`psmpa_core::timing`] gives from the committed cost budget, and
+//! the measured costs against that budget ([`bound`]); the bench's fault scenarios
+//! (`boards/faults/`) against what they expect ([`fault`]); any warning of the emulator (an
+//! access silicon would fault on). The first run is played twice: the same pin log both
+//! times. [`mutants`] plants bugs in a copy of the firmware and requires each to fail.
 
 mod bound;
+mod chip;
 pub mod fault;
 mod harness;
+mod mutants;
 mod svg;
 pub mod world;
 
@@ -39,6 +46,7 @@ use psmpa_sim::world::{Fate, ObstacleReport, Tally, WorldEvent};
 use serde::Serialize;
 
 use crate::{firmware, recording};
+use bound::Budget;
 use fault::{Expect, Fault, FaultFile};
 use harness::{Boot, Event, Harness, Stats, Symbols};
 use world::{BenchWorld, PinFault, pin};
@@ -48,6 +56,17 @@ const FLASH: u32 = 0x1000_0000;
 /// After the firmware's outcome (or its reset), the run goes on this long: the robot must stay
 /// still.
 const GRACE_NS: u64 = 1_000_000_000;
+
+/// What `cargo xtask hil` does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Play and check.
+    Check,
+    /// Play every shipped scenario and fault and rewrite the cost budget.
+    Calibrate,
+    /// Play images with planted bugs; each must fail.
+    Mutants,
+}
 
 /// How `cargo xtask hil` ended.
 pub enum Ending {
@@ -284,13 +303,21 @@ pub struct Report {
     pub collisions: u32,
     /// Whether the robot reached the kitchen door.
     pub reached_door: bool,
-    /// The longest gap between two delivered samples while the sensor stayed on, ms.
+    /// Per obstacle, in order: the sensor whose recorded reading detected it, or `None`.
+    pub detected_by: Vec<Option<String>>,
+    /// The longest gap between two delivered samples while the sensor stayed on, ms (from
+    /// the flight recording).
     pub sample_gap_max_ms: BTreeMap<String, Option<f64>>,
+    /// The longest gap between two of the sonar's triggers while it stayed on, ms (from the
+    /// pin).
+    pub trigger_gap_max_ms: Option<f64>,
     /// The worst reaction measured per sensor, from the pin edge that showed the obstacle to
     /// the motors stopping, cycles at 125 MHz.
     pub reactions_cycles: BTreeMap<String, Option<u64>>,
     /// The response-time bound per sensor, cycles at 125 MHz.
     pub bound_cycles: BTreeMap<String, Option<u64>>,
+    /// Where the bounds' costs come from: `"budget"` (`boards/pico/bench-budget.json`).
+    pub bound_source: String,
     /// `psmpa-sim run --arch psmpa` of the same scenario (none for a fault scenario).
     pub host: Option<HostOutcome>,
     /// How the firmware said its task ended (its log's last word on it), if it did.
@@ -303,8 +330,12 @@ pub struct Report {
     pub wall_s: f64,
     /// The sensing side's cycles per delivered sample (all of its activations, mean).
     pub sensing_cycles_per_sample: Option<u64>,
-    /// The step costs measured, cycles.
+    /// The step costs measured, cycles (the deciding step without the scenario's declared
+    /// planning).
     pub costs: bound::Costs,
+    /// The firmware's own health block at the end (`PSMPA_HEALTH`): a diagnostic, which no
+    /// check reads.
+    pub health_diagnostic: BTreeMap<String, world::Health>,
     /// The stack's high-water mark at the end, bytes (after a reset: the new boot's).
     pub stack_bytes: u64,
     /// Hash of every pin edge, duty and input level with its instant.
@@ -449,15 +480,20 @@ impl PinLog {
     }
 }
 
-/// Plays `play` on the image of `fw`; `out` is where its files go.
-fn play(fw: &Firmware, play: &Play, out: &Path) -> Result<(Report, PinLog), String> {
+/// Plays `play` on the image of `fw`, judged by `budget`; `out` is where its files go.
+fn play(
+    fw: &Firmware,
+    play: &Play,
+    budget: &Budget,
+    out: &Path,
+) -> Result<(Report, PinLog), String> {
     let sc = &play.scenario;
     let settings = settings_for(sc);
     let image = out.join(format!("{}.bin", play.stem()));
     std::fs::write(&image, fw.image(&settings)).map_err(|e| format!("{}: {e}", image.display()))?;
-    let inputs: BTreeMap<u8, u8> = BenchWorld::initial_inputs()
+    let inputs: BTreeMap<u8, Option<u8>> = BenchWorld::initial_inputs()
         .iter()
-        .map(|&(p, l)| (p, u8::from(l)))
+        .map(|&(p, l)| (p, l.map(u8::from)))
         .collect();
     let boot = Boot {
         flash: image,
@@ -473,6 +509,7 @@ fn play(fw: &Firmware, play: &Play, out: &Path) -> Result<(Report, PinLog), Stri
         ],
         pwm: vec![pin::LEFT[2], pin::RIGHT[2]],
         inputs,
+        seed: sc.seed.to_string(),
     };
     let mut harness = Harness::start(&boot)?;
     let table = defmt_decoder::Table::parse(&fw.elf)
@@ -481,7 +518,7 @@ fn play(fw: &Firmware, play: &Play, out: &Path) -> Result<(Report, PinLog), Stri
     let wall = WallClock::now();
     let limit = Duration::from_millis(sc.max_ms) + Duration::from_secs(2);
     let run = psmpa_sim::backend::simulate(
-        co_simulate(fw, play, &settings, &mut harness, &table),
+        co_simulate(fw, play, &settings, budget, &mut harness, &table),
         limit,
     )
     .map_err(|e| format!("{}: {e}", play.name()))?
@@ -538,17 +575,29 @@ struct Collected {
     log: Vec<LogLine>,
     resets: Vec<u64>,
     pins: PinLog,
+    /// The chip's flight recording, read as it comes.
+    chip: chip::ChipRecording,
+    /// Why the recording could not be read, if it could not.
+    chip_error: Option<String>,
+    /// The emulator's warnings: what, where, when.
+    warnings: Vec<(String, u32, u64)>,
+    /// The firmware's health block, last read (a diagnostic).
+    health: Vec<u32>,
     /// When the firmware said how its task ended (or that it was reset), ns.
     done: Option<u64>,
     /// What it said.
     ending: Option<String>,
-    /// When a fault struck: the injection, the sensor's failure, ns.
+    /// When the bench injected a fault through a test point, ns.
+    injected: Option<u64>,
+    /// Whether the motors drove when it did.
+    drove_at_injection: bool,
+    /// When a fault struck: the injection, the sensor's recorded failure, a reset, ns.
     struck: Option<u64>,
     /// The motors started to drive after the fault struck, ns.
     drove_after: Option<u64>,
     /// Whether the motors drove at the last motor event.
     driving: bool,
-    /// After a panic's injection: when the motors went off, and when the log first spoke.
+    /// After a fault struck: when the motors went off, and when the log first spoke.
     off_at: Option<u64>,
     spoke_at: Option<u64>,
 }
@@ -557,13 +606,20 @@ async fn co_simulate(
     fw: &Firmware,
     play: &Play,
     settings: &Settings,
+    budget: &Budget,
     harness: &mut Harness,
     table: &defmt_decoder::Table,
 ) -> Result<(Report, PinLog, Vec<ObstacleReport>), String> {
     let sc = &play.scenario;
     let fault = play.fault.as_ref().map(|f| f.fault);
     let walk = settings.walk_permille.unsigned_abs();
-    let mut bw = BenchWorld::new(sc, walk, fw.ids, pin_fault(fault.as_ref()));
+    let mut bw = BenchWorld::new(
+        sc,
+        walk,
+        fw.ids,
+        pin_fault(fault.as_ref()),
+        budget.tolerance_mm(),
+    );
     let mut decoder = table.new_stream_decoder();
     let mut c = Collected::default();
     let end_ns = sc.max_ms.saturating_mul(1_000_000);
@@ -572,7 +628,8 @@ async fn co_simulate(
     let mut now = 0u64;
     let send = |harness: &mut Harness, pins: &mut PinLog, sets: Vec<world::Set>| {
         for (p, level, at) in sets {
-            pins.push(at, format!("in{p}"), i64::from(level));
+            // 2: open.
+            pins.push(at, format!("in{p}"), level.map_or(2, i64::from));
             harness.set(p, level, at)?;
         }
         Ok::<(), String>(())
@@ -608,24 +665,37 @@ async fn co_simulate(
                     send(harness, &mut c.pins, sets)?;
                     motors(&bw, &mut c, ns);
                 }
-                Event::Health { words, ns } => {
-                    clock_to(ns).await;
-                    let failed = (0..2).any(|i| world::Health::of(&words, fw.ids[i]).failed > 0);
-                    if failed && c.struck.is_none() && fault.is_some() {
-                        c.struck = Some(ns);
-                    }
-                    let sets = bw.health_report(&words, ns);
-                    send(harness, &mut c.pins, sets)?;
-                }
+                Event::Health { words, .. } => c.health = words,
                 Event::Rtt { data, ns } => {
                     c.spoke_at.get_or_insert(ns);
+                    clock_to(ns).await;
+                    let first = c.log.len();
                     decode(&mut *decoder, &data, ns, &mut c)?;
+                    for i in first..c.log.len() {
+                        let frames = match c.chip.line(&c.log[i].text) {
+                            Ok(f) => f,
+                            Err(e) => {
+                                c.chip_error.get_or_insert(e);
+                                continue;
+                            }
+                        };
+                        for (at, frame) in frames {
+                            let sets = bw.recorded(at, &frame, ns);
+                            send(harness, &mut c.pins, sets)?;
+                        }
+                    }
+                    if fault.is_some()
+                        && let Some(t) = bw.sensor_failed
+                    {
+                        c.struck.get_or_insert(t);
+                    }
                 }
                 Event::Reset { ns, .. } => {
                     c.resets.push(ns);
                     c.pins.push(ns, "reset", 0);
                     c.struck.get_or_insert(ns);
                 }
+                Event::Warning { message, pc, ns } => c.warnings.push((message, pc, ns)),
                 Event::At { ns } => now = ns,
                 Event::Error { message } => return Err(message),
             }
@@ -637,15 +707,18 @@ async fn co_simulate(
         if let Some(f) = inject.filter(|f| !injected && now >= f.at_ns()) {
             harness.inject(f.name())?;
             injected = true;
+            c.injected = Some(now);
+            c.drove_at_injection = bw.driving();
             c.struck = Some(now);
+            c.off_at = None;
             c.spoke_at = None;
             c.pins.push(now, format!("inject-{}", f.name()), 0);
         }
     }
-    bw.finish();
+    bw.finish(now);
     let stats = harness.stats()?;
     let stack = harness.stack(fw.stack.0, fw.stack.1)?;
-    let (mut report, mut pins) = report(fw, play, &bw, c, &stats, now);
+    let (mut report, mut pins) = report(fw, play, budget, &bw, c, &stats, now);
     report.stack_bytes = stack;
     let obstacles = bw.world().obstacles().to_vec();
     pins.world = bw.into_events();
@@ -709,10 +782,45 @@ fn decode(
     }
 }
 
+/// What each check judges from, for the report: none reads the world's truth of what the
+/// robot sensed, nor memory the firmware writes for a debugger.
+pub const JUDGED_FROM: &[(&str, &str)] = &[
+    (
+        "readings",
+        "the flight recording's samples against the echoes and switch closures the rig put on the pins",
+    ),
+    (
+        "detections",
+        "the flight recording's samples (which sensor read the obstacle) and the motor pins",
+    ),
+    (
+        "reactions",
+        "pin edges: an echo's fall or the bump switch settling, to the motor pins stopping",
+    ),
+    (
+        "bounds",
+        "the committed cost budget (boards/pico/bench-budget.json), never this run's costs",
+    ),
+    (
+        "costs",
+        "the emulator's cycle counts of handlers, thread mode and spinlock 31, against the budget",
+    ),
+    (
+        "sampling",
+        "the sonar's trigger pin and the recording's samples, between its own SensorOn and SensorOff",
+    ),
+    (
+        "chip",
+        "rp2040js's warnings: an access silicon would fault on",
+    ),
+    ("faults", "the motor pins, the watchdog's resets, the log"),
+];
+
 /// The run's report and its checks.
 fn report(
     fw: &Firmware,
     play: &Play,
+    budget: &Budget,
     bw: &BenchWorld,
     c: Collected,
     stats: &Stats,
@@ -722,15 +830,21 @@ fn report(
     let tally: Tally = bw.world().tally();
     let names = ["sonar", "bumper"];
     let mut failures = Vec::new();
-    let costs = bound::Costs::of(stats);
+    let plan = bound::cycles_of_us(u64::from(sc.plan_us));
+    let mut costs = bound::Costs::of(stats);
+    costs.deciding = costs.deciding.saturating_sub(plan);
+    for over in costs.over(&budget.budget) {
+        failures.push(format!("costs: {over}"));
+    }
     let periods = [sc.sonar.period_ms, sc.bumper_period_ms];
-    let bounds = bound::bounds(&costs, periods);
+    let bounds = bound::bounds(&budget.budget.with_plan(plan), periods);
+    let ms = |ns: u64| ns as f64 / 1e6;
     let mut sample_gap_max_ms = BTreeMap::new();
     let mut reactions_cycles = BTreeMap::new();
     let mut bound_cycles = BTreeMap::new();
     for (i, name) in names.iter().enumerate() {
-        let h = bw.health(i);
-        let gap = (h.delivered >= 2 && h.max_gap_us > 0).then(|| f64::from(h.max_gap_us) / 1e3);
+        let sampled = &bw.sampled[i];
+        let gap = sampled.max_gap(&sampled.samples).map(ms);
         sample_gap_max_ms.insert((*name).to_owned(), gap);
         let r = bw.reactions[i].worst_cycles;
         reactions_cycles.insert((*name).to_owned(), r);
@@ -740,42 +854,77 @@ fn report(
             && r > b
         {
             failures.push(format!(
-                "a {name} reaction of {r} cycles exceeds its bound of {b} cycles"
+                "reactions: a {name} reaction of {r} cycles exceeds its bound of {b} cycles"
             ));
         }
     }
     if let Err(e) = &bounds {
-        failures.push(format!("no response-time bound: {e}"));
+        failures.push(format!("bounds: no response-time bound: {e}"));
     }
-    // Nothing the deciding side does holds a sample up: the bumper, never lost, samples within
-    // its period, plus a debounce time for a read that saw its level change (and a tick of
-    // scheduling). A walk that computes for 50 ms (`replan`) must not stretch it.
-    let bumper_max_ms = (sc.bumper_period_ms + DEBOUNCE.as_millis() + 1) as f64;
-    if play.fault.is_none()
-        && let Some(Some(gap)) = sample_gap_max_ms.get("bumper")
-        && *gap > bumper_max_ms
-    {
-        failures.push(format!(
-            "the bumper's samples lay {gap:.3} ms apart, more than its period and a debounce ({bumper_max_ms} ms)"
-        ));
+    let trigger_gap = bw.sampled[0].max_gap(&bw.triggers).map(ms);
+    if play.fault.is_none() {
+        // Nothing the deciding side does holds a sample up: the sonar triggers on its period
+        // (and a millisecond of scheduling); the bumper, never lost, delivers within its
+        // period, plus a debounce time for a read that saw its level change (and a tick). A
+        // walk that computes for 50 ms (`replan`) must not stretch either.
+        let sonar_max = (sc.sonar.period_ms + 1) as f64;
+        if let Some(gap) = trigger_gap.filter(|g| *g > sonar_max) {
+            failures.push(format!(
+                "sampling: the sonar's triggers lay {gap:.3} ms apart, more than its period and a millisecond ({sonar_max} ms)"
+            ));
+        }
+        let bumper_max = (sc.bumper_period_ms + DEBOUNCE.as_millis() + 1) as f64;
+        if let Some(Some(gap)) = sample_gap_max_ms.get("bumper")
+            && *gap > bumper_max
+        {
+            failures.push(format!(
+                "sampling: the bumper's samples lay {gap:.3} ms apart, more than its period and a debounce ({bumper_max} ms)"
+            ));
+        }
+    }
+    for m in &bw.misreads {
+        failures.push(format!("readings: {m}"));
     }
     for (i, edge) in &bw.unanswered {
         failures.push(format!(
-            "the robot drove on after its {} showed an obstacle at {:.3} s",
+            "reactions: the robot drove on after its {} showed an obstacle at {:.3} s",
             names.get(*i).unwrap_or(&"?"),
             *edge as f64 / 1e9
         ));
     }
+    for (message, pc, ns) in &c.warnings {
+        failures.push(format!(
+            "chip: rp2040js: {message} at PC {pc:#010x}, {:.6} s",
+            *ns as f64 / 1e9
+        ));
+    }
+    if let Some(e) = &c.chip_error {
+        failures.push(format!("flight recording: it does not read: {e}"));
+    }
     if let Some(f) = &play.fault {
         expectations(&f.expect, &tally, &c, &sample_gap_max_ms, &mut failures);
     } else if c.done.is_none() {
-        failures.push("the firmware never said how its task ended".to_owned());
+        failures.push("mission: the firmware never said how its task ended".to_owned());
     }
-    let delivered: u64 = (0..4).map(|i| u64::from(bw.health(i).delivered)).sum();
+    let delivered: u64 = bw.sampled.iter().map(|s| s.samples.len() as u64).sum();
     let sensing = stats
         .handlers
         .get(&bound::EXC_SENSING)
         .map_or(0, |h| h.total);
+    let health_diagnostic = ["sonar", "bumper", "camera", "handle"]
+        .iter()
+        .zip(fw.ids)
+        .map(|(name, id)| ((*name).to_owned(), world::Health::of(&c.health, id)))
+        .collect();
+    let detected_by = bw
+        .world()
+        .obstacles()
+        .iter()
+        .map(|o| match o.fate {
+            Fate::Detected(d) => Some(d.name().to_owned()),
+            _ => None,
+        })
+        .collect();
     let report = Report {
         scenario: sc.name.as_str().to_owned(),
         file: play.file.display().to_string(),
@@ -784,9 +933,12 @@ fn report(
         detected: tally.detected,
         collisions: tally.collisions,
         reached_door: tally.reached_door,
+        detected_by,
         sample_gap_max_ms,
+        trigger_gap_max_ms: trigger_gap,
         reactions_cycles,
         bound_cycles,
+        bound_source: "budget".to_owned(),
         host: None,
         mission: c.ending.clone(),
         watchdog_resets: c.resets.len() as u32,
@@ -794,6 +946,7 @@ fn report(
         wall_s: 0.0,
         sensing_cycles_per_sample: sensing.checked_div(delivered),
         costs,
+        health_diagnostic,
         stack_bytes: 0,
         pin_log_hash: format!("{:016x}", c.pins.hash()),
         failures,
@@ -801,7 +954,6 @@ fn report(
         recording: None,
         log: c.log,
     };
-    let _ = fw;
     (report, c.pins)
 }
 
@@ -815,7 +967,7 @@ fn report(
 fn compare_with_host(sc: &Scenario, r: &mut Report, pins: &PinLog, bench: &[ObstacleReport]) {
     let s = match run_summary(sc, Arch::PSmpa) {
         Ok(s) => s,
-        Err(e) => return r.failures.push(format!("psmpa-sim: {e}")),
+        Err(e) => return r.failures.push(format!("mission: psmpa-sim: {e}")),
     };
     r.host = Some(HostOutcome {
         detected: s.tally.detected,
@@ -838,7 +990,7 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, pins: &PinLog, bench: &[Obst
                 "{what}: the HC-SR04's driver cannot tell this sonar fault from a free path, the NAO's can"
             ));
         } else {
-            r.failures.push(what);
+            r.failures.push(format!("mission: {what}"));
         }
     }
     for (i, (host, bench)) in s.obstacles.iter().zip(bench).enumerate() {
@@ -847,11 +999,16 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, pins: &PinLog, bench: &[Obst
             psmpa_sim::scenario::Kind::Ball => "ball",
         });
         match (host.fate, bench.fate) {
-            (Fate::Collided, Fate::Collided)
-            | (Fate::Detected(_), Fate::Detected(_))
-            | (Fate::Unmet, Fate::Unmet) => {}
+            (Fate::Collided, Fate::Collided) | (Fate::Unmet, Fate::Unmet) => {}
+            (Fate::Detected(h), Fate::Detected(b)) if h == b => {}
+            (Fate::Detected(h), Fate::Detected(b)) => r.failures.push(format!(
+                "detections: #{} {kind}: psmpa-sim's robot detected it with its {}, the bench's with its {}",
+                i + 1,
+                h.name(),
+                b.name()
+            )),
             (_, Fate::Collided) => r.failures.push(format!(
-                "#{} {kind}: a collision on the bench, psmpa-sim's robot {}",
+                "detections: #{} {kind}: a collision on the bench, psmpa-sim's robot {}",
                 i + 1,
                 fate(host.fate)
             )),
@@ -862,7 +1019,7 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, pins: &PinLog, bench: &[Obst
             )),
             (host_fate, bench_fate) => {
                 let what = format!(
-                    "#{} {kind}: psmpa-sim's robot {}, the bench's {}",
+                    "detections: #{} {kind}: psmpa-sim's robot {}, the bench's {}",
                     i + 1,
                     fate(host_fate),
                     fate(bench_fate)
@@ -924,7 +1081,7 @@ fn expectations(
 ) {
     let mut check = |ok: bool, what: String| {
         if !ok {
-            failures.push(what);
+            failures.push(format!("faults: {what}"));
         }
     };
     if let Some(want) = e.reached_door {
@@ -944,6 +1101,44 @@ fn expectations(
             c.resets.len() as u32 == want,
             format!("expected {want} watchdog resets, got {}", c.resets.len()),
         );
+    }
+    // A reset before the fault was not the fault's.
+    if let (Some(at), Some(first)) = (c.injected, c.resets.first()) {
+        check(
+            *first >= at,
+            format!(
+                "the watchdog reset the board at {:.3} s, before the fault at {:.3} s",
+                *first as f64 / 1e9,
+                at as f64 / 1e9
+            ),
+        );
+    }
+    if let Some(within) = e.stops_within_ms {
+        match c.injected {
+            None => check(
+                false,
+                "the fault was never injected: the run ended before it".to_owned(),
+            ),
+            Some(at) => {
+                check(
+                    c.drove_at_injection,
+                    format!(
+                        "the motors were not driving when the fault struck at {:.3} s: nothing to stop",
+                        at as f64 / 1e9
+                    ),
+                );
+                match c.off_at {
+                    Some(off) => check(
+                        off > at && off - at <= within * 1_000_000,
+                        format!(
+                            "the motors stopped {:.3} ms after the fault, not within {within} ms",
+                            (off as f64 - at as f64) / 1e6
+                        ),
+                    ),
+                    None => check(false, "the motors never stopped after the fault".to_owned()),
+                }
+            }
+        }
     }
     if e.still {
         check(c.struck.is_some(), "the fault never struck".to_owned());
@@ -985,33 +1180,80 @@ fn expectations(
 }
 
 /// The boards' README shows log lines of a bench run of `sonar-6`: each must be a line of this
-/// run's log (timestamps included), so that the README never shows lines written by hand.
+/// run's log, in the README's order, so that the README never shows lines written by hand.
+/// Lines are compared by level and words, numbers aside (timestamps, counts, instants): a
+/// microsecond's change does not fail it, a missing or reordered event does.
 fn readme_log(reports: &[(Report, PinLog)]) -> Vec<String> {
     let path = firmware::root().join("boards/README.md");
     let Ok(readme) = std::fs::read_to_string(&path) else {
         return vec![format!("{}: cannot read it", path.display())];
     };
-    let Some((_, block)) = readme.split_once("```text\n") else {
-        return vec![format!("{}: no log block", path.display())];
-    };
-    let block = block.split("```").next().unwrap_or("");
-    let Some((run, _)) = reports
+    let Some(run) = reports
         .iter()
         .find(|(r, _)| r.scenario == "sonar-6" && r.fault.is_none())
+        .map(|(r, _)| r)
     else {
         return vec!["no run of sonar-6 to check the boards' README against".to_owned()];
     };
     let lines: Vec<String> = run
         .log
         .iter()
-        .map(|l| format!("{} {:<5} {}", l.at, l.level, l.text))
+        .map(|l| format!("{} {}", l.level, l.text))
         .collect();
-    block
-        .lines()
-        .filter(|l| *l != "...")
-        .filter(|l| !lines.iter().any(|x| x == l))
-        .map(|l| format!("boards/README.md shows a log line this bench run did not write: {l}"))
+    log_block_in(&readme, &lines)
+        .into_iter()
+        .map(|l| {
+            format!("boards/README.md shows a log line this bench run did not write there: {l}")
+        })
         .collect()
+}
+
+/// The lines of `readme`'s log block that are not in `log` (`LEVEL text` lines) in the
+/// block's order, numbers aside; a block with no lines, or none, is one such line.
+fn log_block_in(readme: &str, log: &[String]) -> Vec<String> {
+    let Some((_, block)) = readme.split_once("```text\n") else {
+        return vec!["(no log block)".to_owned()];
+    };
+    let block = block.split("```").next().unwrap_or("");
+    let log: Vec<String> = log.iter().map(|l| words(l)).collect();
+    let mut from = 0;
+    let mut missing = Vec::new();
+    for line in block.lines().filter(|l| *l != "...") {
+        // The block's lines start with the firmware's timestamp.
+        let shown = words(line.split_once(' ').map_or(line, |(_, rest)| rest));
+        match log
+            .get(from..)
+            .and_then(|rest| rest.iter().position(|l| *l == shown))
+        {
+            Some(i) => from += i + 1,
+            None => missing.push(line.to_owned()),
+        }
+    }
+    if block.lines().all(|l| l == "...") {
+        missing.push("(an empty log block)".to_owned());
+    }
+    missing
+}
+
+/// A log line with each number as `#` and runs of spaces as one.
+fn words(line: &str) -> String {
+    let mut out = String::new();
+    let mut number = false;
+    for ch in line.chars() {
+        if ch.is_ascii_digit() || (number && ch == '.') {
+            if !number {
+                out.push('#');
+            }
+            number = true;
+            continue;
+        }
+        number = false;
+        if ch == ' ' && out.ends_with(' ') {
+            continue;
+        }
+        out.push(ch);
+    }
+    out.trim().to_owned()
 }
 
 /// One run's report and pin log, or why it could not run.
@@ -1024,27 +1266,9 @@ pub fn stack_high_water() -> Option<u64> {
     serde_json::from_slice::<serde_json::Value>(&text).ok()?["stack_bytes"].as_u64()
 }
 
-/// `cargo xtask hil [FILE ...] [--json]`.
-pub fn run(files: &[PathBuf], json: bool) -> Ending {
-    let (plays, defaults) = match plays(files) {
-        Ok(p) => p,
-        Err(e) => return Ending::BadInput(e),
-    };
-    if let Err(e) = harness::check_tools() {
-        return Ending::Failed(e);
-    }
-    eprintln!("xtask hil: building the Pico's image (boards/pico; a few minutes the first time)");
-    let fw = match build().and_then(|elf| Firmware::read(&elf)) {
-        Ok(fw) => fw,
-        Err(e) => return Ending::Failed(e),
-    };
-    let out = firmware::root().join("target/hil");
-    if let Err(e) = std::fs::create_dir_all(&out) {
-        return Ending::Failed(format!("{}: {e}", out.display()));
-    }
-    let wall = WallClock::now();
-    // Two at a time: each run is one Node process and one thread here.
-    // Two at a time: each run is one Node process and one thread here.
+/// Plays every one of `plays` on `fw`, two at a time (each run is one Node process and one
+/// thread here); the results in their order.
+fn play_all(fw: &Firmware, plays: &[Play], budget: &Budget, out: &Path) -> Vec<Played> {
     let next = std::sync::atomic::AtomicUsize::new(0);
     let slots: Vec<std::sync::Mutex<Option<Played>>> =
         plays.iter().map(|_| std::sync::Mutex::new(None)).collect();
@@ -1056,7 +1280,7 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
                     let (Some(p), Some(slot)) = (plays.get(i), slots.get(i)) else {
                         break;
                     };
-                    let result = play(&fw, p, &out);
+                    let result = play(fw, p, budget, out);
                     if let Ok(mut slot) = slot.lock() {
                         *slot = Some(result);
                     }
@@ -1064,7 +1288,7 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
             });
         }
     });
-    let results: Vec<Played> = slots
+    slots
         .into_iter()
         .map(|m| {
             m.into_inner()
@@ -1072,12 +1296,70 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
                 .flatten()
                 .unwrap_or_else(|| Err("a run did not finish".to_owned()))
         })
-        .collect();
+        .collect()
+}
+
+/// The budget a calibration plays with: the committed one (its reading tolerance), or one of
+/// typical costs when there is none. Its cost and bound checks are set aside
+/// ([`calibrating`]): the costs are what is being measured.
+fn provisional_budget() -> Budget {
+    Budget::load().unwrap_or_else(|_| {
+        Budget::of(bound::Costs {
+            sensing_poll: 15_000,
+            alarm: 500,
+            gpio: 1_000,
+            deciding: 80_000,
+            critical: 18_000,
+        })
+    })
+}
+
+/// Whether a failure is one a calibration sets aside: a cost over the old budget, or a bound
+/// computed from it.
+fn calibrating(failure: &str) -> bool {
+    failure.starts_with("costs:")
+        || failure.starts_with("bounds:")
+        || failure.contains("exceeds its bound")
+}
+
+/// `cargo xtask hil [FILE ...] [--json] [--calibrate | --mutants]`.
+pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
+    if mode == Mode::Mutants {
+        return mutants::run(json);
+    }
+    let (plays, defaults) = match plays(files) {
+        Ok(p) => p,
+        Err(e) => return Ending::BadInput(e),
+    };
+    if let Err(e) = harness::check_tools() {
+        return Ending::Failed(e);
+    }
+    let budget = match mode {
+        Mode::Calibrate => provisional_budget(),
+        _ => match Budget::load() {
+            Ok(b) => b,
+            Err(e) => return Ending::Failed(e),
+        },
+    };
+    eprintln!("xtask hil: building the Pico's image (boards/pico; a few minutes the first time)");
+    let fw = match build().and_then(|elf| Firmware::read(&elf)) {
+        Ok(fw) => fw,
+        Err(e) => return Ending::Failed(e),
+    };
+    let out = firmware::root().join("target/hil");
+    if let Err(e) = std::fs::create_dir_all(&out) {
+        return Ending::Failed(format!("{}: {e}", out.display()));
+    }
+    let wall = WallClock::now();
+    let results = play_all(&fw, &plays, &budget, &out);
     let mut failed = Vec::new();
     let mut reports = Vec::new();
     for (p, result) in plays.iter().zip(results) {
         match result {
             Ok((mut report, pins)) => {
+                if mode == Mode::Calibrate {
+                    report.failures.retain(|f| !calibrating(f));
+                }
                 check_recording(&mut report, &p.stem());
                 if !report.failures.is_empty() {
                     failed.push(p.name());
@@ -1106,7 +1388,7 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
     }
     // The same scenario, the same pin log: the first one again.
     if defaults && let (Some(p), Some((first, _))) = (plays.first(), reports.first()) {
-        match play(&fw, p, &out) {
+        match play(&fw, p, &budget, &out) {
             Ok((again, _)) if again.pin_log_hash == first.pin_log_hash => {
                 if !json {
                     println!(
@@ -1134,6 +1416,10 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
         }
     }
     if !json {
+        println!("\nwhat each check judges from:");
+        for (check, from) in JUDGED_FROM {
+            println!("  {check:<10} {from}");
+        }
         let emulated: f64 = reports.iter().map(|(r, _)| r.emulated_s).sum();
         println!(
             "\n{} runs, {:.1} s emulated in {:.1} s ({:.1} emulated s a wall s, two at a time); pictures in {}",
@@ -1144,10 +1430,81 @@ pub fn run(files: &[PathBuf], json: bool) -> Ending {
             out.display()
         );
     }
-    if failed.is_empty() {
-        Ending::Passed
-    } else {
-        Ending::Failed(format!("the bench's checks failed: {}", failed.join(", ")))
+    if !failed.is_empty() {
+        let what = if mode == Mode::Calibrate {
+            "not calibrated: the bench's checks failed"
+        } else {
+            "the bench's checks failed"
+        };
+        return Ending::Failed(format!("{what}: {}", failed.join(", ")));
+    }
+    if mode == Mode::Calibrate {
+        let measured = reports
+            .iter()
+            .map(|(r, _)| r.costs)
+            .fold(bound::Costs::default(), bound::Costs::max);
+        // The new budget must bound every reaction the calibration measured.
+        let new = Budget::of(measured);
+        for ((r, _), p) in reports.iter().zip(&plays) {
+            let sc = &p.scenario;
+            let plan = bound::cycles_of_us(u64::from(sc.plan_us));
+            let periods = [sc.sonar.period_ms, sc.bumper_period_ms];
+            let bounds = match bound::bounds(&new.budget.with_plan(plan), periods) {
+                Ok(b) => b,
+                Err(e) => {
+                    return Ending::Failed(format!(
+                        "{}: no bound from the new budget: {e}",
+                        p.name()
+                    ));
+                }
+            };
+            for (i, name) in ["sonar", "bumper"].iter().enumerate() {
+                if let Some(Some(c)) = r.reactions_cycles.get(*name)
+                    && *c > bounds[i]
+                {
+                    return Ending::Failed(format!(
+                        "{}: a {name} reaction of {c} cycles exceeds the new budget's bound of {} cycles",
+                        p.name(),
+                        bounds[i]
+                    ));
+                }
+            }
+        }
+        return calibrate(measured, reports.len());
+    }
+    Ending::Passed
+}
+
+/// Writes the budget of `measured` (the worst costs of `runs` runs) and prints it beside the
+/// committed one.
+fn calibrate(measured: bound::Costs, runs: usize) -> Ending {
+    let new = Budget::of(measured);
+    let old = Budget::load().ok();
+    println!(
+        "\ncost budget of the Pico's image, cycles at 125 MHz (worst of {runs} runs, +{} %):",
+        new.margin_percent
+    );
+    println!(
+        "  {:<13} {:>12} {:>12} {:>12} {:>12}",
+        "cost", "old measured", "old budget", "measured", "budget"
+    );
+    for (i, (name, m)) in new.measured.named().iter().enumerate() {
+        let o = |c: Option<bound::Costs>| c.map_or("-".to_owned(), |c| c.named()[i].1.to_string());
+        println!(
+            "  {name:<13} {:>12} {:>12} {m:>12} {:>12}",
+            o(old.as_ref().map(|b| b.measured)),
+            o(old.as_ref().map(|b| b.budget)),
+            new.budget.named()[i].1
+        );
+    }
+    let path = Budget::path();
+    let text = serde_json::to_string_pretty(&new).unwrap_or_default() + "\n";
+    match std::fs::write(&path, text) {
+        Ok(()) => {
+            println!("written to {}", path.display());
+            Ending::Passed
+        }
+        Err(e) => Ending::Failed(format!("{}: {e}", path.display())),
     }
 }
 
@@ -1222,6 +1579,14 @@ fn text(r: &Report) -> String {
         "  detected {} of {}, collisions {}, reached the door {}{host}; watchdog resets {}",
         r.detected, r.interferences, r.collisions, r.reached_door, r.watchdog_resets
     );
+    if !r.detected_by.is_empty() {
+        let by: Vec<&str> = r
+            .detected_by
+            .iter()
+            .map(|d| d.as_deref().unwrap_or("-"))
+            .collect();
+        let _ = writeln!(s, "  detected by (obstacle by obstacle): {}", by.join(", "));
+    }
     let _ = writeln!(
         s,
         "  mission: {}",
@@ -1229,13 +1594,16 @@ fn text(r: &Report) -> String {
             .as_deref()
             .unwrap_or("the firmware never said how it ended")
     );
+    if let Some(g) = r.trigger_gap_max_ms {
+        let _ = writeln!(s, "  sonar : longest gap between triggers {g:.3} ms");
+    }
     for name in ["sonar", "bumper"] {
         let gap = r.sample_gap_max_ms.get(name).copied().flatten();
         let re = r.reactions_cycles.get(name).copied().flatten();
         let b = r.bound_cycles.get(name).copied().flatten();
         let _ = writeln!(
             s,
-            "  {name:<6}: longest sample gap {}, worst reaction {} (bound {})",
+            "  {name:<6}: longest sample gap {}, worst reaction {} (bound {}, from the budget)",
             gap.map_or("-".to_owned(), |g| format!("{g:.3} ms")),
             re.map_or("-".to_owned(), |c| format!("{c} cycles")),
             b.map_or("-".to_owned(), |c| format!("{c} cycles")),
@@ -1297,12 +1665,64 @@ mod tests {
             ),
         ];
         for (file, says) in cases {
-            match run(std::slice::from_ref(&file), true) {
+            match run(std::slice::from_ref(&file), true, Mode::Check) {
                 Ending::BadInput(e) => assert!(e.contains(says), "{}: {e}", file.display()),
                 _ => panic!("{} was not refused as bad input", file.display()),
             }
         }
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_readme_log_block_is_checked_for_events_and_order_not_numbers() {
+        let readme = "x\n```text\n0.003 INFO  go to door started\n...\n27.2 INFO  sonar off: 274 samples\n```\n";
+        let log = |lines: &[&str]| lines.iter().map(|l| (*l).to_owned()).collect::<Vec<_>>();
+        // Other instants and counts: the same events.
+        let moved = log(&["INFO go to door started", "INFO sonar off: 275 samples"]);
+        assert!(log_block_in(readme, &moved).is_empty());
+        // An event missing, or in another order, is not.
+        let missing = log(&["INFO go to door started"]);
+        assert_eq!(
+            log_block_in(readme, &missing),
+            ["27.2 INFO  sonar off: 274 samples"]
+        );
+        let swapped = log(&["INFO sonar off: 1 samples", "INFO go to door started"]);
+        assert_eq!(log_block_in(readme, &swapped).len(), 1);
+        assert_eq!(log_block_in("no block", &moved), ["(no log block)"]);
+        assert_eq!(words("a  12.5 mm,  3"), "a # mm, #");
+    }
+
+    #[test]
+    fn a_budget_is_its_measured_costs_with_the_margin() {
+        let measured = bound::Costs {
+            sensing_poll: 100,
+            alarm: 3,
+            gpio: 0,
+            deciding: 1_000,
+            critical: 10,
+        };
+        let b = Budget::of(measured);
+        assert_eq!(b.budget.sensing_poll, 125);
+        // Rounded up.
+        assert_eq!(b.budget.alarm, 4);
+        assert!(b.check().is_ok());
+        let mut edited = b.clone();
+        edited.budget.deciding += 1;
+        assert!(edited.check().unwrap_err().contains("--calibrate"));
+        let over = bound::Costs {
+            deciding: 1_251,
+            ..measured
+        }
+        .over(&b.budget);
+        assert_eq!(
+            over,
+            ["the deciding cost of 1251 cycles exceeds its budget of 1250 cycles"]
+        );
+        // Declared planning time is the scenario's, added to the step.
+        assert_eq!(
+            b.budget.with_plan(bound::cycles_of_us(1_000)).deciding,
+            1_250 + 125_000
+        );
     }
 
     #[test]

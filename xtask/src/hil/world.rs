@@ -1,5 +1,6 @@
 //! The project's world on the bench's pins: psmpa-sim's [`World`] of a scenario, moved by the
-//! firmware's motor pins and answering its sensors through their pins.
+//! firmware's motor pins and answering its sensors through their pins, and judged only from
+//! what a test rig sees: those pins and the chip's own flight recording ([`super::chip`]).
 //!
 //! * **Motors.** Each wheel turns at its PWM duty while STBY is high and its direction pins
 //!   say forward (IN1 high, IN2 low); a brake (both high), a coast (both low), reverse or
@@ -7,20 +8,26 @@
 //!   robot's settings moves it at the scenario's `speed_mps` (the speed the robot is
 //!   calibrated to), a smaller duty proportionally slower, a larger one no faster. The world
 //!   is one straight line and the robot has no inertia: it stops when the wheels do.
-//! * **Sonar** (HC-SR04 on GP2/GP3). On the trigger's falling edge the module reads the world
-//!   ([`World::sonar_start`]) and raises its echo 250 µs later for as long as sound takes to
-//!   the obstacle and back (5.83 µs a millimetre); nothing in range is the module's own 38 ms
+//! * **Sonar** (HC-SR04 on GP2/GP3, a driven output). On the trigger's falling edge the
+//!   module reads the world ([`World::sonar_start`]) and raises its echo 250 µs later for as
+//!   long as sound takes to the obstacle and back (5.83 µs a millimetre); nothing in range is the module's own 38 ms
 //!   pulse; a lost reading (dropout, a silent sonar) no pulse at all.
-//! * **Bumper** (GP4, pulled up, low when pressed) closes when the world's bumper would feel
-//!   an obstacle (a touch of the scenario's minimum contact), and bounces: 1 to 3 bounces of
-//!   50 to 400 µs before it settles, from a generator seeded with the scenario's seed.
-//! * **Marker** (GP5, low when seen) while the robot stands at the kitchen door; **handle**
-//!   limit switch (GP6, low when pressed, with bounce) while it stands there and the door is
-//!   not locked.
-//! * **What the robot sensed.** The firmware's health block says when a sample was delivered
-//!   and what it read: the world counts a detection from the robot's own reading (an echo the
-//!   firmware measured below the threshold, a bumper sample that felt contact), as psmpa-sim
-//!   does from its robot's.
+//! * **Switches** (the bumper on GP4, the handle's limit switch on GP6) close to ground when
+//!   pressed and are open otherwise: an open switch drives nothing, and the pin reads what
+//!   the chip's pad gives it (its pull-up, its pull-down, or a floating level: the harness).
+//!   The bumper closes when the world's bumper would feel an obstacle (a touch of the
+//!   scenario's minimum contact), and bounces: 1 to 3 bounces of 50 to 400 µs before it
+//!   settles, from a generator seeded with the scenario's seed. The **marker** (GP5, an open
+//!   collector) pulls low while the robot stands at the kitchen door; the handle's switch
+//!   closes there when the door is not locked.
+//! * **What the robot sensed** comes from its flight recording: the world registers an
+//!   obstacle from a sample the robot recorded (a sonar reading below the threshold, a bumper
+//!   read that found the switch closed), switches the world's sensors with the robot's own
+//!   `SensorOn`/`SensorOff`, and checks every reading against what the rig put on the pins
+//!   ([`BenchWorld::misreads`]): a reading the echo did not mean, a contact nothing made.
+//! * **Reactions** are timed from the rig's side: an echo that means an obstacle within the
+//!   threshold (by more than the reading's timing error), or the bump switch settling closed,
+//!   while the robot drives, must be followed by the motor pins stopping.
 //! * **Doors.** A robot that stops within 20 mm of the kitchen door (its dead reckoning's
 //!   error) is at the door. There, a drive of at least a second with the door closed pushes
 //!   it open (if the handle gave) and one with the door open enters the kitchen.
@@ -30,6 +37,10 @@
 //! person takes it away, and a run takes longer), and it has no planner on board (at a
 //! locked door it stops: the mission fails instead of taking the back door).
 
+use std::collections::VecDeque;
+
+use psmpa_core::Value;
+use psmpa_core::record::{Frame, Input};
 use psmpa_sim::scenario::{Scenario, to_mm};
 use psmpa_sim::world::{Device, Echo, Place, World, WorldEvent, WorldLog};
 
@@ -110,7 +121,7 @@ impl WorldLog for Events {
 }
 
 /// A sensor's health as the firmware reports it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Health {
     /// Switched on.
     pub on: bool,
@@ -158,8 +169,10 @@ enum Phase {
     AtDoor,
 }
 
-/// A scheduled input level.
-pub type Set = (u8, bool, u64);
+/// What the rig does to an input from an instant on: drives it low or high, or leaves it open
+/// (`None`: a switch that is open, a marker that sees nothing), so that it reads what the
+/// chip's pad gives it.
+pub type Set = (u8, Option<bool>, u64);
 
 /// A reaction the bench waits for: an edge that shows an obstacle while the robot drives.
 #[derive(Clone, Copy, Debug, Default)]
@@ -172,13 +185,62 @@ pub struct Reactions {
     pub count: u32,
 }
 
+/// An echo the rig sent for one trigger.
+#[derive(Clone, Copy, Debug)]
+struct Sent {
+    /// The trigger's fall, ns.
+    trigger_ns: u64,
+    /// The reading its width means, mm (the module's own pulse: the sonar's range); `None`:
+    /// no pulse.
+    mm: Option<u32>,
+    /// The world's read, until a recorded sample or loss delivers it.
+    echo: Option<Echo>,
+}
+
+/// The slots of the mission's sensors the bench knows: sonar, bumper, camera, handle.
+pub const SLOTS: usize = 4;
+
+/// What the robot's own recording says of one sensor: when it was on, when it sampled.
+#[derive(Clone, Debug, Default)]
+pub struct Sampled {
+    /// Switched on and off: (ns, on), in order.
+    pub power: Vec<(u64, bool)>,
+    /// Delivered samples, ns.
+    pub samples: Vec<u64>,
+}
+
+impl Sampled {
+    /// Whether the sensor was on at `ns` (by its last switch before).
+    pub fn on_at(&self, ns: u64) -> bool {
+        self.power
+            .iter()
+            .take_while(|(t, _)| *t <= ns)
+            .last()
+            .is_some_and(|(_, on)| *on)
+    }
+
+    /// The longest interval between two consecutive instants of `at` (sorted) that lie in one
+    /// stretch of the sensor being on, ns; `None` with fewer than two such instants.
+    pub fn max_gap(&self, at: &[u64]) -> Option<u64> {
+        let mut max = None;
+        for pair in at.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            let switched = self.power.iter().any(|(t, _)| *t > a && *t <= b);
+            if self.on_at(a) && !switched {
+                max = max.max(Some(b - a));
+            }
+        }
+        max
+    }
+}
+
 /// The world of one bench run.
 pub struct BenchWorld<'s> {
     world: World<'s, Events>,
     sc: &'s Scenario,
     walk_permille: u16,
     /// The mission's sensor ids of the sonar, the bumper, the camera and the handle.
-    ids: [usize; 4],
+    ids: [usize; SLOTS],
     stby: bool,
     dirs: [[bool; 2]; 2],
     duties: [u16; 2],
@@ -186,16 +248,21 @@ pub struct BenchWorld<'s> {
     speed: u16,
     phase: Phase,
     door_open: bool,
-    /// The sonar read in flight, from its trigger to its delivery.
-    echo: Option<Echo>,
-    /// When the pulse of the echo in flight ends, ns.
-    echo_end: Option<u64>,
-    /// The levels last set on the inputs.
-    levels: [bool; 8],
-    health: [Health; 4],
+    /// The last echoes sent, newest last.
+    sent: VecDeque<Sent>,
+    /// The fall of an echo that clearly means an obstacle, until the robot answers or the
+    /// reaction is pending.
+    watch: Option<u64>,
+    /// What the rig does to each input now.
+    levels: [Option<bool>; 8],
+    /// When the bump switch closed and opened: (ns, closed), in order.
+    bumper_closed: Vec<(u64, bool)>,
     rng: u64,
     fault: Option<PinFault>,
     stuck: bool,
+    /// How far a reading may lie from what its echo meant, mm: an edge the sensing side
+    /// serves late moves it.
+    tolerance_mm: u32,
     /// Sonar, bumper.
     pub reactions: [Reactions; 2],
     /// Edges that showed an obstacle to a driving robot that never stopped for them: sensor,
@@ -205,17 +272,31 @@ pub struct BenchWorld<'s> {
     pub inputs: Vec<Set>,
     /// When the robot stopped driving, ns (the last time).
     pub stopped_ns: Option<u64>,
+    /// What the recording says of each sensor.
+    pub sampled: [Sampled; SLOTS],
+    /// Readings that disagree with the pins: what the robot read, what the rig presented.
+    pub misreads: Vec<String>,
+    /// When the robot first recorded a sensor's failure, ns.
+    pub sensor_failed: Option<u64>,
+    /// The trigger's rising edges, ns.
+    pub triggers: Vec<u64>,
 }
 
 impl<'s> BenchWorld<'s> {
     /// The world of `sc` for a robot whose walking duty is `walk_permille`, with the mission's
-    /// sensor ids `ids` (sonar, bumper, camera, handle) and an optional fault on the pins.
+    /// sensor ids `ids` (sonar, bumper, camera, handle), an optional fault on the pins, and
+    /// the most a sonar reading may lie from its echo, mm.
     pub fn new(
         sc: &'s Scenario,
         walk_permille: u16,
-        ids: [usize; 4],
+        ids: [usize; SLOTS],
         fault: Option<PinFault>,
+        tolerance_mm: u32,
     ) -> Self {
+        let mut levels = [None; 8];
+        for (pin, level) in Self::initial_inputs() {
+            levels[usize::from(pin)] = level;
+        }
         Self {
             world: World::new(sc, Events::default()),
             sc,
@@ -228,38 +309,38 @@ impl<'s> BenchWorld<'s> {
             speed: 1000,
             phase: Phase::ToDoor,
             door_open: false,
-            echo: None,
-            echo_end: None,
-            levels: [false, false, false, false, true, true, true, false],
-            health: [Health::default(); 4],
+            sent: VecDeque::new(),
+            watch: None,
+            levels,
+            bumper_closed: Vec::new(),
             rng: sc.seed ^ 0x9E37_79B9_7F4A_7C15,
             fault,
             stuck: false,
+            tolerance_mm,
             reactions: [Reactions::default(); 2],
             unanswered: Vec::new(),
             inputs: Vec::new(),
             stopped_ns: None,
+            sampled: Default::default(),
+            misreads: Vec::new(),
+            sensor_failed: None,
+            triggers: Vec::new(),
         }
     }
 
-    /// The inputs' levels at reset: echo low, the switches and the marker released (high).
-    pub fn initial_inputs() -> [(u8, bool); 4] {
+    /// The inputs at reset: the echo driven low, the switches open, the marker seeing nothing.
+    pub fn initial_inputs() -> [(u8, Option<bool>); 4] {
         [
-            (pin::ECHO, false),
-            (pin::BUMPER, true),
-            (pin::MARKER, true),
-            (pin::HANDLE, true),
+            (pin::ECHO, Some(false)),
+            (pin::BUMPER, None),
+            (pin::MARKER, None),
+            (pin::HANDLE, None),
         ]
     }
 
     /// The world.
     pub fn world(&self) -> &World<'s, Events> {
         &self.world
-    }
-
-    /// The firmware's last health report of sensor `i` (sonar, bumper, camera, handle).
-    pub fn health(&self, i: usize) -> Health {
-        self.health.get(i).copied().unwrap_or_default()
     }
 
     /// When the world next changes by itself, ns.
@@ -278,29 +359,38 @@ impl<'s> BenchWorld<'s> {
         (z ^ (z >> 31)) % below.max(1)
     }
 
-    fn set(&mut self, out: &mut Vec<Set>, pin: u8, level: bool, at: u64) {
+    fn set(&mut self, out: &mut Vec<Set>, pin: u8, level: Option<bool>, at: u64) {
         if let Some(l) = self.levels.get_mut(usize::from(pin)) {
             *l = level;
+        }
+        if pin == pin::BUMPER {
+            self.bumper_closed.push((at, level == Some(false)));
         }
         self.inputs.push((pin, level, at));
         out.push((pin, level, at));
     }
 
-    /// A switch moves to `level` at `at`, bouncing first; returns when it settles.
-    fn bounce(&mut self, out: &mut Vec<Set>, pin: u8, level: bool, at: u64) -> u64 {
+    /// A switch closes (to ground) or opens at `at`, bouncing first; returns when it settles.
+    fn bounce(&mut self, out: &mut Vec<Set>, pin: u8, closed: bool, at: u64) -> u64 {
+        let (to, from) = if closed {
+            (Some(false), None)
+        } else {
+            (None, Some(false))
+        };
         let mut t = at;
         for _ in 0..1 + self.draw(3) {
-            self.set(out, pin, level, t);
+            self.set(out, pin, to, t);
             t += 50_000 + self.draw(350_000);
-            self.set(out, pin, !level, t);
+            self.set(out, pin, from, t);
             t += 50_000 + self.draw(350_000);
         }
-        self.set(out, pin, level, t);
+        self.set(out, pin, to, t);
         t
     }
 
-    fn level(&self, pin: u8) -> bool {
-        self.levels.get(usize::from(pin)).copied().unwrap_or(false)
+    /// Whether the rig holds `pin` low now (a closed switch, a marker that sees).
+    fn closed(&self, pin: u8) -> bool {
+        self.levels.get(usize::from(pin)).copied().flatten() == Some(false)
     }
 
     /// The robot's speed from its motor pins: thousandths of the scenario's, 0 when it does
@@ -329,7 +419,8 @@ impl<'s> BenchWorld<'s> {
     pub fn output(&mut self, pin: u8, level: bool, ns: u64) -> Vec<Set> {
         let mut out = Vec::new();
         match pin {
-            pin::TRIGGER if !level => self.trigger(ns, &mut out),
+            pin::TRIGGER if level => self.triggers.push(ns),
+            pin::TRIGGER => self.trigger(ns, &mut out),
             pin::STBY => self.stby = level,
             p if p == pin::LEFT[0] => self.dirs[0][0] = level,
             p if p == pin::LEFT[1] => self.dirs[0][1] = level,
@@ -361,7 +452,7 @@ impl<'s> BenchWorld<'s> {
             Some(PinFault::EchoStuck { at_ns }) if ns >= at_ns => {
                 if !self.stuck {
                     self.stuck = true;
-                    self.set(out, pin::ECHO, true, ns + ECHO_DELAY_NS);
+                    self.set(out, pin::ECHO, Some(true), ns + ECHO_DELAY_NS);
                 }
                 return;
             }
@@ -371,26 +462,49 @@ impl<'s> BenchWorld<'s> {
             // Silent: the module never answers.
             return;
         };
-        self.echo = Some(echo);
-        self.echo_end = None;
-        let Some(mm) = echo.mm() else {
+        let max_mm = u32::try_from(to_mm(self.sc.sonar.max_um)).unwrap_or(u32::MAX);
+        let mm = echo.mm().map(|mm| mm.min(max_mm));
+        if self.sent.len() == 8 {
+            self.sent.pop_front();
+        }
+        self.sent.push_back(Sent {
+            trigger_ns: ns,
+            mm,
+            echo: Some(echo),
+        });
+        let Some(mm) = mm else {
             // Lost to dropout: no pulse.
             return;
         };
         let rise = ns + ECHO_DELAY_NS;
-        let max_mm = u32::try_from(to_mm(self.sc.sonar.max_um)).unwrap_or(u32::MAX);
         let width = if mm >= max_mm {
             NO_ECHO_NS
         } else {
             echo_ns(mm)
         };
-        self.set(out, pin::ECHO, true, rise);
-        self.set(out, pin::ECHO, false, rise + width);
-        self.echo_end = Some(rise + width);
+        self.set(out, pin::ECHO, Some(true), rise);
+        self.set(out, pin::ECHO, Some(false), rise + width);
+        // An echo that means an obstacle whatever the reading's timing error: a driving robot
+        // must stop once it has fallen.
+        let clearly = i64::from(mm.saturating_add(self.tolerance_mm));
+        if self.sc.sonar.registers(clearly) && self.watch.is_none() {
+            self.watch = Some(rise + width);
+        }
+    }
+
+    /// An echo being watched has fallen by `ns`: if the robot drives, its reaction is pending.
+    fn watched(&mut self, ns: u64) {
+        if let Some(fall) = self.watch.filter(|f| *f <= ns) {
+            self.watch = None;
+            if self.driving.is_some() && self.reactions[0].pending.is_none() {
+                self.reactions[0].pending = Some(fall);
+            }
+        }
     }
 
     /// Starts, stops or re-speeds the walk from the motor pins.
     fn motion(&mut self, ns: u64) {
+        self.watched(ns);
         let speed = self.wheel_speed();
         match (self.driving, speed > 0) {
             (None, true) => {
@@ -447,66 +561,116 @@ impl<'s> BenchWorld<'s> {
         }
     }
 
-    /// The firmware's health block at `ns`: samples delivered, lost, sensors switched.
-    pub fn health_report(&mut self, words: &[u32], ns: u64) -> Vec<Set> {
-        for slot in 0..4 {
-            let Some(&id) = self.ids.get(slot) else {
-                continue;
-            };
-            let now = Health::of(words, id);
-            let before = self.health[slot];
-            self.health[slot] = now;
-            let device = [
-                Device::Sonar,
-                Device::Bumper,
-                Device::Camera,
-                Device::Handle,
-            ][slot];
-            if now.on != before.on {
-                self.world.power(device, now.on);
+    /// The slot (sonar, bumper, camera, handle) of a mission sensor id.
+    fn slot(&self, id: usize) -> Option<usize> {
+        self.ids.iter().position(|&i| i == id)
+    }
+
+    /// A frame of the robot's flight recording, recorded at `at_ns` and read at `ns`: the
+    /// world follows what the robot switched and sampled, and each reading is checked against
+    /// the pins.
+    pub fn recorded(&mut self, at_ns: u64, frame: &Frame<1>, ns: u64) -> Vec<Set> {
+        if let Some((sensor, on)) = frame.power()
+            && let Some(slot) = self.slot(sensor.index())
+        {
+            self.sampled[slot].power.push((at_ns, on));
+            self.world.power(DEVICES[slot], on);
+        }
+        match frame.input() {
+            Some(Input::Sample { sensor, value, .. }) => {
+                if let Some(slot) = self.slot(sensor.index()) {
+                    self.sampled[slot].samples.push(at_ns);
+                    self.sample(slot, value, at_ns);
+                }
             }
-            for _ in before.delivered..now.delivered {
-                self.delivered(slot, now.value, ns);
-            }
-            if now.lost > before.lost && slot == 0 {
-                // A read the firmware lost: the world's echo is not delivered (a dropout is
-                // logged as the loss it was).
-                if let Some(echo) = self.echo.take().filter(|e| e.mm().is_none()) {
+            Some(Input::Lost { sensor }) if self.slot(sensor.index()) == Some(0) => {
+                // The rig's echo, if it was one it lost to dropout, is logged as that loss.
+                if let Some(sent) = self.sent_before(at_ns)
+                    && let Some(echo) = sent.echo.take()
+                    && echo.mm().is_none()
+                {
                     let _ = self.world.sonar_deliver(echo);
                 }
-                self.echo_end = None;
             }
+            Some(Input::Fault { .. }) => {
+                self.sensor_failed.get_or_insert(at_ns);
+            }
+            _ => {}
         }
         let mut out = Vec::new();
         self.inputs_now(ns, &mut out);
         out
     }
 
-    fn delivered(&mut self, slot: usize, value: u32, ns: u64) {
+    /// The echo sent for the last trigger before `at_ns`.
+    fn sent_before(&mut self, at_ns: u64) -> Option<&mut Sent> {
+        self.sent.iter_mut().rev().find(|s| s.trigger_ns <= at_ns)
+    }
+
+    /// A sample the robot recorded at `at_ns`, delivered to the world as the robot read it.
+    fn sample(&mut self, slot: usize, value: Value, at_ns: u64) {
+        let at = at_ns as f64 / 1e9;
         match slot {
             0 => {
-                if let Some(echo) = self.echo.take() {
-                    let _ = if value == u32::MAX {
-                        self.world.sonar_deliver(echo)
-                    } else {
-                        self.world.sonar_deliver_measured(echo, value)
+                let max_mm = u32::try_from(to_mm(self.sc.sonar.max_um)).unwrap_or(u32::MAX);
+                let tolerance = self.tolerance_mm;
+                let read = match value {
+                    Value::Mm(mm) => Some(mm.unsigned_abs()),
+                    // Nothing in range: the sonar's maximum, which registers nothing.
+                    Value::NoEcho => None,
+                    _ => {
+                        self.misreads
+                            .push(format!("the sonar recorded {value:?} at {at:.3} s"));
+                        return;
+                    }
+                };
+                let Some(sent) = self.sent_before(at_ns) else {
+                    self.misreads.push(format!(
+                        "the sonar recorded a reading at {at:.3} s with no trigger before it"
+                    ));
+                    return;
+                };
+                let meant = sent.mm;
+                let echo = sent.echo.take();
+                let agrees = match (meant, read) {
+                    (Some(m), None) => m >= max_mm,
+                    (Some(m), Some(r)) => m < max_mm && m.abs_diff(r) <= tolerance,
+                    (None, _) => false,
+                };
+                if !agrees {
+                    let said = |mm: Option<u32>| match mm {
+                        None => "nothing in range".to_owned(),
+                        Some(mm) => format!("{mm} mm"),
                     };
-                    self.world.sample_delivered(Device::Sonar);
+                    let meant = match meant {
+                        Some(m) if m >= max_mm => "nothing in range".to_owned(),
+                        Some(m) => format!("{m} mm"),
+                        None => "no echo at all".to_owned(),
+                    };
+                    self.misreads.push(format!(
+                        "the sonar read {} at {at:.3} s where the rig's echo meant {meant} (within {tolerance} mm)",
+                        said(read)
+                    ));
                 }
-                // The robot's ranger read an obstacle, the end of its echo showed it: a driving
-                // robot must stop.
-                let end = self.echo_end.take();
-                let shows = value != u32::MAX && self.sc.sonar.registers(i64::from(value));
-                if let Some(edge) = end.filter(|_| shows)
-                    && self.driving.is_some()
-                    && self.reactions[0].pending.is_none()
-                {
-                    self.reactions[0].pending = Some(edge.min(ns));
+                if let Some(echo) = echo {
+                    let _ = self
+                        .world
+                        .sonar_deliver_measured(echo, read.unwrap_or(max_mm));
+                    self.world.sample_delivered(Device::Sonar);
                 }
             }
             1 => {
+                let pressed = value == Value::Bool(true);
+                // A read that found the switch closed: it was, within a period and two
+                // debounce times before (a read accepts a level that held for one).
+                let window = (self.sc.bumper_period_ms + 2 * DEBOUNCE_MS + 1) * 1_000_000;
+                if pressed && !self.bumper_closed_within(at_ns.saturating_sub(window), at_ns) {
+                    self.misreads.push(format!(
+                        "the bumper read contact at {at:.3} s where the rig had not closed its switch"
+                    ));
+                }
                 let touch = self.world.bumper_read();
-                let _ = self.world.bumper_deliver(touch);
+                let _ = self.world.bumper_deliver_measured(touch, pressed);
                 self.world.sample_delivered(Device::Bumper);
             }
             2 => {
@@ -518,35 +682,54 @@ impl<'s> BenchWorld<'s> {
         }
     }
 
+    /// Whether the rig held the bump switch closed at some instant of `[from, to]`.
+    fn bumper_closed_within(&self, from: u64, to: u64) -> bool {
+        let mut closed = false;
+        for &(t, c) in &self.bumper_closed {
+            if t > to {
+                break;
+            }
+            if t < from {
+                closed = c;
+                continue;
+            }
+            if c || closed {
+                return true;
+            }
+            closed = c;
+        }
+        closed
+    }
+
     /// The inputs the world decides now: the bump switch, the marker, the handle.
     pub fn inputs_now(&mut self, ns: u64, out: &mut Vec<Set>) {
+        self.watched(ns);
         let chatter = match self.fault {
             Some(PinFault::Chatter {
                 at_ns, until_ns, ..
             }) => ns >= at_ns && ns < until_ns,
             _ => false,
         };
-        // Pressed pulls the pin low.
         let pressed = self.world.bumper_read().any();
-        if !chatter && self.level(pin::BUMPER) == pressed {
-            let settled = self.bounce(out, pin::BUMPER, !pressed, ns);
+        if !chatter && self.closed(pin::BUMPER) != pressed {
+            let settled = self.bounce(out, pin::BUMPER, pressed, ns);
             if pressed && self.driving.is_some() && self.reactions[1].pending.is_none() {
                 self.reactions[1].pending = Some(settled);
             }
         }
         let (_, at_door, _) = self.world.legs(Place::KitchenDoor);
-        let marker = !(at_door && self.phase == Phase::AtDoor);
-        if self.level(pin::MARKER) != marker {
-            self.set(out, pin::MARKER, marker, ns);
+        let seen = at_door && self.phase == Phase::AtDoor;
+        if self.closed(pin::MARKER) != seen {
+            self.set(out, pin::MARKER, seen.then_some(false), ns);
         }
-        let handle = !(at_door && self.phase == Phase::AtDoor && !self.sc.door_locked);
-        if self.level(pin::HANDLE) != handle {
-            self.bounce(out, pin::HANDLE, handle, ns);
+        let gives = seen && !self.sc.door_locked;
+        if self.closed(pin::HANDLE) != gives {
+            self.bounce(out, pin::HANDLE, gives, ns);
         }
     }
 
-    /// The chatter of a [`PinFault::Chatter`], all at once: its edges, then the level the
-    /// world wants back.
+    /// The chatter of a [`PinFault::Chatter`], all at once: the switch closing and opening,
+    /// then open again.
     pub fn chatter(&mut self) -> Vec<Set> {
         let mut out = Vec::new();
         if let Some(PinFault::Chatter {
@@ -556,14 +739,13 @@ impl<'s> BenchWorld<'s> {
         }) = self.fault
         {
             let mut t = at_ns;
-            let mut level = false;
+            let mut closed = true;
             while t < until_ns {
-                self.set(&mut out, pin::BUMPER, level, t);
-                level = !level;
+                self.set(&mut out, pin::BUMPER, closed.then_some(false), t);
+                closed = !closed;
                 t += every_ns.max(1);
             }
-            // Released: as before the chatter.
-            self.set(&mut out, pin::BUMPER, true, until_ns);
+            self.set(&mut out, pin::BUMPER, None, until_ns);
         }
         out
     }
@@ -574,7 +756,8 @@ impl<'s> BenchWorld<'s> {
     }
 
     /// At the end of a run: an obstacle shown to a driving robot that never stopped for it.
-    pub fn finish(&mut self) {
+    pub fn finish(&mut self, ns: u64) {
+        self.watched(ns);
         for (i, r) in self.reactions.iter_mut().enumerate() {
             if let Some(edge) = r.pending.take() {
                 self.unanswered.push((i, edge));
@@ -588,10 +771,124 @@ impl<'s> BenchWorld<'s> {
     }
 }
 
+/// The world's device of each slot.
+const DEVICES: [Device; SLOTS] = [
+    Device::Sonar,
+    Device::Bumper,
+    Device::Camera,
+    Device::Handle,
+];
+
+/// The switches' debounce time, ms (`psmpa_drivers::switch::DEBOUNCE`).
+const DEBOUNCE_MS: u64 = psmpa_drivers::switch::DEBOUNCE.as_millis();
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use psmpa_drivers::hcsr04::mm_from_echo_us;
+
+    use embassy_time::Instant;
+    use psmpa_core::{FactSet, SensorId, TraceEvent};
+
+    /// A box 0.35 m ahead from the start, for 10 s.
+    fn boxed() -> Scenario {
+        psmpa_sim::load::parse(
+            std::path::Path::new("t.json"),
+            br#"{"name": "t", "interferences": [{"kind": "box", "at_s": 0.0, "ahead_m": 0.35, "hold_s": 10.0}]}"#,
+        )
+        .unwrap()
+    }
+
+    /// The frame of a trace event (its own instant does not matter here).
+    fn frame(event: TraceEvent) -> Frame<1> {
+        Frame::of(Instant::from_ticks(0), &event)
+    }
+
+    fn sample(sensor: usize, value: Value) -> Frame<1> {
+        frame(TraceEvent::Sample {
+            sensor: SensorId::new(sensor).unwrap(),
+            value,
+            holds: FactSet::EMPTY,
+        })
+    }
+
+    /// Plays one sonar read: switched on, triggered, and the reading `value` recorded.
+    fn read_sonar(bw: &mut BenchWorld<'_>, value: Value) {
+        let on = frame(TraceEvent::SensorOn {
+            sensor: SensorId::new(0).unwrap(),
+        });
+        bw.recorded(0, &on, 0);
+        bw.output(pin::TRIGGER, true, 1_000);
+        bw.output(pin::TRIGGER, false, 11_000);
+        bw.recorded(5_000_000, &sample(0, value), 5_000_000);
+    }
+
+    #[test]
+    fn the_sonar_detects_only_what_the_robot_read() {
+        let sc = boxed();
+        // The echo the rig sends means 350 mm; the robot reads it so: detected by the sonar.
+        let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+        read_sonar(&mut bw, Value::Mm(352));
+        assert!(bw.misreads.is_empty(), "{:?}", bw.misreads);
+        assert_eq!(bw.world().tally().detected, 1);
+        // A deaf sonar reads nothing in range: nothing is detected, and the reading is wrong.
+        let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+        read_sonar(&mut bw, Value::NoEcho);
+        assert_eq!(bw.world().tally().detected, 0);
+        assert!(
+            bw.misreads[0].contains("where the rig's echo meant 350 mm"),
+            "{:?}",
+            bw.misreads
+        );
+        // Beyond the tolerance is a misread too.
+        let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+        read_sonar(&mut bw, Value::Mm(380));
+        assert_eq!(bw.misreads.len(), 1);
+    }
+
+    #[test]
+    fn a_contact_the_rig_never_made_is_a_misread() {
+        let sc = boxed();
+        let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+        bw.recorded(30_000_000, &sample(1, Value::Bool(true)), 30_000_000);
+        assert!(bw.misreads[0].contains("the bumper read contact at 0.030 s"));
+        assert_eq!(bw.world().tally().detected, 0);
+        // A release read is no misread.
+        let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+        bw.recorded(30_000_000, &sample(1, Value::Bool(false)), 30_000_000);
+        assert!(bw.misreads.is_empty());
+    }
+
+    #[test]
+    fn a_switch_counts_as_closed_within_a_window_that_overlaps_it() {
+        let sc = boxed();
+        let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+        let mut out = Vec::new();
+        bw.set(&mut out, pin::BUMPER, Some(false), 100);
+        bw.set(&mut out, pin::BUMPER, None, 200);
+        assert!(bw.bumper_closed_within(0, 150));
+        assert!(bw.bumper_closed_within(150, 160));
+        assert!(bw.bumper_closed_within(190, 300));
+        assert!(!bw.bumper_closed_within(0, 50));
+        assert!(!bw.bumper_closed_within(250, 300));
+        // An open switch drives nothing: the pin log says so.
+        assert_eq!(
+            out,
+            [(pin::BUMPER, Some(false), 100), (pin::BUMPER, None, 200)]
+        );
+    }
+
+    #[test]
+    fn gaps_count_only_within_one_stretch_of_the_sensor_on() {
+        let s = Sampled {
+            power: vec![(0, true), (500, false), (900, true)],
+            samples: vec![],
+        };
+        // 100 and 400 apart while on; 450 to 950 spans the switch-off.
+        assert_eq!(s.max_gap(&[0, 100, 450, 950, 1_300]), Some(350));
+        assert_eq!(s.max_gap(&[950]), None);
+        assert!(s.on_at(499) && !s.on_at(500) && s.on_at(900));
+    }
 
     #[test]
     fn an_echo_reads_back_as_its_millimetre_with_microseconds_to_spare() {
