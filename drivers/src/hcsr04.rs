@@ -4,8 +4,8 @@
 //!
 //! A read ([`Hcsr04::measure`]) is async throughout: it awaits the trigger pulse, the echo's
 //! rise and the echo's fall, and never spins, so a 38 ms read costs other tasks nothing. Every
-//! wait is bounded: the echo must rise within [`RISE_TIMEOUT`] and fall within
-//! [`PULSE_LIMIT`].
+//! wait is bounded: the echo must rise within [`RISE_TIMEOUT`] (or the time a slower module
+//! is given, [`Hcsr04::with_rise_timeout`]) and fall within [`PULSE_LIMIT`].
 //!
 //! The width is timed with `embassy_time::Instant` from when the task sees the rise to when it
 //! sees the fall. Each edge reaches the task through the GPIO interrupt and an executor poll:
@@ -95,15 +95,30 @@ pub const fn range_from_echo_us(width_us: u64) -> Result<Range, Hcsr04Error> {
 pub struct Hcsr04<T, E> {
     trigger: T,
     echo: E,
+    rise_timeout: Duration,
 }
 
 impl<T: OutputPin, E: InputPin + Wait> Hcsr04<T, E> {
     /// The ranger on these pins. Touches neither until the first read.
     pub const fn new(trigger: T, echo: E) -> Self {
-        Self { trigger, echo }
+        Self {
+            trigger,
+            echo,
+            rise_timeout: RISE_TIMEOUT,
+        }
     }
 
-    /// Takes one measurement: triggers, waits for the echo to rise (at most [`RISE_TIMEOUT`])
+    /// The ranger, waiting up to `timeout` for its echo to rise instead of [`RISE_TIMEOUT`]:
+    /// for a module that answers later (one that processes before it pings, or sits behind a
+    /// converter). A longer read must still fit the sensor's sample timeout.
+    #[must_use]
+    pub const fn with_rise_timeout(mut self, timeout: Duration) -> Self {
+        self.rise_timeout = timeout;
+        self
+    }
+
+    /// Takes one measurement: triggers, waits for the echo to rise (at most [`RISE_TIMEOUT`],
+    /// or the module's own [`with_rise_timeout`](Self::with_rise_timeout))
     /// and times the pulse (at most [`PULSE_LIMIT`]). Takes the pulse's width plus about the
     /// trigger pulse: 38 ms and a little with nothing in range.
     ///
@@ -119,7 +134,7 @@ impl<T: OutputPin, E: InputPin + Wait> Hcsr04<T, E> {
         self.trigger.set_high().map_err(|_| Hcsr04Error::Pin)?;
         Timer::after(TRIGGER_PULSE).await;
         self.trigger.set_low().map_err(|_| Hcsr04Error::Pin)?;
-        match with_timeout(RISE_TIMEOUT, self.echo.wait_for_high()).await {
+        match with_timeout(self.rise_timeout, self.echo.wait_for_high()).await {
             Ok(rose) => rose.map_err(|_| Hcsr04Error::Pin)?,
             Err(_) => return Err(Hcsr04Error::NoEcho),
         }

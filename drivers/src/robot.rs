@@ -17,8 +17,12 @@
 //!   encoders: it drives at [`Settings::walk_permille`], which moves it at
 //!   [`Settings::walk_mm_s`] (measure it on your robot), for as long as
 //!   [`Settings::walk_mm`] takes at that speed. It brakes as soon as its precondition is false
-//!   (the sonar sees something, the bumper is pressed) and drives on when it holds again;
-//!   braked time does not count. Accurate to the speed's calibration and the braking distance.
+//!   (the sonar sees something, the bumper is pressed). With [`Settings::avoid`] of 0 it
+//!   waits and drives on when the precondition holds again; otherwise it steps around the
+//!   obstacle ([`Settings::avoid`] long: it turns away, passes it, turns back to its heading)
+//!   and drives on, taking a violation seen before the step's end as the obstacle it passed.
+//!   Braked and stepping time does not count. Accurate to the speed's calibration and the
+//!   braking distance.
 //! * "open door", "open back door": asks for a `handle` reading, stops if the door is locked,
 //!   then pushes the door open: a timed drive.
 //! * "enter kitchen", "enter by back door": a timed drive through the door.
@@ -119,15 +123,23 @@ pub struct Settings {
     pub sonar_period: Option<Duration>,
     /// The bumper's sampling period, if not the mission's.
     pub bumper_period: Option<Duration>,
+    /// How long a side step around an obstacle takes (a quarter turning away at the walking
+    /// duty, a half passing, a quarter turning back); 0: no side step, the walk waits for
+    /// the path to clear.
+    pub avoid: Duration,
+    /// The longest the sonar's module may take to raise its echo after a trigger, if longer
+    /// than its driver's [`RISE_TIMEOUT`](crate::hcsr04::RISE_TIMEOUT) (a module that answers
+    /// later); 0: that.
+    pub sonar_rise: Duration,
 }
 
-/// Words in a calibration record: [`RECORD_MAGIC`], [`RECORD_VERSION`], the 11 settings, a
+/// Words in a calibration record: [`RECORD_MAGIC`], [`RECORD_VERSION`], the 13 settings, a
 /// CRC-32 of the rest.
-pub const RECORD_WORDS: usize = 14;
+pub const RECORD_WORDS: usize = 16;
 /// A calibration record's first word: `PSMC` in little-endian bytes.
 pub const RECORD_MAGIC: u32 = u32::from_le_bytes(*b"PSMC");
 /// The layout of the calibration record this crate reads and writes.
-pub const RECORD_VERSION: u32 = 1;
+pub const RECORD_VERSION: u32 = 2;
 
 /// Why a calibration record was not taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -195,7 +207,8 @@ pub fn crc32(words: &[u32]) -> u32 {
 
 impl Settings {
     /// 300 mm clearance; a 2 m walk at 600 ‰, 250 mm/s (8 s); pushing at 300 ‰ for 1.5 s;
-    /// entering at 500 ‰ for 3 s; no planning time; the mission's periods.
+    /// entering at 500 ‰ for 3 s; no planning time; the mission's periods; no side step; the
+    /// sonar driver's own rise timeout.
     pub const DEFAULT: Self = Self {
         clearance_mm: 300,
         walk_mm: 2_000,
@@ -208,6 +221,8 @@ impl Settings {
         plan: Duration::from_ticks(0),
         sonar_period: None,
         bumper_period: None,
+        avoid: Duration::from_ticks(0),
+        sonar_rise: Duration::from_ticks(0),
     };
 
     /// How long the walk drives: `walk_mm / walk_mm_s`, rounded up to the millisecond; `None`
@@ -240,6 +255,8 @@ impl Settings {
             u32::try_from(self.plan.as_micros()).unwrap_or(u32::MAX),
             period(self.sonar_period),
             period(self.bumper_period),
+            ms(self.avoid),
+            ms(self.sonar_rise),
             0,
         ];
         let (body, sum) = r.split_at_mut(RECORD_WORDS - 1);
@@ -270,6 +287,8 @@ impl Settings {
             plan_us,
             sonar_ms,
             bumper_ms,
+            avoid_ms,
+            rise_ms,
             sum,
         ] = *r;
         if magic != RECORD_MAGIC {
@@ -300,6 +319,8 @@ impl Settings {
             plan: Duration::from_micros(u64::from(plan_us)),
             sonar_period: period(sonar_ms),
             bumper_period: period(bumper_ms),
+            avoid: Duration::from_millis(u64::from(avoid_ms)),
+            sonar_rise: Duration::from_millis(u64::from(rise_ms)),
         };
         if walk_mm_s == 0 {
             return Err(RecordError::Invalid);
@@ -511,9 +532,27 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         self.stop(Outcome::Success)
     }
 
-    /// Drives for the walk's time, braking while the precondition is false; each time it
-    /// starts or resumes driving it first plans its way ([`Settings::plan`]). The wheels are
-    /// written only when the robot starts or stops, not on every sample.
+    /// Steps around an obstacle: turns away, passes it and turns back to its heading, at the
+    /// walking duty, [`Settings::avoid`] in all; then brakes.
+    async fn side_step(&self) -> Result<(), PinError> {
+        let (d, back) = (
+            self.settings.walk_permille,
+            self.settings.walk_permille.saturating_neg(),
+        );
+        let all = self.settings.avoid.as_ticks();
+        let turn = all.checked_div(4).unwrap_or(0);
+        let pass = all.saturating_sub(turn.saturating_mul(2));
+        for (left, right, ticks) in [(back, d, turn), (d, d, pass), (d, back, turn)] {
+            self.wheels(|w| w.drive(left, right))?;
+            Timer::after(Duration::from_ticks(ticks)).await;
+        }
+        self.wheels(Drive::brake)
+    }
+
+    /// Drives for the walk's time, braking while the precondition is false, or stepping
+    /// around what made it false ([`Settings::avoid`]); each time it starts or resumes
+    /// driving it first plans its way ([`Settings::plan`]). The wheels are written only when
+    /// the robot starts or stops, not on every sample.
     async fn walk(&self, io: &ActionIo<'_>) -> Outcome {
         let Some(mut left) = self.settings.walk_time() else {
             return Outcome::Failure;
@@ -521,8 +560,11 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         let duty = self.settings.walk_permille;
         let mut version = io.version();
         let mut moving = None;
+        // A violation last seen before this instant is one a side step went around.
+        let mut passed = Instant::from_ticks(0);
         loop {
-            let go = io.violation().is_none();
+            let violation = io.violation().filter(|v| v.last_seen >= passed);
+            let go = violation.is_none();
             if moving != Some(go) {
                 let set = if go {
                     if self.settings.plan.as_ticks() > 0 {
@@ -530,12 +572,21 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                     }
                     self.wheels(|w| w.drive(duty, duty))
                 } else {
+                    // The precondition turned false: brake at once.
                     self.wheels(Drive::brake)
                 };
                 if set.is_err() {
                     return self.stop(Outcome::Failure);
                 }
                 moving = Some(go);
+            }
+            if !go && self.settings.avoid.as_ticks() > 0 {
+                if self.side_step().await.is_err() {
+                    return self.stop(Outcome::Failure);
+                }
+                passed = Instant::now();
+                version = io.version();
+                continue;
             }
             let since = Instant::now();
             let arrival = go.then(|| since.saturating_add(left));

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{Run, Wheeling, World, action, echo_ms, run, sensor};
+use common::{Run, Wheeling, World, action, echo_ms, run, run_with, sensor};
 use embassy_time::{Duration, Instant};
 use psmpa_core::{Config, ControlError, Outcome, SensorFault, TraceEvent, Value};
 use psmpa_drivers::hcsr04::{Hcsr04Error, PULSE_LIMIT, RISE_TIMEOUT, Range};
@@ -220,6 +220,57 @@ fn a_bump_during_the_walk_brakes_once_and_the_walk_resumes_after_it() {
         (left - drove(&run)).as_millis(),
         walk_ms() + (restored - violated).as_millis()
     );
+}
+
+#[test]
+fn with_a_side_step_the_walk_goes_around_a_bump_and_drives_on() {
+    // The bumper is hit at 3 s and freed at 4 s; the robot steps around for a second.
+    let mut bumper = chatter(3_000, 1, false);
+    bumper.extend(chatter(4_000, 1, true));
+    let avoid = Duration::from_millis(1_000);
+    let settings = Settings {
+        avoid,
+        ..Settings::DEFAULT
+    };
+    let run = run_with(
+        World {
+            bumper,
+            ..World::clear()
+        },
+        settings,
+    );
+    assert!(run.result.is_ok(), "{:?}", run.result);
+    let walk = action("go to door");
+    let violated = run
+        .trace
+        .first(|e| matches!(e, TraceEvent::PreconditionViolated { action, .. } if *action == walk))
+        .unwrap();
+    assert_eq!(violated, Instant::from_millis(3_000 + DEBOUNCE.as_millis()));
+    let ms = Duration::from_millis;
+    // Turning away (the left wheel backwards), passing, turning back (the right backwards).
+    assert_eq!(run.left.at(violated), Wheeling::Other);
+    assert_eq!(run.right.at(violated), walking());
+    for wheel in [&run.left, &run.right] {
+        assert_eq!(wheel.at(violated + ms(250)), walking());
+        assert_eq!(wheel.at(violated + ms(749)), walking());
+    }
+    assert_eq!(run.left.at(violated + ms(750)), walking());
+    assert_eq!(run.right.at(violated + ms(750)), Wheeling::Other);
+    // Then it drives on: the violation it saw was the obstacle it went around, and the
+    // bumper was freed meanwhile. The step does not count as walking.
+    for wheel in [&run.left, &run.right] {
+        assert_eq!(wheel.at(violated + avoid), walking());
+    }
+    let (_, left) = run.state(walk);
+    assert_eq!(
+        (left - drove(&run)).as_millis(),
+        walk_ms() + avoid.as_millis()
+    );
+    // Once: one violation.
+    let violations = run
+        .trace
+        .find(|e| matches!(e, TraceEvent::PreconditionViolated { action, .. } if *action == walk));
+    assert_eq!(violations.len(), 1);
 }
 
 #[test]

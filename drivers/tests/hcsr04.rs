@@ -128,3 +128,17 @@ fn the_conversion_bounds_the_rated_range_in_microseconds() {
     // No overflow for absurd widths.
     assert_eq!(range_from_echo_us(u64::MAX), Ok(Range::NothingInRange));
 }
+
+#[test]
+fn a_module_that_answers_later_is_read_with_its_own_rise_timeout() {
+    // The echo rises 20 ms after the trigger falls: past the default rise timeout.
+    let late = || ScriptedPin::new(false, &[(21, true), (27, false)]);
+    let (range, ended, _) = read(late());
+    assert_eq!(range, Err(Hcsr04Error::NoEcho));
+    assert_eq!(ended, 1 + RISE_TIMEOUT.as_millis());
+    // Given 25 ms to rise, the same echo is 1,029 mm.
+    let trigger = RecordedPin::new();
+    let mut sonar = Hcsr04::new(trigger, late()).with_rise_timeout(Duration::from_millis(25));
+    let done = simulate(sonar.measure(), Duration::from_secs(1)).unwrap();
+    assert_eq!(done.output, Ok(Range::Mm(1_029)));
+}

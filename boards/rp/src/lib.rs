@@ -200,12 +200,14 @@ async fn main(spawner: Spawner) {
     let settings = match calibration::read() {
         Ok(s) => {
             info!(
-                "calibration from flash: clearance {=u16} mm, walk {=u32} mm at {=u32} mm/s ({=i16} permille), planning {=u64} us",
+                "calibration from flash: clearance {=u16} mm, walk {=u32} mm at {=u32} mm/s ({=i16} permille), planning {=u64} us, side step {=u64} ms, echo rise {=u64} ms",
                 s.clearance_mm,
                 s.walk_mm,
                 s.walk_mm_s,
                 s.walk_permille,
-                s.plan.as_micros()
+                s.plan.as_micros(),
+                s.avoid.as_millis(),
+                s.sonar_rise.as_millis()
             );
             s
         }
@@ -291,10 +293,17 @@ async fn main(spawner: Spawner) {
         Pwm::new_output_b(p.PWM_SLICE7, p.PIN_15, speed),
     );
     let devices = Devices {
-        sonar: Hcsr04::new(
-            Output::new(p.PIN_2, Level::Low),
-            Input::new(p.PIN_3, Pull::Down),
-        ),
+        sonar: {
+            let sonar = Hcsr04::new(
+                Output::new(p.PIN_2, Level::Low),
+                Input::new(p.PIN_3, Pull::Down),
+            );
+            if settings.sonar_rise.as_ticks() > 0 {
+                sonar.with_rise_timeout(settings.sonar_rise)
+            } else {
+                sonar
+            }
+        },
         bumper: Switch::new(Input::new(p.PIN_4, Pull::Up), Active::Low, DEBOUNCE),
         // Pulled up: unplugged, it reads "no marker", not noise.
         camera: Marker::new(Input::new(p.PIN_5, Pull::Up), Active::Low),

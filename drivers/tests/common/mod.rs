@@ -251,6 +251,11 @@ pub const LIMIT: Duration = Duration::from_secs(60);
 
 /// Runs the Fetch Tea mission on the robot in `world`.
 pub fn run(world: World) -> Run {
+    run_with(world, Settings::DEFAULT)
+}
+
+/// Runs the Fetch Tea mission on the robot in `world`, calibrated with `settings`.
+pub fn run_with(world: World, settings: Settings) -> Run {
     let trigger = RecordedPin::new();
     let bumper = ScriptedPin::new(true, &world.bumper);
     let (left, right, standby) = (Wheel::new(), Wheel::new(), RecordedPin::new());
@@ -266,7 +271,7 @@ pub fn run(world: World) -> Run {
             ),
             wheels: Drive::with_standby(left.channel(), right.channel(), standby.clone()),
         },
-        Settings::DEFAULT,
+        settings,
     );
     let rt = FetchTeaRuntime::new(
         &fetch_tea::MISSION,
