@@ -1105,10 +1105,21 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// Starts a side step around the nearest registered obstacle ahead.
     pub fn begin_avoid(&self) {
+        self.side_step(true);
+    }
+
+    /// Starts a side step around the nearest obstacle ahead, registered or not: a body whose
+    /// wheels turn it around whatever stands in front of it (the bench's robot, whose
+    /// registrations reach the world from its recording after its wheels have moved).
+    pub fn begin_avoid_nearest(&self) {
+        self.side_step(false);
+    }
+
+    fn side_step(&self, sensed_only: bool) {
         self.with(|s, sc| {
             let target = s
                 .present_obstacles()
-                .filter(|(_, o)| o.pos_um >= s.pos_um && o.sensed)
+                .filter(|(_, o)| o.pos_um >= s.pos_um && (o.sensed || !sensed_only))
                 .min_by_key(|(_, o)| o.pos_um)
                 .map(|(i, _)| i as u8);
             s.motion = Motion::Avoiding {

@@ -3,9 +3,11 @@
 //
 // It only moves pin levels and time. The world (where the robot is, what the sonar sees,
 // when a bump switch closes) is the project's Rust world in the xtask process; this file
-// boots the firmware's flash image, applies the input levels the world schedules, reports
-// the output pins' edges and the PWM duties measured from them, and reads what the firmware
-// writes to RAM (its defmt log over RTT, its sensors' health). It also counts cycles: each
+// boots the firmware's flash image, applies the input levels the world schedules (or what an
+// open input's pad gives it), reports the output pins' edges and the PWM duties measured from
+// them, and reads what the firmware writes to RAM: its defmt log over RTT (the flight
+// recording in it), and its sensors' health block, a diagnostic the bench judges nothing by.
+// It also counts cycles: each
 // interrupt handler's own, thread mode's busy stretches and the critical sections, for the
 // response-time analysis.
 //

@@ -27,6 +27,7 @@ struct Mutant {
 
 /// The walk's brake when its precondition turns false (`drivers/src/robot.rs`).
 const BRAKE: &str = "                } else {
+                    // The precondition turned false: brake at once.
                     self.wheels(Drive::brake)
                 };";
 
@@ -284,10 +285,13 @@ pub fn run(json: bool) -> Ending {
             (Ok(fw), Ok(())) => fw,
             (Err(e), _) | (_, Err(e)) => return Ending::Failed(format!("mutant {}: {e}", m.name)),
         };
-        let (list, _) = match plays(&files) {
+        let (mut list, _) = match plays(&files) {
             Ok(p) => p,
             Err(e) => return Ending::Failed(e),
         };
+        for p in &mut list {
+            p.stop_at_failure = true;
+        }
         let played = play_all(&fw, &list, &budget, &out);
         let names: Vec<String> = list.iter().map(super::Play::name).collect();
         let v = verdict(m, &played, &names);
@@ -308,6 +312,29 @@ pub fn run(json: bool) -> Ending {
                 v.run.as_deref().unwrap_or("-"),
                 v.failure.as_deref().unwrap_or("every run held its checks")
             );
+        }
+    }
+    let caught = verdicts.iter().filter(|v| v.caught_by.is_some()).count();
+    let mut table = String::from(
+        "\n| planted bug | mutant | caught by | run | its first failure |\n|---|---|---|---|---|\n",
+    );
+    for v in &verdicts {
+        table.push_str(&format!(
+            "| {} | `{}` | {} | {} | {} |\n",
+            v.what,
+            v.mutant,
+            v.caught_by.as_deref().unwrap_or("**not caught**"),
+            v.run.as_deref().unwrap_or("-"),
+            v.failure.as_deref().unwrap_or("every run held its checks")
+        ));
+    }
+    let cell = format!("{caught} of {} planted bugs caught", verdicts.len());
+    for (file, name, text) in [
+        ("boards/README.md", "bench-mutants", table.as_str()),
+        ("README.md", "mutants", cell.as_str()),
+    ] {
+        if let Err(e) = super::write_between(&root.join(file), name, text) {
+            return Ending::Failed(e);
         }
     }
     let missed: Vec<&str> = verdicts

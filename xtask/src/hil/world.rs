@@ -8,16 +8,19 @@
 //!   robot's settings moves it at the scenario's `speed_mps` (the speed the robot is
 //!   calibrated to), a smaller duty proportionally slower, a larger one no faster. The world
 //!   is one straight line and the robot has no inertia: it stops when the wheels do.
-//! * **Sonar** (HC-SR04 on GP2/GP3, a driven output). On the trigger's falling edge the
-//!   module reads the world ([`World::sonar_start`]) and raises its echo 250 µs later for as
-//!   long as sound takes to the obstacle and back (5.83 µs a millimetre); nothing in range is the module's own 38 ms
-//!   pulse; a lost reading (dropout, a silent sonar) no pulse at all.
+//! * **Sonar** (HC-SR04 on GP2/GP3, a driven output). On the falling edge of a trigger pulse
+//!   of at least 10 µs the module reads the world ([`World::sonar_start`]) and raises its
+//!   echo 250 µs later for as long as sound takes to the obstacle and back (5.83 µs a
+//!   millimetre); nothing in range is the module's own 38 ms pulse; a lost reading (dropout,
+//!   a silent sonar) no pulse at all. With the scenario's read latency (`latency_ms`) the echo
+//!   ends that long after the trigger at the earliest: it rises later, as wide.
 //! * **Switches** (the bumper on GP4, the handle's limit switch on GP6) close to ground when
 //!   pressed and are open otherwise: an open switch drives nothing, and the pin reads what
 //!   the chip's pad gives it (its pull-up, its pull-down, or a floating level: the harness).
 //!   The bumper closes when the world's bumper would feel an obstacle (a touch of the
 //!   scenario's minimum contact), and bounces: 1 to 3 bounces of 50 to 400 µs before it
-//!   settles, from a generator seeded with the scenario's seed. The **marker** (GP5, an open
+//!   settles, from a generator seeded with the scenario's seed; the bumper's read latency
+//!   (`latency_ms`) delays its edges as a slower sensor answers later. The **marker** (GP5, an open
 //!   collector) pulls low while the robot stands at the kitchen door; the handle's switch
 //!   closes there when the door is not locked.
 //! * **What the robot sensed** comes from its flight recording: the world registers an
@@ -41,8 +44,8 @@ use std::collections::VecDeque;
 
 use psmpa_core::Value;
 use psmpa_core::record::{Frame, Input};
-use psmpa_sim::scenario::{Scenario, to_mm};
-use psmpa_sim::world::{Device, Echo, Place, World, WorldEvent, WorldLog};
+use psmpa_sim::scenario::{FaultKind, Scenario, to_mm};
+use psmpa_sim::world::{Device, Echo, Motion, Place, World, WorldEvent, WorldLog};
 
 /// The pins (the boards' pin table).
 pub mod pin {
@@ -64,8 +67,12 @@ pub mod pin {
     pub const RIGHT: [u8; 3] = [13, 14, 15];
 }
 
+/// The shortest trigger pulse the HC-SR04 fires on.
+pub const TRIGGER_NS: u64 = 10_000;
 /// The HC-SR04 raises its echo this long after the trigger falls (its 40 kHz burst).
 pub const ECHO_DELAY_NS: u64 = 250_000;
+/// What a sonar out of range measures on the bench: nearer than the HC-SR04's 20 mm minimum.
+pub const TOO_NEAR_MM: u32 = 10;
 /// The module's own pulse when no echo returns.
 pub const NO_ECHO_NS: u64 = 38_000_000;
 /// How far from the kitchen door a robot that stopped counts as at it, µm: the door's marker
@@ -96,6 +103,11 @@ pub enum PinFault {
     },
     /// The echo line sticks high at the first trigger from `at_ns`.
     EchoStuck {
+        /// From when, ns.
+        at_ns: u64,
+    },
+    /// Every echo from `at_ns` is shorter than the module's minimum range.
+    TooNear {
         /// From when, ns.
         at_ns: u64,
     },
@@ -245,11 +257,15 @@ pub struct BenchWorld<'s> {
     dirs: [[bool; 2]; 2],
     duties: [u16; 2],
     driving: Option<u64>,
+    /// Since when the wheels turn the robot around an obstacle (the world's side step).
+    stepping: Option<u64>,
     speed: u16,
     phase: Phase,
     door_open: bool,
     /// The last echoes sent, newest last.
     sent: VecDeque<Sent>,
+    /// The trigger's level.
+    trigger_high: bool,
     /// The fall of an echo that clearly means an obstacle, until the robot answers or the
     /// reaction is pending.
     watch: Option<u64>,
@@ -306,10 +322,12 @@ impl<'s> BenchWorld<'s> {
             dirs: [[false; 2]; 2],
             duties: [0; 2],
             driving: None,
+            stepping: None,
             speed: 1000,
             phase: Phase::ToDoor,
             door_open: false,
             sent: VecDeque::new(),
+            trigger_high: false,
             watch: None,
             levels,
             bumper_closed: Vec::new(),
@@ -418,9 +436,19 @@ impl<'s> BenchWorld<'s> {
     /// speed; the sonar's module reads the world when its trigger falls.
     pub fn output(&mut self, pin: u8, level: bool, ns: u64) -> Vec<Set> {
         let mut out = Vec::new();
+        // Whether the trigger was high before this edge.
+        let was_high = pin == pin::TRIGGER && std::mem::replace(&mut self.trigger_high, level);
         match pin {
-            pin::TRIGGER if level => self.triggers.push(ns),
-            pin::TRIGGER => self.trigger(ns, &mut out),
+            pin::TRIGGER if level && !was_high => self.triggers.push(ns),
+            pin::TRIGGER if level => {}
+            // The module fires on the fall of a pulse of at least 10 µs: not on the pin
+            // becoming an output, low, at boot.
+            pin::TRIGGER => {
+                let pulse = self.triggers.last().map(|rise| ns.saturating_sub(*rise));
+                if was_high && pulse.is_some_and(|p| p >= TRIGGER_NS) {
+                    self.trigger(ns, &mut out);
+                }
+            }
             pin::STBY => self.stby = level,
             p if p == pin::LEFT[0] => self.dirs[0][0] = level,
             p if p == pin::LEFT[1] => self.dirs[0][1] = level,
@@ -446,9 +474,25 @@ impl<'s> BenchWorld<'s> {
         out
     }
 
+    /// The scenario's sonar fault as the HC-SR04 shows it on its pins, once it has begun: a
+    /// silent sonar answers nothing and a stuck one sends the same echo again and again (the
+    /// world's read says so); one out of range, which the module cannot report beyond its
+    /// range (that is its "nothing in range"), measures below its 20 mm minimum instead.
+    fn scenario_fault(&self, ns: u64) -> Option<PinFault> {
+        let (kind, at_ms) = self.sc.fault?;
+        let at_ns = u64::from(at_ms) * 1_000_000;
+        (kind == FaultKind::OutOfRange && ns >= at_ns).then_some(PinFault::TooNear { at_ns })
+    }
+
     fn trigger(&mut self, ns: u64, out: &mut Vec<Set>) {
-        match self.fault {
+        match self.fault.or(self.scenario_fault(ns)) {
             Some(PinFault::NoEcho { at_ns }) if ns >= at_ns => return,
+            Some(PinFault::TooNear { at_ns }) if ns >= at_ns => {
+                let rise = ns + ECHO_DELAY_NS;
+                self.set(out, pin::ECHO, Some(true), rise);
+                self.set(out, pin::ECHO, Some(false), rise + echo_ns(TOO_NEAR_MM));
+                return;
+            }
             Some(PinFault::EchoStuck { at_ns }) if ns >= at_ns => {
                 if !self.stuck {
                     self.stuck = true;
@@ -476,12 +520,15 @@ impl<'s> BenchWorld<'s> {
             // Lost to dropout: no pulse.
             return;
         };
-        let rise = ns + ECHO_DELAY_NS;
         let width = if mm >= max_mm {
             NO_ECHO_NS
         } else {
             echo_ns(mm)
         };
+        // A module that answers after the scenario's read latency: its echo ends then at the
+        // earliest, as wide as the distance says, so it rises later.
+        let latency = self.sc.sonar.latency_ms * 1_000_000;
+        let rise = ns + ECHO_DELAY_NS.max(latency.saturating_sub(width));
         self.set(out, pin::ECHO, Some(true), rise);
         self.set(out, pin::ECHO, Some(false), rise + width);
         // An echo that means an obstacle whatever the reading's timing error: a driving robot
@@ -502,10 +549,26 @@ impl<'s> BenchWorld<'s> {
         }
     }
 
-    /// Starts, stops or re-speeds the walk from the motor pins.
+    /// Whether the wheels turn the robot on the spot: one forward, one backwards.
+    fn pivoting(&self) -> bool {
+        let turning = |i: usize| self.duties[i] > 0 && self.dirs[i][0] != self.dirs[i][1];
+        self.stby && turning(0) && turning(1) && self.dirs[0] != self.dirs[1]
+    }
+
+    /// Starts, stops or re-speeds the walk from the motor pins. A pivot on the way to the
+    /// door starts the world's side step around the nearest obstacle ahead; until it is over
+    /// and the wheels no longer turn the robot, the wheels are the step's, not the walk's.
     fn motion(&mut self, ns: u64) {
         self.watched(ns);
-        let speed = self.wheel_speed();
+        let pivot = self.pivoting();
+        if self.stepping.is_some() {
+            let (legs, _, _) = self.world.legs(Place::KitchenDoor);
+            if pivot || matches!(legs, Motion::Avoiding { .. }) {
+                return;
+            }
+            self.stepping = None;
+        }
+        let speed = if pivot { 0 } else { self.wheel_speed() };
         match (self.driving, speed > 0) {
             (None, true) => {
                 self.driving = Some(ns);
@@ -535,6 +598,10 @@ impl<'s> BenchWorld<'s> {
                 }
             }
             _ => {}
+        }
+        if pivot && self.phase == Phase::ToDoor {
+            self.stepping = Some(ns);
+            self.world.begin_avoid_nearest();
         }
     }
 
@@ -712,7 +779,10 @@ impl<'s> BenchWorld<'s> {
         };
         let pressed = self.world.bumper_read().any();
         if !chatter && self.closed(pin::BUMPER) != pressed {
-            let settled = self.bounce(out, pin::BUMPER, pressed, ns);
+            // A bumper that answers after the scenario's read latency: its contact shows that
+            // much later.
+            let at = ns + self.sc.bumper_latency_ms * 1_000_000;
+            let settled = self.bounce(out, pin::BUMPER, pressed, at);
             if pressed && self.driving.is_some() && self.reactions[1].pending.is_none() {
                 self.reactions[1].pending = Some(settled);
             }
@@ -750,9 +820,9 @@ impl<'s> BenchWorld<'s> {
         out
     }
 
-    /// Whether the motors drive now.
-    pub fn driving(&self) -> bool {
-        self.driving.is_some()
+    /// Whether any wheel turns now (driving, stepping around, reversing).
+    pub fn motors_on(&self) -> bool {
+        self.stby && (0..2).any(|i| self.duties[i] > 0 && self.dirs[i][0] != self.dirs[i][1])
     }
 
     /// At the end of a run: an obstacle shown to a driving robot that never stopped for it.
@@ -844,6 +914,45 @@ mod tests {
         let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
         read_sonar(&mut bw, Value::Mm(380));
         assert_eq!(bw.misreads.len(), 1);
+    }
+
+    #[test]
+    fn a_slow_sonar_ends_its_echo_after_its_read_latency() {
+        let rise_of = |latency: &str| {
+            let json = format!(
+                r#"{{"name": "t", "sonar": {{"latency_ms": {latency}}},
+                    "interferences": [{{"kind": "box", "at_s": 0.0, "ahead_m": 0.35, "hold_s": 10.0}}]}}"#
+            );
+            let sc =
+                psmpa_sim::load::parse(std::path::Path::new("t.json"), json.as_bytes()).unwrap();
+            let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+            bw.output(pin::TRIGGER, true, 0);
+            let sets = bw.output(pin::TRIGGER, false, 10_000);
+            let echo: Vec<u64> = sets
+                .iter()
+                .filter(|(p, _, _)| *p == pin::ECHO)
+                .map(|(_, _, at)| *at)
+                .collect();
+            (echo[0], echo[1] - echo[0])
+        };
+        let (rise, width) = rise_of("0");
+        assert_eq!(rise, 10_000 + ECHO_DELAY_NS);
+        assert_eq!(width, echo_ns(350));
+        // 40 ms: the same width, ending 40 ms after the trigger.
+        let (rise, width) = rise_of("40");
+        assert_eq!(width, echo_ns(350));
+        assert_eq!(rise + width, 10_000 + 40_000_000);
+    }
+
+    #[test]
+    fn a_trigger_too_short_or_never_raised_fires_nothing() {
+        let sc = boxed();
+        let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+        // The pin becoming an output, low, at boot.
+        assert!(bw.output(pin::TRIGGER, false, 1_000).is_empty());
+        bw.output(pin::TRIGGER, true, 2_000);
+        assert!(bw.output(pin::TRIGGER, false, 11_999).is_empty());
+        assert!(bw.sent.is_empty());
     }
 
     #[test]
