@@ -15,8 +15,9 @@
 //!
 //! Beside the log, the sink keeps each sensor's health in [`HEALTH`] (samples delivered and
 //! lost, faults, the longest gap between two samples) and logs it at `info` when the sensor
-//! is switched off: `sonar off: 142 samples, 0 lost, longest gap 100000 us`. A debugger, or
-//! the bench in the loop, reads [`HEALTH`] from RAM by its symbol.
+//! is switched off: `sonar off: 142 samples, 0 lost, longest gap 100000 us`. A debugger reads
+//! [`HEALTH`] from RAM by its symbol; the bench in the loop reports it as a diagnostic and
+//! judges nothing by it (a judge must not read what the judged writes for it).
 
 use defmt::{debug, info, trace, warn};
 use embassy_time::Instant;
