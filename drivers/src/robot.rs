@@ -20,9 +20,9 @@
 //!   (the sonar sees something, the bumper is pressed). With [`Settings::avoid`] of 0 it
 //!   waits and drives on when the precondition holds again; otherwise it steps around the
 //!   obstacle ([`Settings::avoid`] long: it turns away, passes it, turns back to its heading)
-//!   and drives on, taking a violation seen before the step's end as the obstacle it passed.
-//!   Braked and stepping time does not count. Accurate to the speed's calibration and the
-//!   braking distance.
+//!   and drives on, taking a violation seen before the step's end (and [`STEP_SETTLE`] after
+//!   it) as the obstacle it passed. Braked and stepping time does not count. Accurate to the
+//!   speed's calibration and the braking distance.
 //! * "open door", "open back door": asks for a `handle` reading, stops if the door is locked,
 //!   then pushes the door open: a timed drive.
 //! * "enter kitchen", "enter by back door": a timed drive through the door.
@@ -89,6 +89,10 @@ psmpa_core::include_mission!(
 
 /// The runtime of robot `P` (a [`FetchTea`]), tracing into `T`.
 pub type FetchTeaRuntime<'r, P, T = ()> = fetch_tea::Runtime<'r, P, T>;
+
+/// After a side step, readings taken this soon still show the obstacle it went around (a
+/// bump switch settling open): the walk takes them for that one.
+pub const STEP_SETTLE: Duration = Duration::from_ticks(crate::switch::DEBOUNCE.as_ticks() * 2);
 
 /// [`SensorFault::Device`] code: a pin reported an error.
 pub const PIN_FAULT: u8 = 1;
@@ -584,7 +588,9 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                 if self.side_step().await.is_err() {
                     return self.stop(Outcome::Failure);
                 }
-                passed = Instant::now();
+                // A switch the step released reads open within two debounce times (its
+                // bounces end within one): a read before that may still show the contact.
+                passed = Instant::now().saturating_add(STEP_SETTLE);
                 version = io.version();
                 continue;
             }
