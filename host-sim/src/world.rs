@@ -40,6 +40,15 @@ use psmpa_core::TraceHash;
 
 use crate::scenario::{FaultKind, Interference, Kind, MAX_INTERFERENCES, Scenario, to_mm};
 
+/// How far from a door a robot that dead-reckons its walk may stop and be at it, µm: the
+/// door's marker is a reflective strip 40 mm long, centred on the door, which a marker sensor
+/// sees from anywhere above it.
+pub const ARRIVAL_UM: i64 = 20_000;
+
+/// How long a body that pushes must drive at the kitchen door to push it open, or to go
+/// through it once open, ms ([`World::push_door`]).
+pub const DOOR_PUSH_MS: u64 = 1_000;
+
 /// The world's devices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Device {
@@ -469,6 +478,11 @@ fn div_ceil(a: i64, b: i64) -> u64 {
 }
 
 impl<L: WorldLog> State<L> {
+    /// Whether the kitchen door's handle gives: the robot stands there, and it is not locked.
+    fn door_gives(&self, sc: &Scenario) -> bool {
+        self.pos_um == sc.door_um && !sc.door_locked
+    }
+
     /// The sonar's fault now, if it has one.
     fn fault(&self, sc: &Scenario) -> Option<FaultKind> {
         sc.fault
@@ -1159,6 +1173,47 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         })
     }
 
+    /// A robot that dead-reckons its walk (the bench's wheeled one) stopped on its way to
+    /// `place`: within [`ARRIVAL_UM`] of it with no obstacle between, it stands there
+    /// ([`dock`](Self::dock)) and has arrived ([`arrived`](Self::arrived), once). Whether it
+    /// has arrived at `place`.
+    pub fn stopped_near(&self, place: Place) -> bool {
+        let arrived = self.view(|s, sc| s.pos_um == place.at_um(sc) && s.at_door_ms.is_some());
+        if arrived || !self.dock(place, ARRIVAL_UM) {
+            return arrived;
+        }
+        self.arrived(place);
+        true
+    }
+
+    /// Whether the robot stands at the kitchen door, having arrived there: its door's marker
+    /// is in view, and its handle gives when the door is not locked.
+    pub fn at_kitchen_door(&self) -> bool {
+        self.view(|s, sc| s.pos_um == sc.door_um && s.at_door_ms.is_some())
+    }
+
+    /// Whether the kitchen door's handle gives under the robot's hand now: it stands at the
+    /// door and the door is not locked (what [`handle`](Self::handle) reads, with no sample).
+    pub fn door_gives(&self) -> bool {
+        self.view(|s, sc| s.door_gives(sc))
+    }
+
+    /// A body that pushes (the bench's wheeled robot) drove for `ms` at the kitchen door: a
+    /// drive of at least [`DOOR_PUSH_MS`] pushes the closed door open when its handle gives
+    /// (not locked), and goes through the open door into the kitchen. A shorter one, or one
+    /// anywhere else, does nothing.
+    pub fn push_door(&self, ms: u64) {
+        if ms < DOOR_PUSH_MS || !self.at_kitchen_door() {
+            return;
+        }
+        let (open, locked) = self.view(|s, sc| (s.door_open, sc.door_locked));
+        if !open && !locked {
+            self.open_door(Place::KitchenDoor);
+        } else if open {
+            self.enter_kitchen();
+        }
+    }
+
     /// Opens a door.
     pub fn open_door(&self, place: Place) {
         self.with(|s, _| {
@@ -1172,7 +1227,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     pub fn handle(&self) -> bool {
         self.with(|s, sc| {
             let at_door = s.pos_um == sc.door_um;
-            let gives = at_door && !sc.door_locked;
+            let gives = s.door_gives(sc);
             s.emit(WorldEvent::Sample(Device::Handle, u32::from(gives)));
             s.delivered(Device::Handle);
             if at_door && sc.door_locked {

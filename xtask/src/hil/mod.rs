@@ -336,6 +336,8 @@ pub struct Report {
     pub host: Option<HostOutcome>,
     /// How the firmware said its task ended (its log's last word on it), if it did.
     pub mission: Option<String>,
+    /// Whether the chip's own log says its mission reached its goal.
+    pub mission_succeeded: bool,
     /// Resets by the watchdog.
     pub watchdog_resets: u32,
     /// Emulated time, s.
@@ -976,6 +978,10 @@ fn report(
         bound_cycles,
         bound_source: "budget".to_owned(),
         host: None,
+        mission_succeeded: c
+            .ending
+            .as_deref()
+            .is_some_and(|e| e.contains("Fetch Tea: goal reached")),
         mission: c.ending.clone(),
         watchdog_resets: c.resets.len() as u32,
         emulated_s: now as f64 / 1e9,

@@ -31,14 +31,14 @@
 //! * **Reactions** are timed from the rig's side: an echo that means an obstacle within the
 //!   threshold (by more than the reading's timing error), or the bump switch settling closed,
 //!   while the robot drives, must be followed by the motor pins stopping.
-//! * **Doors.** A robot that stops within 20 mm of the kitchen door (its dead reckoning's
-//!   error) is at the door. There, a drive of at least a second with the door closed pushes
-//!   it open (if the handle gave) and one with the door open enters the kitchen.
+//! * **Doors and side steps** are the world's rules ([`World::stopped_near`],
+//!   [`World::push_door`], [`World::begin_avoid_nearest`]); this module only maps the motor
+//!   pins to them: a stop on the way may be an arrival (within 20 mm, its dead reckoning's
+//!   error), a drive at the door a push, a pivot a side step.
 //!
-//! Where the body differs from the simulator's NAO: the wheeled robot brakes and waits for
-//! the path to clear instead of stepping around an obstacle (so an obstacle stays until the
-//! person takes it away, and a run takes longer), and it has no planner on board (at a
-//! locked door it stops: the mission fails instead of taking the back door).
+//! Where the body differs from the simulator's NAO is listed in one place,
+//! `super::body_difference`; it has no planner on board either (at a locked door it stops
+//! where psmpa-sim's robot takes the back door: the kitchen door is reached by both).
 
 use std::collections::VecDeque;
 
@@ -75,12 +75,6 @@ pub const ECHO_DELAY_NS: u64 = 250_000;
 pub const TOO_NEAR_MM: u32 = 10;
 /// The module's own pulse when no echo returns.
 pub const NO_ECHO_NS: u64 = 38_000_000;
-/// How far from the kitchen door a robot that stopped counts as at it, µm: the door's marker
-/// is a reflective strip 40 mm long, centred on the door, which the marker sensor sees from
-/// anywhere above it.
-pub const ARRIVAL_UM: i64 = 20_000;
-/// A drive at the door at least this long pushes the door open, or goes through it.
-pub const DOOR_DRIVE_NS: u64 = 1_000_000_000;
 /// Cycles of the RP2040's 125 MHz clock a nanosecond: 8 ns a cycle.
 pub const NS_PER_CYCLE: u64 = 8;
 
@@ -172,15 +166,6 @@ impl Health {
     }
 }
 
-/// Where the robot is in its task, as the world sees it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Phase {
-    /// Walking to the kitchen door (or stopped on the way).
-    ToDoor,
-    /// At the kitchen door.
-    AtDoor,
-}
-
 /// What the rig does to an input from an instant on: drives it low or high, or leaves it open
 /// (`None`: a switch that is open, a marker that sees nothing), so that it reads what the
 /// chip's pad gives it.
@@ -260,8 +245,7 @@ pub struct BenchWorld<'s> {
     /// Since when the wheels turn the robot around an obstacle (the world's side step).
     stepping: Option<u64>,
     speed: u16,
-    phase: Phase,
-    door_open: bool,
+
     /// The last echoes sent, newest last.
     sent: VecDeque<Sent>,
     /// The trigger's level.
@@ -324,8 +308,7 @@ impl<'s> BenchWorld<'s> {
             driving: None,
             stepping: None,
             speed: 1000,
-            phase: Phase::ToDoor,
-            door_open: false,
+
             sent: VecDeque::new(),
             trigger_high: false,
             watch: None,
@@ -573,7 +556,7 @@ impl<'s> BenchWorld<'s> {
             (None, true) => {
                 self.driving = Some(ns);
                 self.speed = speed;
-                if self.phase == Phase::ToDoor {
+                if !self.world.at_kitchen_door() {
                     self.world.set_speed(speed);
                     self.world.walk_to(Place::KitchenDoor);
                 }
@@ -593,38 +576,25 @@ impl<'s> BenchWorld<'s> {
             }
             (Some(_), true) if speed != self.speed => {
                 self.speed = speed;
-                if self.phase == Phase::ToDoor {
+                if !self.world.at_kitchen_door() {
                     self.world.set_speed(speed);
                 }
             }
             _ => {}
         }
-        if pivot && self.phase == Phase::ToDoor {
+        if pivot && !self.world.at_kitchen_door() {
             self.stepping = Some(ns);
             self.world.begin_avoid_nearest();
         }
     }
 
-    /// The robot stopped after driving since `since`.
+    /// The robot stopped after driving since `since`: on its way, it may have arrived; at
+    /// the door, it pushed the door for that long (the world's rules for a body that pushes).
     fn stopped(&mut self, since: u64, ns: u64) {
-        match self.phase {
-            Phase::ToDoor => {
-                if self.world.dock(Place::KitchenDoor, ARRIVAL_UM) {
-                    self.world.arrived(Place::KitchenDoor);
-                    self.phase = Phase::AtDoor;
-                }
-            }
-            Phase::AtDoor if ns.saturating_sub(since) >= DOOR_DRIVE_NS => {
-                if !self.door_open {
-                    if !self.sc.door_locked {
-                        self.world.open_door(Place::KitchenDoor);
-                        self.door_open = true;
-                    }
-                } else {
-                    self.world.enter_kitchen();
-                }
-            }
-            Phase::AtDoor => {}
+        if self.world.at_kitchen_door() {
+            self.world.push_door(ns.saturating_sub(since) / 1_000_000);
+        } else {
+            self.world.stopped_near(Place::KitchenDoor);
         }
     }
 
@@ -787,12 +757,11 @@ impl<'s> BenchWorld<'s> {
                 self.reactions[1].pending = Some(settled);
             }
         }
-        let (_, at_door, _) = self.world.legs(Place::KitchenDoor);
-        let seen = at_door && self.phase == Phase::AtDoor;
+        let seen = self.world.at_kitchen_door();
         if self.closed(pin::MARKER) != seen {
             self.set(out, pin::MARKER, seen.then_some(false), ns);
         }
-        let gives = seen && !self.sc.door_locked;
+        let gives = seen && self.world.door_gives();
         if self.closed(pin::HANDLE) != gives {
             self.bounce(out, pin::HANDLE, gives, ns);
         }
@@ -953,6 +922,68 @@ mod tests {
         bw.output(pin::TRIGGER, true, 2_000);
         assert!(bw.output(pin::TRIGGER, false, 11_999).is_empty());
         assert!(bw.sent.is_empty());
+    }
+
+    #[test]
+    fn the_wheels_arrive_push_the_door_and_go_through_by_the_worlds_rules() {
+        let sc = psmpa_sim::load::parse(
+            std::path::Path::new("t.json"),
+            br#"{"name": "t", "door_m": 0.1, "robot": {"speed_mps": 0.1}, "interferences": []}"#,
+        )
+        .unwrap();
+        let events = psmpa_sim::backend::simulate(
+            async {
+                let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
+                let mut t = 0;
+                // Drives for `ms`, then brakes.
+                let mut drive = async |bw: &mut BenchWorld<'_>, ms: u64| {
+                    for p in [pin::STBY, pin::LEFT[0], pin::RIGHT[0]] {
+                        bw.output(p, true, t);
+                    }
+                    bw.duty(pin::LEFT[2], 600, t);
+                    bw.duty(pin::RIGHT[2], 600, t);
+                    t += ms * 1_000_000;
+                    embassy_time::Timer::at(Instant::from_millis(t / 1_000_000)).await;
+                    bw.output(pin::LEFT[1], true, t);
+                    bw.output(pin::RIGHT[1], true, t);
+                    bw.output(pin::LEFT[1], false, t);
+                    bw.output(pin::RIGHT[1], false, t);
+                    bw.duty(pin::LEFT[2], 0, t);
+                    bw.duty(pin::RIGHT[2], 0, t);
+                };
+                // 99 of the 100 mm by dead reckoning: within 20 mm, at the door.
+                drive(&mut bw, 990).await;
+                assert!(bw.world().at_kitchen_door());
+                assert!(bw.closed(pin::MARKER) && bw.closed(pin::HANDLE));
+                // Half a second of pushing does not open it; a second does; a second more
+                // goes through.
+                drive(&mut bw, 500).await;
+                drive(&mut bw, 1_000).await;
+                drive(&mut bw, 1_000).await;
+                bw.into_events()
+            },
+            embassy_time::Duration::from_secs(10),
+        )
+        .unwrap()
+        .output;
+        let doors: Vec<_> = events
+            .iter()
+            .filter(|(_, _, e)| {
+                matches!(
+                    e,
+                    WorldEvent::Arrived(_) | WorldEvent::DoorOpened(_) | WorldEvent::InKitchen
+                )
+            })
+            .map(|(ms, _, e)| (*ms, *e))
+            .collect();
+        assert_eq!(
+            doors,
+            [
+                (990, WorldEvent::Arrived(Place::KitchenDoor)),
+                (2_490, WorldEvent::DoorOpened(Place::KitchenDoor)),
+                (3_490, WorldEvent::InKitchen)
+            ]
+        );
     }
 
     #[test]
