@@ -21,8 +21,9 @@
 //!   waits and drives on when the precondition holds again; otherwise it steps around the
 //!   obstacle ([`Settings::avoid`] long: it turns away, passes it, turns back to its heading)
 //!   and drives on, taking a violation seen before the step's end (and [`STEP_SETTLE`] after
-//!   it) as the obstacle it passed. Braked and stepping time does not count. Accurate to the
-//!   speed's calibration and the braking distance.
+//!   it) as the obstacle it passed. Braked and stepping time does not count, nor the time
+//!   from a bumper read that found a contact to the brake (the obstacle held the wheels).
+//!   Accurate to the speed's calibration and the braking distance.
 //! * "open door", "open back door": asks for a `handle` reading, stops if the door is locked,
 //!   then pushes the door open: a timed drive.
 //! * "enter kitchen", "enter by back door": a timed drive through the door.
@@ -598,7 +599,14 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
             let arrival = go.then(|| since.saturating_add(left));
             let changed = io.changed_until(version, arrival).await;
             if go {
-                let driven = Instant::now().saturating_duration_since(since);
+                // Wheels held by what the bumper touched do not move the robot: a contact
+                // read since this stretch began ends the driving at the read's instant.
+                let held = io
+                    .sample(fetch_tea::Sensor::Bumper.id())
+                    .filter(|e| e.value == Value::Bool(true) && e.at >= since)
+                    .map(|e| e.at);
+                let until = held.unwrap_or_else(Instant::now);
+                let driven = until.saturating_duration_since(since);
                 left = left.checked_sub(driven).unwrap_or(Duration::from_ticks(0));
             }
             if left.as_ticks() == 0 {

@@ -214,11 +214,14 @@ fn a_bump_during_the_walk_brakes_once_and_the_walk_resumes_after_it() {
         );
         assert_eq!(wheel.at(restored), walking());
     }
-    // Braked time does not count as walking: the walk lasts that much longer.
+    // Braked time does not count as walking, nor the time the bumper held the wheels from the
+    // read that found the contact (it began at the last edge, 3,030 ms) to the brake: the walk
+    // lasts that much longer.
     let (_, left) = run.state(walk);
+    let held = d;
     assert_eq!(
         (left - drove(&run)).as_millis(),
-        walk_ms() + (restored - violated).as_millis()
+        walk_ms() + held + (restored - violated).as_millis()
     );
 }
 
@@ -257,14 +260,15 @@ fn with_a_side_step_the_walk_goes_around_a_bump_and_drives_on() {
     assert_eq!(run.left.at(violated + ms(750)), walking());
     assert_eq!(run.right.at(violated + ms(750)), Wheeling::Other);
     // Then it drives on: the violation it saw was the obstacle it went around, and the
-    // bumper was freed meanwhile. The step does not count as walking.
+    // bumper was freed meanwhile. The step does not count as walking, nor the debounce time
+    // the bumper held the wheels before the brake.
     for wheel in [&run.left, &run.right] {
         assert_eq!(wheel.at(violated + avoid), walking());
     }
     let (_, left) = run.state(walk);
     assert_eq!(
         (left - drove(&run)).as_millis(),
-        walk_ms() + avoid.as_millis()
+        walk_ms() + DEBOUNCE.as_millis() + avoid.as_millis()
     );
     // Once: one violation.
     let violations = run
