@@ -20,8 +20,8 @@
 //!   (the sonar sees something, the bumper is pressed). With [`Settings::avoid`] of 0 it
 //!   waits and drives on when the precondition holds again; otherwise it steps around the
 //!   obstacle ([`Settings::avoid`] long: it turns away, passes it, turns back to its heading)
-//!   and drives on, taking a violation seen before the step's end (and [`STEP_SETTLE`] after
-//!   it) as the obstacle it passed. Braked and stepping time does not count, nor the time
+//!   and drives on, taking a violation seen before the step's end (a bumper contact up to
+//!   [`STEP_SETTLE`] after it) as the obstacle it passed. Braked and stepping time does not count, nor the time
 //!   from a bumper read that found a contact to the brake (the obstacle held the wheels).
 //!   Accurate to the speed's calibration and the braking distance.
 //! * "open door", "open back door": asks for a `handle` reading, stops if the door is locked,
@@ -91,8 +91,9 @@ psmpa_core::include_mission!(
 /// The runtime of robot `P` (a [`FetchTea`]), tracing into `T`.
 pub type FetchTeaRuntime<'r, P, T = ()> = fetch_tea::Runtime<'r, P, T>;
 
-/// After a side step, readings taken this soon still show the obstacle it went around (a
-/// bump switch settling open): the walk takes them for that one.
+/// After a side step, switch readings taken this soon still show the obstacle it went around
+/// (a bump switch reads open within two debounce times; its bounces end within one): the walk
+/// takes them for that one. A sonar reading that comes after the step sees what is there.
 pub const STEP_SETTLE: Duration = Duration::from_ticks(crate::switch::DEBOUNCE.as_ticks() * 2);
 
 /// [`SensorFault::Device`] code: a pin reported an error.
@@ -565,10 +566,20 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         let duty = self.settings.walk_permille;
         let mut version = io.version();
         let mut moving = None;
-        // A violation last seen before this instant is one a side step went around.
+        // When the last side step ended: a violation last seen before it (and a contact
+        // before the bumper settled) is the obstacle it went around.
         let mut passed = Instant::from_ticks(0);
+        // The sonar's last reading when it ended: one after it sees what is there now.
+        let mut stepped_sonar = None;
+        let sonar = fetch_tea::Sensor::Sonar.id();
         loop {
-            let violation = io.violation().filter(|v| v.last_seen >= passed);
+            let seen = io.sample(sonar).is_some_and(|e| {
+                stepped_sonar.is_none_or(|at| e.at > at)
+                    && matches!(e.value, Value::Mm(mm) if mm <= i32::from(self.settings.clearance_mm))
+            });
+            let violation = io
+                .violation()
+                .filter(|v| seen || v.last_seen >= passed.saturating_add(STEP_SETTLE));
             let go = violation.is_none();
             if moving != Some(go) {
                 let set = if go {
@@ -589,9 +600,8 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                 if self.side_step().await.is_err() {
                     return self.stop(Outcome::Failure);
                 }
-                // A switch the step released reads open within two debounce times (its
-                // bounces end within one): a read before that may still show the contact.
-                passed = Instant::now().saturating_add(STEP_SETTLE);
+                passed = Instant::now();
+                stepped_sonar = io.sample(sonar).map(|e| e.at);
                 version = io.version();
                 continue;
             }

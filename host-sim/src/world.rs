@@ -343,12 +343,22 @@ impl Echo {
     pub const fn mm(&self) -> Option<u32> {
         self.mm
     }
+
+    /// The obstacle the echo came from (the first, if several stand at that distance).
+    pub fn came_from(&self) -> Option<u8> {
+        bits(self.from).next().map(|i| i as u8)
+    }
 }
 
 impl Touch {
     /// Whether the read felt an obstacle: a bump switch that is closed.
     pub const fn any(&self) -> bool {
         self.touching != 0
+    }
+
+    /// The obstacle felt (the first, if several).
+    pub fn felt(&self) -> Option<u8> {
+        bits(self.touching).next().map(|i| i as u8)
     }
 }
 
@@ -1119,23 +1129,28 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
 
     /// Starts a side step around the nearest registered obstacle ahead.
     pub fn begin_avoid(&self) {
-        self.side_step(true);
+        self.side_step(None);
     }
 
-    /// Starts a side step around the nearest obstacle ahead, registered or not: a body whose
-    /// wheels turn it around whatever stands in front of it (the bench's robot, whose
-    /// registrations reach the world from its recording after its wheels have moved).
-    pub fn begin_avoid_nearest(&self) {
-        self.side_step(false);
+    /// Starts a side step around obstacle `shown` if it is still there and ahead: the one a
+    /// body's sensors were last shown (the bench's robot, whose registrations reach the world
+    /// from its recording after its wheels have moved); else as [`begin_avoid`](Self::begin_avoid).
+    pub fn begin_avoid_around(&self, shown: Option<u8>) {
+        self.side_step(shown);
     }
 
-    fn side_step(&self, sensed_only: bool) {
+    fn side_step(&self, shown: Option<u8>) {
         self.with(|s, sc| {
-            let target = s
-                .present_obstacles()
-                .filter(|(_, o)| o.pos_um >= s.pos_um && (o.sensed || !sensed_only))
-                .min_by_key(|(_, o)| o.pos_um)
-                .map(|(i, _)| i as u8);
+            let ahead = |o: &Obstacle| o.pos_um >= s.pos_um;
+            let target = shown
+                .filter(|&i| s.present & 1 << i != 0)
+                .filter(|&i| s.obstacles.get(usize::from(i)).is_some_and(ahead))
+                .or_else(|| {
+                    s.present_obstacles()
+                        .filter(|(_, o)| ahead(o) && o.sensed)
+                        .min_by_key(|(_, o)| o.pos_um)
+                        .map(|(i, _)| i as u8)
+                });
             s.motion = Motion::Avoiding {
                 // A side step takes time, so that it cannot repeat at one instant.
                 left_ms: sc.avoid_ms.max(1),

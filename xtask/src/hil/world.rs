@@ -32,7 +32,7 @@
 //!   threshold (by more than the reading's timing error), or the bump switch settling closed,
 //!   while the robot drives, must be followed by the motor pins stopping.
 //! * **Doors and side steps** are the world's rules ([`World::stopped_near`],
-//!   [`World::push_door`], [`World::begin_avoid_nearest`]); this module only maps the motor
+//!   [`World::push_door`], [`World::begin_avoid_around`]); this module only maps the motor
 //!   pins to them: a stop on the way may be an arrival (within 20 mm, its dead reckoning's
 //!   error), a drive at the door a push, a pivot a side step.
 //!
@@ -250,6 +250,9 @@ pub struct BenchWorld<'s> {
     sent: VecDeque<Sent>,
     /// The trigger's level.
     trigger_high: bool,
+    /// The obstacle the pins last showed the robot (an echo within the threshold, the bump
+    /// switch closing): what a side step then goes around.
+    shown: Option<u8>,
     /// The fall of an echo that clearly means an obstacle, until the robot answers or the
     /// reaction is pending.
     watch: Option<u64>,
@@ -311,6 +314,7 @@ impl<'s> BenchWorld<'s> {
 
             sent: VecDeque::new(),
             trigger_high: false,
+            shown: None,
             watch: None,
             levels,
             bumper_closed: Vec::new(),
@@ -520,6 +524,9 @@ impl<'s> BenchWorld<'s> {
         if self.sc.sonar.registers(clearly) && self.watch.is_none() {
             self.watch = Some(rise + width);
         }
+        if self.sc.sonar.registers(i64::from(mm)) {
+            self.shown = echo.came_from().or(self.shown);
+        }
     }
 
     /// An echo being watched has fallen by `ns`: if the robot drives, its reaction is pending.
@@ -539,7 +546,7 @@ impl<'s> BenchWorld<'s> {
     }
 
     /// Starts, stops or re-speeds the walk from the motor pins. A pivot on the way to the
-    /// door starts the world's side step around the nearest obstacle ahead; until it is over
+    /// door starts the world's side step around the obstacle the pins last showed it; until it is over
     /// and the wheels no longer turn the robot, the wheels are the step's, not the walk's.
     fn motion(&mut self, ns: u64) {
         self.watched(ns);
@@ -584,7 +591,7 @@ impl<'s> BenchWorld<'s> {
         }
         if pivot && !self.world.at_kitchen_door() {
             self.stepping = Some(ns);
-            self.world.begin_avoid_nearest();
+            self.world.begin_avoid_around(self.shown);
         }
     }
 
@@ -747,7 +754,11 @@ impl<'s> BenchWorld<'s> {
             }) => ns >= at_ns && ns < until_ns,
             _ => false,
         };
-        let pressed = self.world.bumper_read().any();
+        let touch = self.world.bumper_read();
+        let pressed = touch.any();
+        if pressed {
+            self.shown = touch.felt().or(self.shown);
+        }
         if !chatter && self.closed(pin::BUMPER) != pressed {
             // A bumper that answers after the scenario's read latency: its contact shows that
             // much later.
