@@ -62,16 +62,20 @@ pub enum Fault {
 }
 
 impl Fault {
-    /// When it strikes, ns.
-    pub fn at_ns(&self) -> u64 {
-        let s = match *self {
+    /// When it strikes, s.
+    pub fn at_s(&self) -> f64 {
+        match *self {
             Self::NoEcho { at_s }
             | Self::EchoStuckHigh { at_s }
             | Self::BumperChatter { at_s, .. }
             | Self::Hang { at_s }
             | Self::Panic { at_s } => at_s,
-        };
-        (s.max(0.0) * 1e9) as u64
+        }
+    }
+
+    /// When it strikes, ns.
+    pub fn at_ns(&self) -> u64 {
+        (self.at_s().max(0.0) * 1e9) as u64
     }
 
     /// Its name in the file.
@@ -193,18 +197,65 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<FaultFile, String> {
         fault: raw.fault.fault().map_err(bad)?,
         expect: raw.expect,
     };
+    let at = |e: String| format!("{}: {e}", path.display());
+    if file.name.trim().is_empty() {
+        return Err(at("name: empty".to_owned()));
+    }
+    let at_s = file.fault.at_s();
+    if !(0.0..=MAX_AT_S).contains(&at_s) {
+        return Err(at(format!(
+            "fault.at_s {at_s}: from 0 to {MAX_AT_S} s (a day)"
+        )));
+    }
     if file.fault.at_ns() == 0 && !matches!(file.fault, Fault::NoEcho { .. }) {
-        return Err(format!("{}: fault.at_s must be above 0", path.display()));
+        return Err(at("fault.at_s must be above 0".to_owned()));
     }
     if let Fault::BumperChatter {
         for_s, every_us, ..
     } = file.fault
-        && (!(0.0..=60.0).contains(&for_s) || every_us == 0)
     {
-        return Err(format!(
-            "{}: a chatter lasts 0 to 60 s with at least 1 us between edges",
-            path.display()
-        ));
+        if !(0.0..=60.0).contains(&for_s) || every_us < MIN_CHATTER_US {
+            return Err(at(format!(
+                "a chatter lasts 0 to 60 s with at least {MIN_CHATTER_US} us between edges"
+            )));
+        }
+        let edges = for_s * 1e6 / every_us as f64;
+        if edges > MAX_CHATTER_EDGES as f64 {
+            return Err(at(format!(
+                "a chatter of {edges:.0} edges: the bench plays at most {MAX_CHATTER_EDGES} (each is a pin change the emulator plays)"
+            )));
+        }
+    }
+    for sensor in file.expect.sample_gap_max_ms.keys() {
+        if !["sonar", "bumper"].contains(&sensor.as_str()) {
+            return Err(at(format!(
+                "expect.sample_gap_max_ms: no sensor {sensor:?} on the bench's robot: sonar or bumper"
+            )));
+        }
     }
     Ok(file)
+}
+
+/// The latest a fault may strike, s: a day, as a scenario's longest run.
+pub const MAX_AT_S: f64 = 86_400.0;
+/// The shortest time between two edges of a chattering bumper, µs: faster than the chip's
+/// GPIO interrupt and the sensing poll it wakes can take them, every edge is one more pending
+/// interrupt.
+pub const MIN_CHATTER_US: u64 = 20;
+/// The most edges a chatter may make: each is a pin change the harness plays and logs.
+pub const MAX_CHATTER_EDGES: u64 = 200_000;
+
+impl FaultFile {
+    /// Whether the fault strikes within `sc`'s run: one later than its `max_s` never does.
+    pub fn fits(&self, sc: &psmpa_sim::scenario::Scenario) -> Result<(), String> {
+        let at_ms = (self.fault.at_s() * 1e3) as u64;
+        if at_ms >= sc.max_ms {
+            return Err(format!(
+                "fault.at_s {}: after its scenario's run ends (max_s {})",
+                self.fault.at_s(),
+                sc.max_ms as f64 / 1e3
+            ));
+        }
+        Ok(())
+    }
 }

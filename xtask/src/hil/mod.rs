@@ -125,12 +125,16 @@ fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
     };
     let mut plays = Vec::new();
     for file in files {
-        let bytes = std::fs::read(&file)
-            .map_err(|e| format!("{}: cannot read the file: {e}", file.display()))?;
+        // A regular file of at most 1 MiB: a FIFO would wait for ever, a device never end.
+        let bytes = read_input(&file, "scenario")?;
         if fault::is_fault_file(&bytes) {
             let f = fault::load(&file, &bytes)?;
-            let scenario = psmpa_sim::load::load(&f.scenario)
+            let scenario = read_input(&f.scenario, "scenario")
+                .and_then(|b| psmpa_sim::load::parse(&f.scenario, &b).map_err(|e| e.to_string()))
                 .map_err(|e| format!("{}: its scenario: {e}", file.display()))?;
+            playable(&scenario).map_err(|e| format!("{}: its scenario: {e}", file.display()))?;
+            f.fits(&scenario)
+                .map_err(|e| format!("{}: {e}", file.display()))?;
             plays.push(Play {
                 file,
                 scenario,
@@ -139,6 +143,7 @@ fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
             });
         } else {
             let scenario = psmpa_sim::load::parse(&file, &bytes).map_err(|e| e.to_string())?;
+            playable(&scenario).map_err(|e| format!("{}: {e}", file.display()))?;
             plays.push(Play {
                 file,
                 scenario,
@@ -148,6 +153,37 @@ fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
         }
     }
     Ok((plays, defaults))
+}
+
+/// Reads an input file as psmpa-sim does: a regular file of at most 1 MiB.
+fn read_input(path: &Path, what: &str) -> Result<Vec<u8>, String> {
+    if path.as_os_str().is_empty() {
+        return Err(format!("an empty path, not a {what} file"));
+    }
+    psmpa_sim::cli::files::read_input(path, what)
+}
+
+/// The shortest run the bench plays, ms: the chip boots and establishes its model first
+/// (42 ms), and a run must leave it time to act.
+pub const MIN_RUN_MS: u64 = 1_000;
+
+/// Whether the bench can play `sc`: a scenario psmpa-sim accepts that the bench cannot play
+/// faithfully is refused up front, saying why.
+fn playable(sc: &Scenario) -> Result<(), String> {
+    if sc.max_ms < MIN_RUN_MS {
+        return Err(format!(
+            "max_s {}: the bench plays runs of at least {} s (the chip boots and establishes its model first)",
+            sc.max_ms as f64 / 1e3,
+            MIN_RUN_MS / 1_000
+        ));
+    }
+    if to_mm(sc.door_um) < 1 {
+        return Err(
+            "door_m: the board's walk is whole millimetres; a door less than 1 mm away is no walk"
+                .to_owned(),
+        );
+    }
+    Ok(())
 }
 
 /// The `.json` files of `dir`, sorted.
@@ -1213,7 +1249,11 @@ fn expectations(
                 format!("the log spoke at {spoke} ns, before the motors went off at {off} ns"),
             ),
             (None, _) => check(false, "the motors never went off".to_owned()),
-            (Some(_), None) => {}
+            // A panic logs its message: a log that never spoke shows nothing of the order.
+            (Some(_), None) => check(
+                false,
+                "the log never spoke after the fault: which came first cannot be told".to_owned(),
+            ),
         }
     }
     for want in &e.log {
@@ -1848,6 +1888,116 @@ mod tests {
                 _ => panic!("{} was not refused as bad input", file.display()),
             }
         }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Whether `file` is refused as bad input, saying `says`, at once.
+    fn refused(file: &Path, says: &str) {
+        let started = std::time::Instant::now();
+        match run(&[file.to_path_buf()], true, Mode::Check) {
+            Ending::BadInput(e) => assert!(e.contains(says), "{}: {e}", file.display()),
+            _ => panic!("{} was not refused as bad input", file.display()),
+        }
+        // Refused before anything is read to its end or built: well within a second.
+        assert!(started.elapsed().as_secs() < 5, "{}", file.display());
+    }
+
+    #[test]
+    fn hostile_input_files_are_refused_in_one_line() {
+        let dir = std::env::temp_dir().join(format!("psmpa-hil-hostile-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // A FIFO would wait for a writer for ever; /dev/zero never ends.
+        let fifo = dir.join("fifo.json");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            refused(&fifo, "is a FIFO, not a scenario file");
+        }
+        refused(Path::new("/dev/zero"), "is a device, not a scenario file");
+        let write = |name: &str, text: &str| {
+            let p = dir.join(name);
+            std::fs::write(&p, text).unwrap();
+            p
+        };
+        let big = dir.join("big.json");
+        std::fs::write(&big, vec![b' '; (1 << 20) + 1]).unwrap();
+        refused(&big, "larger than 1 MiB");
+        // Scenarios psmpa-sim accepts that the bench cannot play.
+        refused(
+            &write(
+                "tiny.json",
+                r#"{"name": "t", "max_s": 0.001, "interferences": []}"#,
+            ),
+            "runs of at least 1 s",
+        );
+        refused(
+            &write(
+                "near.json",
+                r#"{"name": "t", "door_m": 0.000001, "interferences": []}"#,
+            ),
+            "less than 1 mm away",
+        );
+        // Fault files: the scenario a device, nonsense times, names and sensors, a chatter
+        // faster than the emulator plays.
+        let quiet = firmware::root().join("scenarios/quiet.json");
+        let fault = |name: &str, scenario: &Path, body: &str| {
+            write(
+                name,
+                &format!(
+                    r#"{{"name": "f", "scenario": {:?}, {body}}}"#,
+                    scenario.display().to_string()
+                ),
+            )
+        };
+        refused(
+            &fault(
+                "zero.json",
+                Path::new("/dev/zero"),
+                r#""fault": {"kind": "hang", "at_s": 1}, "expect": {}"#,
+            ),
+            "its scenario: /dev/zero: is a device",
+        );
+        for (name, body, says) in [
+            (
+                "late.json",
+                r#""fault": {"kind": "hang", "at_s": 1e300}, "expect": {}"#,
+                "a day",
+            ),
+            (
+                "negative.json",
+                r#""fault": {"kind": "hang", "at_s": -1}, "expect": {}"#,
+                "from 0",
+            ),
+            (
+                "after.json",
+                r#""fault": {"kind": "hang", "at_s": 700}, "expect": {}"#,
+                "after its scenario's run ends",
+            ),
+            (
+                "chatter.json",
+                r#""fault": {"kind": "bumper-chatter", "at_s": 1, "for_s": 2, "every_us": 1}, "expect": {}"#,
+                "at least 20 us between edges",
+            ),
+            (
+                "edges.json",
+                r#""fault": {"kind": "bumper-chatter", "at_s": 1, "for_s": 60, "every_us": 20}, "expect": {}"#,
+                "the bench plays at most",
+            ),
+            (
+                "sensor.json",
+                r#""fault": {"kind": "hang", "at_s": 1}, "expect": {"sample_gap_max_ms": {"lidar": 5}}"#,
+                "no sensor \"lidar\"",
+            ),
+        ] {
+            refused(&fault(name, &quiet, body), says);
+        }
+        let empty = write(
+            "empty-name.json",
+            &format!(
+                r#"{{"name": " ", "scenario": {:?}, "fault": {{"kind": "hang", "at_s": 1}}, "expect": {{}}}}"#,
+                quiet.display().to_string()
+            ),
+        );
+        refused(&empty, "name: empty");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
