@@ -81,6 +81,8 @@ pub enum RecordError {
     },
     /// A buffer too small for a frame was given to [`Frame::encode`].
     Buffer,
+    /// Its header gives a tick rate of 0: its frames' instants have no unit.
+    TickRate,
 }
 
 impl core::fmt::Display for RecordError {
@@ -95,6 +97,7 @@ impl core::fmt::Display for RecordError {
             Self::Corrupt { at } => write!(f, "the frame at byte {at} fails its checksum"),
             Self::Cut { at } => write!(f, "cut short in the item at byte {at}"),
             Self::Buffer => f.write_str("the buffer is smaller than a frame"),
+            Self::TickRate => f.write_str("its header gives a tick rate of 0 Hz"),
         }
     }
 }
@@ -158,7 +161,7 @@ impl Header {
         };
         let tick_hz = (u64_at(header, 19) & 0xFFFF_FFFF) as u32;
         if tick_hz == 0 {
-            return Err(RecordError::Corrupt { at: 19 });
+            return Err(RecordError::TickRate);
         }
         Ok(Self {
             width: byte(header, 10),
@@ -798,6 +801,17 @@ mod tests {
     #[test]
     fn the_check_value_is_zlib_s() {
         assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    }
+
+    #[test]
+    fn a_header_with_a_tick_rate_of_0_says_so() {
+        let mut header = Header::new(1, 7).encode();
+        header[19..23].copy_from_slice(&0u32.to_le_bytes());
+        assert_eq!(Header::decode(&header), Err(RecordError::TickRate));
+        assert_eq!(
+            std::format!("{}", RecordError::TickRate),
+            "its header gives a tick rate of 0 Hz"
+        );
     }
 
     #[test]

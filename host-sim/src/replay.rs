@@ -150,6 +150,9 @@ pub enum Source {
     },
 }
 
+/// The longest run a recording may hold, s: a day, as a scenario's `max_s`.
+pub const LONGEST_S: u64 = 86_400;
+
 /// The prologue's kind byte of a board's recording (after the architectures' 0 and 1).
 pub const BOARD: u8 = 2;
 
@@ -262,8 +265,17 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
             Frame::<1>::decode(&bytes[offset..], offset).map_err(|e| fail(e.to_string()))?;
         // In the host's ticks (a board counts 1 MHz): what it took less than one of them to do
         // comes at the same instant.
-        frame.ticks = (u128::from(frame.ticks) * u128::from(embassy_time::TICK_HZ)
-            / u128::from(header.tick_hz)) as u64;
+        let ticks = u128::from(frame.ticks) * u128::from(embassy_time::TICK_HZ)
+            / u128::from(header.tick_hz);
+        // No run lasts longer than a day (a scenario's longest): an instant beyond it would
+        // overflow the replay's clock.
+        if ticks > u128::from(LONGEST_S * embassy_time::TICK_HZ) {
+            return Err(fail(format!(
+                "the frame at byte {offset} is at {} s, after a day, the longest run",
+                u128::from(frame.ticks) / u128::from(header.tick_hz)
+            )));
+        }
+        frame.ticks = ticks as u64;
         frames.push(frame);
         offset += used;
     }

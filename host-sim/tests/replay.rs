@@ -156,6 +156,15 @@ fn a_file_that_is_not_a_whole_recording_is_refused() {
     let mut older = bytes[..19].to_vec();
     older[8] = 1;
     older.extend_from_slice(&bytes[record::HEADER_LEN..]);
+    // The first frame at the largest instant, its checksum made good.
+    let mut late = bytes.clone();
+    late[start + 1..start + 9].copy_from_slice(&u64::MAX.to_le_bytes());
+    let body = record::frame_len(1) - 4;
+    let crc = record::crc32(&late[start..start + body]);
+    late[start + body..start + body + 4].copy_from_slice(&crc.to_le_bytes());
+    // A header whose tick rate is 0: its instants have no unit.
+    let mut no_ticks = bytes.clone();
+    no_ticks[19..23].copy_from_slice(&0u32.to_le_bytes());
     let mut other = bytes.clone();
     // The prologue's scenario, changed, its checksum made good: another run's recording.
     let name_at = bytes.windows(7).position(|w| w == b"sonar-6").unwrap();
@@ -177,6 +186,8 @@ fn a_file_that_is_not_a_whole_recording_is_refused() {
         ),
         (write("other.rec", &other), "another mission"),
         (write("empty.rec", b""), "cut short"),
+        (write("no-ticks.rec", &no_ticks), "a tick rate of 0 Hz"),
+        (write("late.rec", &late), "after a day, the longest run"),
     ] {
         let (status, _, stderr) = replay(&path);
         assert_eq!(status, Some(2), "{}: {stderr}", path.display());
