@@ -102,6 +102,6 @@ step "psmpa-core and psmpa-model use no allocator"
 awk 'FNR == 1 { prev = "" }
      /extern crate (alloc|std)/ && prev !~ /cfg\((test|all\(feature = "std", not\(test\)\))\)/ { print FILENAME ":" FNR ": " $0; bad = 1 }
      { prev = $0 }
-     END { exit bad }' core/src/*.rs model/src/*.rs || { echo "core and model must not use alloc or std outside tests" >&2; exit 1; }
+     END { exit bad }' $(find core/src model/src -name '*.rs' | sort) || { echo "core and model must not use alloc or std outside tests" >&2; exit 1; }
 
 printf '\nall checks passed\n'
