@@ -81,11 +81,22 @@ cargo xtask qemu --inject-fault --expect-failure
 step "firmware size: flash, static RAM, stack high-water against budget and snapshot (the QEMU images and both boards)"
 cargo xtask size
 
+# The bench writes its figures into these pages: they must come out as committed (a
+# deterministic emulator: a figure that moved was not measured by this tree).
+figures=$(mktemp -d)
+cp README.md docs/firmware.md boards/README.md "$figures/"
+
 step "the bench: the Pico's firmware on an emulated RP2040 (rp2040js) against the project's world, every scenario and fault, judged from its pins and its flight recording against psmpa-sim and the committed cost budget"
 cargo xtask hil
 
 step "the bench can fail: images with planted bugs (a deaf sonar, a floating bumper, slow brakes, ...) must each fail it"
 cargo xtask hil --mutants
+
+step "the bench's figures on the pages are the ones it measured"
+for page in README.md docs/firmware.md boards/README.md; do
+  diff -u "$figures/$(basename "$page")" "$page" || { echo "$page: the bench's figures moved: commit what cargo xtask hil wrote" >&2; exit 1; }
+done
+rm -rf "$figures"
 
 step "firmware stack: static worst case from the binary, at least the high-water marks of QEMU and the bench"
 cargo xtask stack

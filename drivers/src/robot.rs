@@ -21,9 +21,9 @@
 //!   waits and drives on when the precondition holds again; otherwise it steps around the
 //!   obstacle ([`Settings::avoid`] long: it turns away, passes it, turns back to its heading)
 //!   and drives on, taking a violation seen before the step's end (a bumper contact up to
-//!   [`STEP_SETTLE`] after it) as the obstacle it passed. Braked and stepping time does not count, nor the time
-//!   from a bumper read that found a contact to the brake (the obstacle held the wheels).
-//!   Accurate to the speed's calibration and the braking distance.
+//!   [`STEP_SETTLE`] after it) as the obstacle it passed. Braked and stepping time does not
+//!   count, nor the time from a bumper read that found a contact to the brake (the obstacle
+//!   held the wheels). Accurate to the speed's calibration and the braking distance.
 //! * "open door", "open back door": asks for a `handle` reading, stops if the door is locked,
 //!   then pushes the door open: a timed drive.
 //! * "enter kitchen", "enter by back door": a timed drive through the door.

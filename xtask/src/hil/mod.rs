@@ -687,17 +687,12 @@ async fn co_simulate(
         Ok::<(), String>(())
     };
     send(harness, &mut c.pins, bw.chatter())?;
-    let plan = bound::cycles_of_us(u64::from(sc.plan_us));
-    let bounds = bound::bounds(
-        &budget.budget.with_plan(plan),
-        [sc.sonar.period_ms, sc.bumper_period_ms],
-    )
-    .ok();
+    let live_bounds = scenario_bounds(budget, sc).ok();
     loop {
         let finish = c
             .done
             .map_or(end_ns, |d| d.saturating_add(GRACE_NS).min(end_ns));
-        if now >= finish || (play.stop_at_failure && failing(&bw, &c, bounds, now)) {
+        if now >= finish || (play.stop_at_failure && failing(&bw, &c, live_bounds, now)) {
             break;
         }
         let mut stop = finish;
@@ -781,6 +776,19 @@ async fn co_simulate(
     let obstacles = bw.world().obstacles().to_vec();
     pins.world = bw.into_events();
     Ok((report, pins, obstacles))
+}
+
+/// The sonar's and the bumper's bounds in `sc` from `budget`, its declared planning time added
+/// to the deciding step.
+fn scenario_bounds(
+    budget: &Budget,
+    sc: &Scenario,
+) -> Result<[u64; 2], psmpa_core::timing::TimingError> {
+    let plan = bound::cycles_of_us(u64::from(sc.plan_us));
+    bound::bounds(
+        &budget.budget.with_plan(plan),
+        [sc.sonar.period_ms, sc.bumper_period_ms],
+    )
 }
 
 /// Whether a check has failed already, as far as a run in progress shows: a reading the pins
@@ -909,8 +917,7 @@ fn report(
     for over in costs.over(&budget.budget) {
         failures.push(format!("costs: {over}"));
     }
-    let periods = [sc.sonar.period_ms, sc.bumper_period_ms];
-    let bounds = bound::bounds(&budget.budget.with_plan(plan), periods);
+    let bounds = scenario_bounds(budget, sc);
     let ms = |ns: u64| ns as f64 / 1e6;
     let mut sample_gap_max_ms = BTreeMap::new();
     let mut reactions_cycles = BTreeMap::new();
@@ -1552,10 +1559,7 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
         // The new budget must bound every reaction the calibration measured.
         let new = Budget::of(measured);
         for ((r, _), p) in reports.iter().zip(&plays) {
-            let sc = &p.scenario;
-            let plan = bound::cycles_of_us(u64::from(sc.plan_us));
-            let periods = [sc.sonar.period_ms, sc.bumper_period_ms];
-            let bounds = match bound::bounds(&new.budget.with_plan(plan), periods) {
+            let bounds = match scenario_bounds(&new, &p.scenario) {
                 Ok(b) => b,
                 Err(e) => {
                     return Ending::Failed(format!(

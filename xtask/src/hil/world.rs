@@ -178,8 +178,6 @@ pub struct Reactions {
     pub pending: Option<u64>,
     /// The worst reaction measured, cycles.
     pub worst_cycles: Option<u64>,
-    /// How many were measured.
-    pub count: u32,
 }
 
 /// An echo the rig sent for one trigger.
@@ -242,8 +240,8 @@ pub struct BenchWorld<'s> {
     dirs: [[bool; 2]; 2],
     duties: [u16; 2],
     driving: Option<u64>,
-    /// Since when the wheels turn the robot around an obstacle (the world's side step).
-    stepping: Option<u64>,
+    /// The wheels turn the robot around an obstacle (the world's side step).
+    stepping: bool,
     speed: u16,
 
     /// The last echoes sent, newest last.
@@ -271,10 +269,6 @@ pub struct BenchWorld<'s> {
     /// Edges that showed an obstacle to a driving robot that never stopped for them: sensor,
     /// ns.
     pub unanswered: Vec<(usize, u64)>,
-    /// Input changes, for the pin log.
-    pub inputs: Vec<Set>,
-    /// When the robot stopped driving, ns (the last time).
-    pub stopped_ns: Option<u64>,
     /// What the recording says of each sensor.
     pub sampled: [Sampled; SLOTS],
     /// Readings that disagree with the pins: what the robot read, what the rig presented.
@@ -309,7 +303,7 @@ impl<'s> BenchWorld<'s> {
             dirs: [[false; 2]; 2],
             duties: [0; 2],
             driving: None,
-            stepping: None,
+            stepping: false,
             speed: 1000,
 
             sent: VecDeque::new(),
@@ -324,8 +318,6 @@ impl<'s> BenchWorld<'s> {
             tolerance_mm,
             reactions: [Reactions::default(); 2],
             unanswered: Vec::new(),
-            inputs: Vec::new(),
-            stopped_ns: None,
             sampled: Default::default(),
             misreads: Vec::new(),
             sensor_failed: None,
@@ -371,7 +363,6 @@ impl<'s> BenchWorld<'s> {
         if pin == pin::BUMPER {
             self.bumper_closed.push((at, level == Some(false)));
         }
-        self.inputs.push((pin, level, at));
         out.push((pin, level, at));
     }
 
@@ -551,12 +542,12 @@ impl<'s> BenchWorld<'s> {
     fn motion(&mut self, ns: u64) {
         self.watched(ns);
         let pivot = self.pivoting();
-        if self.stepping.is_some() {
+        if self.stepping {
             let (legs, _, _) = self.world.legs(Place::KitchenDoor);
             if pivot || matches!(legs, Motion::Avoiding { .. }) {
                 return;
             }
-            self.stepping = None;
+            self.stepping = false;
         }
         let speed = if pivot { 0 } else { self.wheel_speed() };
         match (self.driving, speed > 0) {
@@ -570,13 +561,11 @@ impl<'s> BenchWorld<'s> {
             }
             (Some(since), false) => {
                 self.driving = None;
-                self.stopped_ns = Some(ns);
                 self.world.stop();
                 for r in &mut self.reactions {
                     if let Some(edge) = r.pending.take() {
                         let cycles = ns.saturating_sub(edge) / NS_PER_CYCLE;
                         r.worst_cycles = r.worst_cycles.max(Some(cycles));
-                        r.count += 1;
                     }
                 }
                 self.stopped(since, ns);
@@ -590,7 +579,7 @@ impl<'s> BenchWorld<'s> {
             _ => {}
         }
         if pivot && !self.world.at_kitchen_door() {
-            self.stepping = Some(ns);
+            self.stepping = true;
             self.world.begin_avoid_around(self.shown);
         }
     }
