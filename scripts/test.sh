@@ -84,7 +84,7 @@ cargo xtask size
 # The bench writes its figures into these pages: they must come out as committed (a
 # deterministic emulator: a figure that moved was not measured by this tree).
 figures=$(mktemp -d)
-cp README.md docs/firmware.md boards/README.md "$figures/"
+cp --parents README.md docs/firmware.md boards/README.md "$figures/"
 
 step "the bench: the Pico's firmware on an emulated RP2040 (rp2040js) against the project's world, every scenario and fault, judged from its pins and its flight recording against psmpa-sim and the committed cost budget"
 cargo xtask hil
@@ -94,7 +94,7 @@ cargo xtask hil --mutants
 
 step "the bench's figures on the pages are the ones it measured"
 for page in README.md docs/firmware.md boards/README.md; do
-  diff -u "$figures/$(basename "$page")" "$page" || { echo "$page: the bench's figures moved: commit what cargo xtask hil wrote" >&2; exit 1; }
+  diff -u "$figures/$page" "$page" || { echo "$page: the bench's figures moved: commit what cargo xtask hil wrote" >&2; exit 1; }
 done
 rm -rf "$figures"
 
