@@ -26,6 +26,7 @@ mod size;
 mod stack;
 mod timing;
 mod trace;
+mod wcet;
 
 use std::process::ExitCode;
 
@@ -101,6 +102,16 @@ enum Task {
     /// Response-time analysis from step costs measured in QEMU on both machines: a latency
     /// bound per sensor, checked against every measured reaction; the tables also go to a
     /// JSON file.
+    /// Static worst-case execution times of the Pico image's jobs (cycles of the RP2040's
+    /// Cortex-M0+), from the binary: exit 1 naming any loop it cannot bound.
+    Wcet {
+        /// The board (only `pico`: the RP2040 image the bench runs).
+        #[arg(long, default_value = "pico", value_parser = ["pico"])]
+        board: String,
+        /// Print one JSON object on stdout.
+        #[arg(long)]
+        json: bool,
+    },
     Timing {
         /// Core clock the cycle counts of every machine are converted at (default: each
         /// machine's own, 25 MHz on mps2-an386, 20 MHz on mps2-an505).
@@ -160,6 +171,7 @@ fn main() -> ExitCode {
             json,
             expect_failure,
         } => timing::run(clock_hz, json).then_expect(expect_failure),
+        Task::Wcet { json, .. } => wcet::run(json),
         Task::Hil { .. } => Ok(()),
     };
     match result {

@@ -446,6 +446,8 @@ struct Function {
     calls: BTreeSet<u64>,
     /// Calls through registers not resolved to one target.
     sites: BTreeSet<Site>,
+    /// What each call or jump through a register resolved to, by the instruction's address.
+    at: BTreeMap<u64, BTreeSet<Resolved>>,
 }
 
 /// The firmware's functions and what its pointers may reach.
@@ -1280,7 +1282,9 @@ impl Program {
                     continue;
                 }
                 if through_register {
-                    for r in resolve(code, i, reg, &branches_to, &word, &mut used_literals) {
+                    let resolved = resolve(code, i, reg, &branches_to, &word, &mut used_literals);
+                    f.at.insert(insn.addr, resolved.clone());
+                    for r in resolved {
                         match r {
                             Resolved::Direct(t) => {
                                 f.calls.insert(t);
@@ -1298,6 +1302,10 @@ impl Program {
                     && !jump_table(code, i, *start..end)
                 {
                     f.sites.insert(Site::Unknown(insn.addr));
+                    f.at.insert(
+                        insn.addr,
+                        BTreeSet::from([Resolved::Site(Site::Unknown(insn.addr))]),
+                    );
                 }
             }
         }
@@ -1728,6 +1736,79 @@ fn check_board(
         }
     }
     Ok(())
+}
+
+/// Which executor's tasks a job may poll through a task pointer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Side {
+    /// The sensing executor's (`SWI_IRQ_1`): never the main task.
+    Sensing,
+    /// Thread mode's: never the sensing task.
+    Deciding,
+    /// A handler that polls no task.
+    Any,
+}
+
+/// The Pico image's call graph, for the static timing analysis: what a call or jump through
+/// a register may reach, by the same rules as the stack bound.
+pub(crate) struct CallGraph {
+    program: Program,
+}
+
+impl CallGraph {
+    /// Reads the image built for analysis (`--emit-relocs`) at `elf`.
+    pub(crate) fn of(elf: &Path) -> Result<Self, String> {
+        Ok(Self {
+            program: program(elf)?,
+        })
+    }
+
+    /// Builds the Pico's image for analysis (the shipped code, with relocations kept) and
+    /// returns its path.
+    pub(crate) fn build_pico() -> Result<PathBuf, String> {
+        (PICO.analysed)()
+    }
+
+    /// The shipped Pico image's path, built.
+    pub(crate) fn shipped_pico() -> Result<PathBuf, String> {
+        (PICO.shipped)()
+    }
+
+    /// Whether the analysed image's code and constants are the shipped image's, byte for byte.
+    pub(crate) fn same_code(analysed: &Path, shipped: &Path) -> Result<bool, String> {
+        Ok(code(analysed, PICO.sections)? == code(shipped, PICO.sections)?)
+    }
+
+    /// The functions a call or jump through a register at `site`, in the function starting
+    /// at `caller`, may reach; `None` if the call graph has no such site.
+    pub(crate) fn targets(&self, caller: u64, site: u64, side: Side) -> Option<BTreeSet<u64>> {
+        let f = self.program.funcs.get(&caller)?;
+        let resolved = f.at.get(&site)?;
+        let excluded = match side {
+            Side::Sensing => PICO2_MAIN_TASK,
+            Side::Deciding => PICO2_SENSING_TASK,
+            Side::Any => NO_TASK,
+        };
+        let analysis = Analysis::new(&self.program, &PICO.rules, excluded);
+        let mut out = BTreeSet::new();
+        for r in resolved {
+            match r {
+                Resolved::Direct(t) => {
+                    out.insert(*t);
+                }
+                Resolved::Site(s) => out.extend(analysis.targets(&f.name, *s)),
+                Resolved::Spill(_) => {
+                    out.extend(analysis.targets(&f.name, Site::Unknown(site)));
+                }
+            }
+        }
+        Some(out)
+    }
+
+    /// The start of the function named `name` (or one of its other names).
+    pub(crate) fn by_name(&self, name: &str) -> Option<u64> {
+        by_name(&self.program, name)
+    }
 }
 
 /// Analyses the firmware (and runs it in QEMU), then the boards; prints, compares.
