@@ -81,8 +81,9 @@ cargo xtask qemu --inject-fault --expect-failure
 step "firmware size: flash, static RAM, stack high-water against budget and snapshot (the QEMU images and both boards)"
 cargo xtask size
 
-# The bench writes its figures into these pages: they must come out as committed (a
-# deterministic emulator: a figure that moved was not measured by this tree).
+# The bench and the static timing write their figures into these pages: they must come out
+# as committed (a deterministic emulator, a deterministic analysis: a figure that moved was
+# not measured by this tree).
 figures=$(mktemp -d)
 cp --parents README.md docs/firmware.md boards/README.md "$figures/"
 
@@ -92,14 +93,20 @@ cargo xtask hil
 step "the bench can fail: images with planted bugs (a deaf sonar, a floating bumper, slow brakes, ...) must each fail it"
 cargo xtask hil --mutants
 
-step "the bench's figures on the pages are the ones it measured"
-for page in README.md docs/firmware.md boards/README.md; do
-  diff -u "$figures/$page" "$page" || { echo "$page: the bench's figures moved: commit what cargo xtask hil wrote" >&2; exit 1; }
-done
-rm -rf "$figures"
-
 step "firmware stack: static worst case from the binary, at least the high-water marks of QEMU and the bench"
 cargo xtask stack
+
+step "static timing: every job of the Pico's image bounded in cycles from its binary (every loop counted or annotated)"
+cargo xtask wcet
+
+step "the static timing can fail: a busy loop planted on the sonar's path raises its bound, a busy wait planted in the safety stop is refused"
+cargo xtask wcet --mutants
+
+step "the bench's and the static timing's figures on the pages are the ones they measured"
+for page in README.md docs/firmware.md boards/README.md; do
+  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask hil and cargo xtask wcet wrote" >&2; exit 1; }
+done
+rm -rf "$figures"
 
 step "timing: response-time analysis from QEMU step costs on both cores; every measured reaction within its bound"
 cargo xtask timing

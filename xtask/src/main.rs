@@ -111,6 +111,10 @@ enum Task {
         /// Print one JSON object on stdout.
         #[arg(long)]
         json: bool,
+        /// Analyse images with planted bugs (a busy loop on the sonar's path, a busy wait in
+        /// the safety stop): exit 0 only when the analysis catches every one.
+        #[arg(long, conflicts_with = "json")]
+        mutants: bool,
     },
     Timing {
         /// Core clock the cycle counts of every machine are converted at (default: each
@@ -154,6 +158,24 @@ fn main() -> ExitCode {
             }
         };
     }
+    if let Task::Wcet { json, mutants, .. } = &task {
+        let ending = if *mutants {
+            wcet::mutants::run()
+        } else {
+            wcet::run(*json)
+        };
+        return match ending {
+            hil::Ending::Passed => ExitCode::SUCCESS,
+            hil::Ending::Failed(e) => {
+                eprintln!("xtask wcet: {e}");
+                ExitCode::FAILURE
+            }
+            hil::Ending::BadInput(e) => {
+                eprintln!("xtask wcet: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
     let result = match task {
         Task::Qemu {
             inject_fault,
@@ -171,8 +193,7 @@ fn main() -> ExitCode {
             json,
             expect_failure,
         } => timing::run(clock_hz, json).then_expect(expect_failure),
-        Task::Wcet { json, .. } => wcet::run(json),
-        Task::Hil { .. } => Ok(()),
+        Task::Hil { .. } | Task::Wcet { .. } => Ok(()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -226,13 +226,15 @@ const PICO2_ONLY_FROM: &[OnlyFrom] = &[
     FORMATTING,
 ];
 
-/// The task `main` runs (`#[embassy_executor::main]`): its poll function polls main's body.
+/// The tasks of thread mode that the sensing executor never polls: `main`
+/// (`#[embassy_executor::main]`) and `control`, whose poll runs the control loop.
 const PICO2_MAIN_TASK: Task = Task {
     name: "embassy_executor::raw::TaskStorage<",
-    // Main's body, or, inlined into the poll, the behaviours its control loop runs (only the
+    // Their bodies, or, inlined into the poll, the behaviours the control loop runs (only the
     // deciding side runs an action).
     calls: &[
         "psmpa_board_rp::____embassy_main_task",
+        "psmpa_board_rp::__control_task",
         " as psmpa_core::platform::Actuator>::run",
     ],
 };
@@ -541,6 +543,15 @@ fn build() -> Result<PathBuf, String> {
 fn build_board(board: firmware::Board) -> Result<PathBuf, String> {
     let dir = firmware::boards().join(board.dir);
     let target_dir = firmware::boards().join("target/stack");
+    build_board_at(&dir, &target_dir, board)
+}
+
+/// [`build_board`] from the board's folder `dir` into `target_dir`.
+fn build_board_at(
+    dir: &Path,
+    target_dir: &Path,
+    board: firmware::Board,
+) -> Result<PathBuf, String> {
     let flags = [
         "-Zemit-stack-sizes",
         "-Clink-arg=--emit-relocs",
@@ -548,9 +559,9 @@ fn build_board(board: firmware::Board) -> Result<PathBuf, String> {
         "-Csymbol-mangling-version=legacy",
     ]
     .join("\x1f");
-    let mut cmd = firmware::cargo_in(&dir);
+    let mut cmd = firmware::cargo_in(dir);
     cmd.args(["build", "--quiet", "--release"]);
-    build_with(cmd, &flags, &target_dir, board.what)?;
+    build_with(cmd, &flags, target_dir, board.what)?;
     Ok(target_dir
         .join(board.target)
         .join("release")
@@ -1767,6 +1778,15 @@ impl CallGraph {
     /// returns its path.
     pub(crate) fn build_pico() -> Result<PathBuf, String> {
         (PICO.analysed)()
+    }
+
+    /// Builds the Pico's image for analysis from the sources at `root` into `target_dir`.
+    pub(crate) fn build_pico_in(root: &Path, target_dir: &Path) -> Result<PathBuf, String> {
+        build_board_at(
+            &root.join("boards").join(firmware::PICO.dir),
+            target_dir,
+            firmware::PICO,
+        )
     }
 
     /// The shipped Pico image's path, built.

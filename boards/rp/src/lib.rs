@@ -178,7 +178,7 @@ async fn feed(mut watchdog: Watchdog) {
 
 /// The firmware: checks how the board last stopped, starts the watchdog, reads the robot's
 /// calibration, hands the pins to the drivers (the pin table below, as in the boards'
-/// READMEs), starts sensing above deciding and runs the task once.
+/// READMEs), starts sensing above deciding and the control task in thread mode.
 #[embassy_executor::main(
     executor = "embassy_rp::executor::Executor",
     entry = "cortex_m_rt::entry"
@@ -330,15 +330,25 @@ async fn main(spawner: Spawner) {
     // Sensing above deciding: priority 2 preempts thread mode; GPIO (embassy-rp's bank 0
     // interrupt) is at 3, so an edge's waker only pends the sensing executor.
     interrupt::SWI_IRQ_1.set_priority(Priority::P2);
-    let spawner = SENSING.start(interrupt::SWI_IRQ_1);
+    let sensing_spawner = SENSING.start(interrupt::SWI_IRQ_1);
     match sensing(runtime) {
-        Ok(task) => spawner.spawn(task),
+        Ok(task) => sensing_spawner.spawn(task),
         Err(_) => {
             error!("the sensing task is already running");
             return;
         }
     }
 
+    match control(runtime, mission) {
+        Ok(task) => spawner.spawn(task),
+        Err(_) => error!("the control task is already running"),
+    }
+}
+
+/// Runs the task once (the control loop, Algorithm 1) in thread mode: a task of its own, so
+/// that each of its polls is a deciding step and no more (`cargo xtask wcet` bounds one).
+#[embassy_executor::task]
+async fn control(runtime: &'static Runtime, mission: &'static fetch_tea::Mission) {
     let outcome = runtime.run().await;
     #[cfg(feature = "recorder")]
     record::flush();

@@ -20,11 +20,11 @@
 //! access silicon would fault on). The first run is played twice: the same pin log both
 //! times. [`mutants`] plants bugs in a copy of the firmware and requires each to fail.
 
-mod bound;
+pub(crate) mod bound;
 mod chip;
 pub mod fault;
 mod harness;
-mod mutants;
+pub(crate) mod mutants;
 mod svg;
 pub mod world;
 
@@ -1685,7 +1685,7 @@ its echo ends, a lost one not at all). {differences} named differences from psmp
 }
 
 /// `n` with a comma between each three digits.
-fn thousands(n: u64) -> String {
+pub(crate) fn thousands(n: u64) -> String {
     let digits = n.to_string();
     let mut out = String::new();
     for (i, ch) in digits.chars().enumerate() {

@@ -199,7 +199,7 @@ struct Verdict {
 }
 
 /// Copies the repository's files (tracked, and new ones not ignored) to `tree`.
-fn copy_tree(root: &Path, tree: &Path) -> Result<(), String> {
+pub(crate) fn copy_tree(root: &Path, tree: &Path) -> Result<(), String> {
     let out = Command::new("git")
         .args(["ls-files", "-co", "--exclude-standard", "-z"])
         .current_dir(root)
@@ -229,7 +229,7 @@ fn copy_tree(root: &Path, tree: &Path) -> Result<(), String> {
 }
 
 /// Copies the boards' target folder to `to` once, so that the scratch builds start warm.
-fn warm_target(from: &Path, to: &Path) -> Result<(), String> {
+pub(crate) fn warm_target(from: &Path, to: &Path) -> Result<(), String> {
     if to.exists() || !from.exists() {
         return Ok(());
     }

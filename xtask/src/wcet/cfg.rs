@@ -98,6 +98,9 @@ pub struct Worst {
     pub loops: Vec<Loop>,
     /// Functions called (directly, through registers, or tail called).
     pub callees: BTreeSet<u64>,
+    /// Addresses of the code it may run and the constants it reads from its literal pools and
+    /// jump tables (its own, not its callees').
+    pub touched: BTreeSet<u64>,
 }
 
 /// Where control goes after an instruction, with the cycles the edge adds.
@@ -115,13 +118,30 @@ struct Node {
     completes: Option<u64>,
 }
 
-/// Decodes the function at `start..end` and builds its graph.
-fn graph(image: &mut dyn Image, start: u64, end: u64) -> Result<(Vec<Node>, Worst), String> {
+/// A critical section to bound instead of the whole function: from the instruction at `from`
+/// (a call of an acquire, or a `CPSID`) to a call of one of `release` or a `CPSIE`.
+#[derive(Clone, Copy, Debug)]
+pub struct Section<'a> {
+    pub from: u64,
+    pub release: &'a [u64],
+    /// Where an inlined release's paths join after its `CPSIE` (which a nested section skips):
+    /// the section has ended there too.
+    pub joins: &'a [u64],
+}
+
+/// Decodes the function at `start..end` (or one of its critical sections) and builds its
+/// graph.
+fn graph(
+    image: &mut dyn Image,
+    start: u64,
+    end: u64,
+    section: Option<Section<'_>>,
+) -> Result<(Vec<Node>, Worst), String> {
     let inside = |a: u64| (start..end).contains(&a);
     let mut index: BTreeMap<u64, usize> = BTreeMap::new();
     let mut nodes: Vec<Node> = Vec::new();
     let mut targets: Vec<(usize, Vec<(u64, u64)>)> = Vec::new();
-    let mut work = vec![start];
+    let mut work = vec![section.map_or(start, |s| s.from)];
     let mut worst = Worst::default();
     // Calls to a memory function: (site, callee).
     let mut sized: Vec<(u64, u64)> = Vec::new();
@@ -141,7 +161,22 @@ fn graph(image: &mut dyn Image, start: u64, end: u64) -> Result<(Vec<Node>, Wors
         let mut completes = None;
         // (target, extra cycles of the edge)
         let mut succ: Vec<(u64, u64)> = Vec::new();
-        match insn.flow {
+        let ends_section = section.is_some_and(|s| match insn.flow {
+            Flow::Call(t) => s.release.contains(&t),
+            Flow::Return => true,
+            _ => insn.opcode() == yaxpeax_arm::armv7::Opcode::CPS(false) || s.joins.contains(&addr),
+        });
+        // A return inside a section ends it too: the lock was already held (a nested section,
+        // whose outer one is bounded from its own start with this call in it), or interrupts
+        // were off before it.
+        let flow = if ends_section { Flow::Stop } else { insn.flow };
+        if ends_section {
+            completes = Some(match insn.flow {
+                Flow::Call(t) => image.call(t)?.unwrap_or(0),
+                _ => 0,
+            });
+        }
+        match flow {
             Flow::Next => succ.push((next, 0)),
             Flow::Branch(t) if inside(t) => succ.push((t, 0)),
             Flow::Branch(t) => {
@@ -252,7 +287,7 @@ fn graph(image: &mut dyn Image, start: u64, end: u64) -> Result<(Vec<Node>, Wors
         let r = image
             .length_register(t)
             .ok_or("a memory function vanished")?;
-        let n = match constant(image, &nodes, &preds, i, r) {
+        let n = match constant(&*image, &nodes, &preds, i, r) {
             Some(n) => n,
             None => image.length_at(start, site).map(|(n, _)| n).ok_or_else(|| {
                 format!(
@@ -278,7 +313,7 @@ fn graph(image: &mut dyn Image, start: u64, end: u64) -> Result<(Vec<Node>, Wors
         else {
             continue;
         };
-        if let Some(at) = constant(image, &nodes, &preds, i, base) {
+        if let Some(at) = constant(&*image, &nodes, &preds, i, base) {
             let placed = thumb::place(at);
             let node = &mut nodes[i];
             node.cost =
@@ -299,6 +334,27 @@ fn graph(image: &mut dyn Image, start: u64, end: u64) -> Result<(Vec<Node>, Wors
     }
     if let Some(b) = branched.first_mut() {
         *b = true;
+    }
+    for n in &nodes {
+        let i = &n.insn;
+        worst.touched.insert(i.addr);
+        worst.touched.insert(i.addr + i.len - 1);
+        if let Some((15, Some(k), None)) = thumb::address(i, 1) {
+            let word = ((i.addr + 4) & !3) + k;
+            worst.touched.extend([word, word + 3]);
+        }
+        if let Flow::Jump(_) = i.flow {
+            // A jump table lies between the dispatch and its first target.
+            let first = n
+                .succ
+                .iter()
+                .filter_map(|Edge::To(w, _)| addr_of.get(*w).copied())
+                .filter(|t| *t > i.addr)
+                .min();
+            if let Some(first) = first {
+                worst.touched.extend((i.addr..first).step_by(2));
+            }
+        }
     }
     let unplaced = image.unplaced_load();
     for (n, b) in nodes.iter_mut().zip(branched) {
@@ -324,51 +380,76 @@ fn constant(
     at: usize,
     r: u8,
 ) -> Option<u64> {
-    use yaxpeax_arm::armv7::Opcode;
     let mut v = at;
     for _ in 0..24 {
         let [p] = preds.get(v)?.as_slice() else {
             return None;
         };
         v = *p;
-        let i = &nodes.get(v)?.insn;
-        if !writes_register(i, r) {
-            continue;
+        if writes_register(&nodes.get(v)?.insn, r) {
+            return written(image, nodes, preds, v, r);
         }
-        let imm = |k| thumb::immediate(i, k);
-        let src = thumb::register(i, 1);
-        return match i.opcode() {
-            Opcode::MOV => match (imm(1), src) {
-                (Some(k), _) => Some(k),
-                (None, Some(s)) if s < 13 => constant(image, nodes, preds, v, s),
-                _ => None,
-            },
-            Opcode::LSL => {
-                let k = imm(2)?;
-                let value = constant(image, nodes, preds, v, src?)?;
-                value
-                    .checked_shl(u32::try_from(k).ok()?)
-                    .filter(|x| *x <= u64::from(u32::MAX))
-            }
-            Opcode::ADD => match (src, imm(1), imm(2)) {
-                (None, Some(k), _) => constant(image, nodes, preds, v, r)?.checked_add(k),
-                (Some(s), None, Some(k)) if s < 13 => {
-                    constant(image, nodes, preds, v, s)?.checked_add(k)
-                }
-                _ => None,
-            },
-            Opcode::LDR => match thumb::address(i, 1)? {
-                (15, Some(k), None) => {
-                    let word = ((i.addr + 4) & !3) + k;
-                    let bytes = image.code(word)?.get(..4)?;
-                    Some(u64::from(u32::from_le_bytes(bytes.try_into().ok()?)))
-                }
-                _ => None,
-            },
-            _ => None,
-        };
     }
     None
+}
+
+/// The value register `r` holds after node `v`.
+fn value_after(
+    image: &dyn Image,
+    nodes: &[Node],
+    preds: &[Vec<usize>],
+    v: usize,
+    r: u8,
+) -> Option<u64> {
+    if writes_register(&nodes.get(v)?.insn, r) {
+        written(image, nodes, preds, v, r)
+    } else {
+        constant(image, nodes, preds, v, r)
+    }
+}
+
+/// The constant node `v` writes to register `r`, if it writes one.
+fn written(
+    image: &dyn Image,
+    nodes: &[Node],
+    preds: &[Vec<usize>],
+    v: usize,
+    r: u8,
+) -> Option<u64> {
+    use yaxpeax_arm::armv7::Opcode;
+    let i = &nodes.get(v)?.insn;
+    let imm = |k| thumb::immediate(i, k);
+    let src = thumb::register(i, 1);
+    match i.opcode() {
+        Opcode::MOV => match (imm(1), src) {
+            (Some(k), _) => Some(k),
+            (None, Some(s)) if s < 13 => constant(image, nodes, preds, v, s),
+            _ => None,
+        },
+        Opcode::LSL => {
+            let k = imm(2)?;
+            let value = constant(image, nodes, preds, v, src?)?;
+            value
+                .checked_shl(u32::try_from(k).ok()?)
+                .filter(|x| *x <= u64::from(u32::MAX))
+        }
+        Opcode::ADD => match (src, imm(1), imm(2)) {
+            (None, Some(k), _) => constant(image, nodes, preds, v, r)?.checked_add(k),
+            (Some(s), None, Some(k)) if s < 13 => {
+                constant(image, nodes, preds, v, s)?.checked_add(k)
+            }
+            _ => None,
+        },
+        Opcode::LDR => match thumb::address(i, 1)? {
+            (15, Some(k), None) => {
+                let word = ((i.addr + 4) & !3) + k;
+                let bytes = image.code(word)?.get(..4)?;
+                Some(u64::from(u32::from_le_bytes(bytes.try_into().ok()?)))
+            }
+            _ => None,
+        },
+        _ => None,
+    }
 }
 
 /// The targets of the jump table `insn` (which writes the PC from `r`) dispatches through, if
@@ -806,15 +887,7 @@ impl Loops<'_> {
                 body: scc.iter().map(|v| self.nodes[*v].insn.addr).collect(),
             };
             let counted = match entries.as_slice() {
-                [h] => counted(
-                    self.nodes,
-                    *h,
-                    &inside,
-                    &self.preds,
-                    &self.idom,
-                    &self.item,
-                    &latches,
-                ),
+                [h] => counted(&*image, self, *h, &inside, &latches),
                 _ => None,
             };
             let (bound, source) = match counted {
@@ -864,7 +937,17 @@ impl Loops<'_> {
 
 /// The worst case of the function at `start..end`.
 pub fn analyse(image: &mut dyn Image, start: u64, end: u64) -> Result<Worst, String> {
-    let (nodes, mut worst) = graph(image, start, end)?;
+    analyse_from(image, start, end, None)
+}
+
+/// The worst case of the function at `start..end`, or of one of its critical sections.
+pub fn analyse_from(
+    image: &mut dyn Image,
+    start: u64,
+    end: u64,
+    section: Option<Section<'_>>,
+) -> Result<Worst, String> {
+    let (nodes, mut worst) = graph(image, start, end, section)?;
     let (idom, _) = dominators(&nodes);
     let mut preds: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
     for (v, node) in nodes.iter().enumerate() {
@@ -896,14 +979,13 @@ pub fn analyse(image: &mut dyn Image, start: u64, end: u64) -> Result<Worst, Str
 /// bound on its back edges per entry: the steps from the start to the limit, plus one (the
 /// exit may test before or after the step).
 fn counted(
-    nodes: &[Node],
+    image: &dyn Image,
+    loops: &Loops<'_>,
     h: usize,
     body: &[bool],
-    preds: &[Vec<usize>],
-    idom: &[usize],
-    item: &[Option<usize>],
     latches: &[usize],
 ) -> Option<u64> {
+    let (nodes, preds, idom, item) = (loops.nodes, &loops.preds, &loops.idom, &loops.item);
     let inside = |v: usize| body.get(v).copied().unwrap_or(false);
     // An exit that tests the counter on every iteration (it dominates every back edge);
     // other exits only leave sooner.
@@ -914,13 +996,28 @@ fn counted(
         .collect();
     exits
         .iter()
-        .filter_map(|exit| counted_exit(nodes, h, *exit, body, preds, idom, item, latches))
+        .filter_map(|exit| {
+            counted_exit(image, nodes, h, *exit, body, preds, idom, item, latches)
+                .or_else(|| set_bits_exit(nodes, *exit, body, preds, idom, latches))
+        })
         .min()
+}
+
+/// How a counted loop's counter relates to its limit while the loop goes on.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Goes {
+    /// `counter != limit`
+    Ne,
+    /// `counter < limit`
+    Lt,
+    /// `counter <= limit`
+    Le,
 }
 
 /// The bound [`counted`] finds for the loop's exit at node `exit`.
 #[allow(clippy::too_many_arguments)]
 fn counted_exit(
+    image: &dyn Image,
     nodes: &[Node],
     h: usize,
     exit: usize,
@@ -930,38 +1027,107 @@ fn counted_exit(
     item: &[Option<usize>],
     latches: &[usize],
 ) -> Option<u64> {
-    use yaxpeax_arm::armv7::{ConditionCode, Opcode};
+    use yaxpeax_arm::armv7::{ConditionCode as C, Opcode};
     let inside = |v: usize| body.get(v).copied().unwrap_or(false);
     let branch = &nodes[exit].insn;
-    let Flow::Conditional(_) = branch.flow else {
+    let Flow::Conditional(target) = branch.flow else {
         return None;
     };
-    let equality = matches!(
-        branch.inner.condition,
-        ConditionCode::EQ | ConditionCode::NE
-    );
-    // The compare just before the branch: `CMP r, #K` (counts to K) or `SUBS r, #s` (counts
-    // down to zero).
+    // The condition under which the loop goes on: the branch's, when it branches back in.
+    let stays = nodes[exit]
+        .succ
+        .iter()
+        .any(|Edge::To(w, _)| nodes[*w].insn.addr == target && inside(*w));
+    let negate = |c: C| match c {
+        C::EQ => C::NE,
+        C::NE => C::EQ,
+        C::HS => C::LO,
+        C::LO => C::HS,
+        C::HI => C::LS,
+        C::LS => C::HI,
+        C::GE => C::LT,
+        C::LT => C::GE,
+        C::GT => C::LE,
+        C::LE => C::GT,
+        other => other,
+    };
+    let goes_on = if stays {
+        branch.inner.condition
+    } else {
+        negate(branch.inner.condition)
+    };
+    // The compare just before the branch: `CMP` of the counter and its limit (either way
+    // round), or `SUBS r, #s` (counts down to zero).
     let c = preds[exit]
         .iter()
         .copied()
         .find(|p| nodes[*p].insn.addr + nodes[*p].insn.len == branch.addr)?;
     let cmp = &nodes[c].insn;
-    let reg = thumb::register(cmp, 0)?;
+    let [first] = preds[h]
+        .iter()
+        .copied()
+        .filter(|p| !inside(*p))
+        .collect::<Vec<_>>()[..]
+    else {
+        return None;
+    };
+    let written_inside =
+        |r: u8| (0..nodes.len()).any(|u| inside(u) && writes_register(&nodes[u].insn, r));
+    // A limit: an immediate, or a register the loop never writes, constant on the way in.
+    let invariant = |r: u8| {
+        if written_inside(r) {
+            None
+        } else {
+            value_after(image, nodes, preds, first, r)
+        }
+    };
+    // (counter, limit, how it goes on)
+    let (reg, limit, goes, down) = match cmp.opcode() {
+        Opcode::SUB if cmp.inner.s() && goes_on == C::NE => {
+            (thumb::register(cmp, 0)?, 0, Goes::Ne, true)
+        }
+        Opcode::CMP => {
+            if !down_free(goes_on) {
+                return None;
+            }
+            let a = thumb::register(cmp, 0)?;
+            let b = thumb::register(cmp, 1);
+            // A limit: an immediate, what straight-line code before the compare sets the
+            // register to (a constant rebuilt every iteration), or a register the loop never
+            // writes that holds a constant on the way in.
+            let limit_of = |r: u8| constant(image, nodes, preds, c, r).or_else(|| invariant(r));
+            let as_counter = thumb::immediate(cmp, 1)
+                .or_else(|| limit_of(b?))
+                .and_then(|limit| {
+                    let goes = match goes_on {
+                        C::NE => Goes::Ne,
+                        C::LO | C::LT => Goes::Lt,
+                        C::LS | C::LE => Goes::Le,
+                        _ => return None,
+                    };
+                    Some((a, limit, goes, false))
+                });
+            // Or `CMP limit, counter`.
+            let swapped = || {
+                let limit = limit_of(a)?;
+                let goes = match goes_on {
+                    C::NE => Goes::Ne,
+                    C::HI | C::GT => Goes::Lt,
+                    C::HS | C::GE => Goes::Le,
+                    _ => return None,
+                };
+                Some((b?, limit, goes, false))
+            };
+            as_counter.or_else(swapped)?
+        }
+        _ => return None,
+    };
     let imm = |i: &Insn| match thumb::register(i, 1) {
         Some(r) if r == reg => thumb::immediate(i, 2),
         Some(_) => None,
         None => thumb::immediate(i, 1),
     };
-    let down = match cmp.opcode() {
-        Opcode::CMP => false,
-        Opcode::SUB if cmp.inner.s() => true,
-        _ => return None,
-    };
-    if !down && imm(cmp) == Some(0) {
-        return set_bits(nodes, reg, &inside, idom, latches);
-    }
-    // Every write of the register in the loop: exactly one, the step.
+    // Every write of the counter in the loop: exactly one, the step, on every iteration.
     let writes: Vec<usize> = (0..nodes.len())
         .filter(|v| inside(*v) && writes_register(&nodes[*v].insn, reg))
         .collect();
@@ -973,47 +1139,58 @@ fn counted_exit(
         && item.get(*w).copied().flatten().is_none();
     let step = match step_insn.opcode() {
         Opcode::SUB if down && *w == c => imm(step_insn)?,
-        Opcode::ADD if !down => imm(step_insn)?,
+        Opcode::ADD if !down && thumb::register(step_insn, 0) == Some(reg) => imm(step_insn)?,
         _ => return None,
     };
     if !every_time || step == 0 {
         return None;
     }
-    // The start: the last write of the register on the one way into the header.
-    let entries: Vec<usize> = preds[h].iter().copied().filter(|p| !inside(*p)).collect();
-    let [first] = entries.as_slice() else {
-        return None;
-    };
-    let mut v = *first;
-    // Copies (`MOV rD, rS`) are followed to the register they copy.
-    let mut from = reg;
-    let init = loop {
-        let i = &nodes[v].insn;
-        if writes_register(i, from) {
-            if i.opcode() != Opcode::MOV {
-                return None;
-            }
-            match (thumb::immediate(i, 1), thumb::register(i, 1)) {
-                (Some(k), _) => break k,
-                (None, Some(r)) if r < 13 => from = r,
-                _ => return None,
-            }
-        }
-        let [p] = preds[v].as_slice() else {
-            return None;
-        };
-        v = *p;
-    };
-    let span = if down {
-        init
-    } else {
-        imm(cmp)?.checked_sub(init)?
-    };
-    // An equality test the steps jump over never ends.
-    if span == 0 || (equality && span % step != 0) {
+    let init = value_after(image, nodes, preds, first, reg)?;
+    // Counters and limits past 2^31 may compare signed as negative: not counted here.
+    if init >= 1 << 31 || limit >= 1 << 31 {
         return None;
     }
-    Some(span.div_ceil(step) + 1)
+    let span = if down { init } else { limit.checked_sub(init)? };
+    let iterations = match goes {
+        // An equality test the steps jump over never ends.
+        Goes::Ne if span == 0 || span % step != 0 => return None,
+        Goes::Ne | Goes::Lt => span.div_ceil(step),
+        Goes::Le => span / step + 1,
+    };
+    // Back edges: at most the iterations, and one more where the exit tests before the step.
+    Some(iterations + 1)
+}
+
+/// Whether the loop's going-on condition is one a counted loop may have.
+fn down_free(c: yaxpeax_arm::armv7::ConditionCode) -> bool {
+    !matches!(
+        c,
+        yaxpeax_arm::armv7::ConditionCode::EQ | yaxpeax_arm::armv7::ConditionCode::AL
+    )
+}
+
+/// [`set_bits`] for the loop's exit at node `exit`: `CMP x, #0` then the branch.
+fn set_bits_exit(
+    nodes: &[Node],
+    exit: usize,
+    body: &[bool],
+    preds: &[Vec<usize>],
+    idom: &[usize],
+    latches: &[usize],
+) -> Option<u64> {
+    use yaxpeax_arm::armv7::Opcode;
+    let branch = &nodes[exit].insn;
+    let c = preds[exit]
+        .iter()
+        .copied()
+        .find(|p| nodes[*p].insn.addr + nodes[*p].insn.len == branch.addr)?;
+    let cmp = &nodes[c].insn;
+    if cmp.opcode() != Opcode::CMP || thumb::immediate(cmp, 1) != Some(0) {
+        return None;
+    }
+    let reg = thumb::register(cmp, 0)?;
+    let inside = |v: usize| body.get(v).copied().unwrap_or(false);
+    set_bits(nodes, reg, &inside, idom, latches)
 }
 
 /// A loop over the set bits of a word (`x &= x - 1` until `x == 0`): every write of `x` in the
@@ -1076,4 +1253,33 @@ fn writes_register(insn: &Insn, reg: u8) -> bool {
         Opcode::BL | Opcode::BLX => reg <= 3 || reg == 12 || reg == 14,
         _ => thumb::register(insn, 0) == Some(reg),
     }
+}
+
+/// The addresses in the function at `start..end` where a critical section begins (calls of
+/// one of `acquire`, and `CPSID` instructions: an acquire inlined), and where an inlined
+/// release's paths join (after each `CPSIE`).
+pub fn section_starts(
+    image: &mut dyn Image,
+    start: u64,
+    end: u64,
+    acquire: &[u64],
+) -> Result<(Vec<u64>, Vec<u64>), String> {
+    let (nodes, _) = graph(image, start, end, None)?;
+    let joins: Vec<u64> = nodes
+        .iter()
+        .map(|n| &n.insn)
+        .filter(|i| i.opcode() == yaxpeax_arm::armv7::Opcode::CPS(false))
+        .map(|i| i.addr + i.len)
+        .collect();
+    let mut out: Vec<u64> = nodes
+        .iter()
+        .map(|n| &n.insn)
+        .filter(|i| {
+            matches!(i.flow, Flow::Call(t) if acquire.contains(&t))
+                || i.opcode() == yaxpeax_arm::armv7::Opcode::CPS(true)
+        })
+        .map(|i| i.addr)
+        .collect();
+    out.sort_unstable();
+    Ok((out, joins))
 }

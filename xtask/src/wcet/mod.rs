@@ -3,7 +3,7 @@
 //!
 //! * Code: the image built for the stack analysis (the shipped code, relocations kept; checked
 //!   byte for byte against the shipped image), decoded by `yaxpeax-arm` from each function's
-//!   entry ([`cfg`]), costed by the Cortex-M0+ TRM's cycle table ([`thumb`]).
+//!   entry ([`cfg`](mod@cfg)), costed by the Cortex-M0+ TRM's cycle table ([`thumb`]).
 //! * Calls: direct calls by their target's worst case; calls through registers by the worst of
 //!   what the stack analyser's call graph says they may reach (the sensing executor never polls
 //!   the main task, and the thread-mode executor never the sensing task). Recursion is refused.
@@ -11,13 +11,14 @@
 //!   `boards/pico/wcet-loops.json`, keyed by the source function the loop is written in (as the
 //!   debug information names it) and checked on the bench. A loop with neither fails, naming
 //!   its function and address.
-//! * Memory: see [`Memory`]: the stack and peripherals as the TRM and the RP2040 datasheet give
-//!   them, code and constants in flash through the XIP cache with a miss per line.
+//! * Memory: see [`XIP_FILL`]: the stack and peripherals as the TRM and the RP2040 datasheet
+//!   give them, code and constants in flash through the XIP cache with a miss per line.
 //!
 //! Jobs: the three handlers that release or run sensing work (exception entry and return
 //! included), the longest critical section, and one poll of the main task (the deciding side).
 
 mod cfg;
+pub mod mutants;
 mod thumb;
 
 #[cfg(test)]
@@ -30,6 +31,8 @@ use std::process::Command;
 use object::{Object, ObjectSection, ObjectSymbol, RelocationKind, SymbolKind};
 use serde::{Deserialize, Serialize};
 
+use crate::hil::Ending;
+use crate::hil::bound::{self, Costs};
 use crate::stack::{CallGraph, Side};
 
 /// Exception entry on the Cortex-M0+, cycles: the TRM's interrupt latency with zero wait
@@ -45,11 +48,10 @@ pub const EXCEPTION_RETURN: u64 = 15;
 /// `PICO_FLASH_SPI_CLKDIV` 2) keeps the flash in quad continuous-read mode, so a line costs 8
 /// clocks of address and mode, 4 dummy clocks and 16 of data, 28 SPI clocks at half the system
 /// clock: 56 cycles, plus [`XIP_OVERHEAD`] for the SSI's chip select and the bus. A job starts
-/// with a cold cache: each line it may touch misses once (every function it reaches, whole,
-/// and all of `.rodata`, which it may read through any pointer), as long as no cache set holds
-/// more of those lines than the cache's two ways; a code line of a set that does is charged a
-/// miss every time control enters it, a constant's line on every load the analysis cannot
-/// place.
+/// with a cold cache: each line of code (and of its literal pools and jump tables) it may touch
+/// misses once, as long as no cache set holds more of those lines than the cache's two ways;
+/// a line of a set that does misses every time control enters it. A load the analysis cannot
+/// place may read a constant: it is charged a miss.
 pub const XIP_FILL: u64 = 56;
 /// The SSI's chip-select and the AHB's hops around a fill: an allowance, not a measurement.
 pub const XIP_OVERHEAD: u64 = 8;
@@ -90,20 +92,52 @@ const LENGTHS: &[(&str, u8)] = &[
     ("memset", 2),
 ];
 
-/// Where a call through a register is a waker's: the inline frames of `core::task::Waker`.
+/// Where a call through a register is a waker's: the inline frames of `core::task::Waker`'s
+/// methods and trait implementations.
 const WAKER_CALLS: &[&str] = &[
-    "core::task::wake::Waker::",
-    "<core::task::wake::Waker as core::ops::drop::Drop>::drop",
-    "<core::task::wake::Waker as core::clone::Clone>::clone",
+    "<core::task::wake::Waker>::",
+    "<core::task::wake::Waker as ",
 ];
 
 /// The functions of the image's waker vtables: embassy's executor's (and core's no-op waker).
 const WAKER_FNS: &[&str] = &["embassy_executor::raw::waker::", "core::task::wake::"];
 
+/// Core's formatting traits and their implementations.
+const FORMATTING: &[&str] = &["core::fmt::", "<core::fmt::"];
+
+/// Code that writes to a formatter's output.
+const FORMATTERS: &[&str] = &[
+    "<core::fmt::Formatter>::",
+    "<char as core::fmt::",
+    "PadAdapter",
+];
+
+/// Implementations of `fmt::Write` (and its provided methods).
+const FMT_WRITERS: &[&str] = &[" as core::fmt::Write>::", "core::fmt::Write::"];
+
+/// Implementations of `Display` and `Debug`.
+const FMT_IMPLS: &[&str] = &[" as core::fmt::Display>::fmt", " as core::fmt::Debug>::fmt"];
+
+/// Embassy's executor, the only caller of a task's entry points.
+const EXECUTOR: &[&str] = &[
+    "embassy_executor::raw::Executor::",
+    "embassy_executor::raw::SyncExecutor::",
+];
+
+/// A task's entry points: its poll function, and the one a finished task's header holds.
+const TASKS: &[&str] = &[TASK_POLL, "embassy_executor::raw::poll_exited"];
+
 /// A task's poll function.
 const TASK_POLL: &str = "embassy_executor::raw::TaskStorage<";
 /// The body of the task the sensing executor polls.
 const SENSING_TASK: &str = "psmpa_board_rp::__sensing_task::";
+
+thread_local! {
+    /// The annotations that matched a loop or a call.
+    static USED: std::cell::RefCell<BTreeSet<String>> = const {
+        std::cell::RefCell::new(BTreeSet::new())
+    };
+}
 
 /// The committed loop annotations.
 #[derive(Debug, Deserialize, Serialize)]
@@ -131,6 +165,10 @@ pub struct Annotation {
     /// different bound in each.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub jobs: Vec<String>,
+    /// A function the loop must be inlined into for the annotation to hold (a busy wait the
+    /// design declares, and no other use of the same helper).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub within: Option<String>,
 }
 
 impl Annotation {
@@ -202,8 +240,8 @@ const JOBS: &[JobSpec] = &[
     },
 ];
 
-/// The body of the main task, whose poll is the deciding side's step.
-const MAIN_TASK: &str = "psmpa_board_rp::____embassy_main_task::";
+/// The body of the control task, whose poll is the deciding side's step.
+const MAIN_TASK: &str = "psmpa_board_rp::__control_task::";
 
 /// One job's result.
 #[derive(Clone, Debug, Serialize)]
@@ -359,6 +397,8 @@ struct Job<'a> {
     unbounded: BTreeSet<(u64, u64, String)>,
     /// Calls to a memory function whose length nothing bounds.
     unsized_calls: BTreeSet<u64>,
+    /// The lines of code and literals it may touch.
+    touched: BTreeSet<u64>,
     reached: BTreeSet<u64>,
     /// Lines whose cache set holds more than the ways.
     conflicted: BTreeSet<u64>,
@@ -395,6 +435,7 @@ impl cfg::Image for Job<'_> {
         let result = cfg::analyse(self, addr, end);
         self.path.pop();
         let worst = result.map_err(|e| format!("{}: {e}", self.elf.name(addr)))?;
+        self.touched.extend(worst.touched.iter().map(|a| a / LINE));
         for l in &worst.loops {
             self.loops.push(LoopReport {
                 function: self.elf.name(addr),
@@ -427,7 +468,10 @@ impl cfg::Image for Job<'_> {
                     .iter()
                     .find(|a| a.function == f && a.applies_to(self.job))
             })
-            .map(|a| (a.bound, a.why.clone()));
+            .map(|a| {
+                USED.with(|u| u.borrow_mut().insert(a.function.clone()));
+                (a.bound, a.why.clone())
+            });
         if found.is_none() {
             self.unsized_calls.insert(site);
         }
@@ -446,6 +490,7 @@ impl cfg::Image for Job<'_> {
         let result = cfg::analyse(self, addr, end);
         self.length = outer;
         let worst = result.map_err(|e| format!("{}: {e}", self.elf.name(addr)))?;
+        self.touched.extend(worst.touched.iter().map(|a| a / LINE));
         self.by_length.insert((addr, length), worst.cycles);
         Ok(worst.cycles)
     }
@@ -455,19 +500,34 @@ impl cfg::Image for Job<'_> {
             .graph
             .targets(function, site, self.side)
             .ok_or_else(|| format!("the call graph has no call through a register at {site:#x}"))?;
-        // A waker's call (its vtable's wake, wake_by_ref, clone or drop, as the debug
-        // information shows the call inlined from core's Waker) reaches only a waker vtable's
-        // functions, not whatever other table holds a function at the same offset.
-        let waker = self.sources.get(&site).is_some_and(|fs| {
-            fs.iter()
-                .any(|f| WAKER_CALLS.iter().any(|w| f.starts_with(w)))
+
+        // A call through a vtable reaches an implementation of its own family, not whatever
+        // other table holds a function at the same offset: a waker's functions from a
+        // Waker's calls (the debug information shows the call inlined from core's Waker),
+        // core's formatting traits from core's formatting code, a task's poll function from
+        // embassy's executor; every other call, none of these.
+        let frames: Vec<String> = self.sources.get(&site).cloned().unwrap_or_default();
+        let caller = self.elf.name(function);
+        let in_frames = |family: &[&str]| {
+            frames
+                .iter()
+                .chain([&caller])
+                .any(|f| family.iter().any(|p| f.starts_with(p) || f.contains(p)))
+        };
+        let waker = frames
+            .iter()
+            .any(|f| WAKER_CALLS.iter().any(|w| f.starts_with(w)));
+        let formatting = in_frames(FORMATTING);
+        let executor = in_frames(EXECUTOR);
+        targets.retain(|t| {
+            let name = self.elf.name(*t);
+            let of = |family: &[&str]| {
+                family
+                    .iter()
+                    .any(|p| name.starts_with(p) || name.contains(p))
+            };
+            (waker == of(WAKER_FNS)) && (formatting == of(FORMATTING)) && (executor || !of(TASKS))
         });
-        if waker {
-            targets.retain(|t| {
-                let name = self.elf.name(*t);
-                WAKER_FNS.iter().any(|w| name.starts_with(w))
-            });
-        }
         // An executor polls its own tasks: the sensing executor only the sensing task,
         // thread mode every other one (which task a poll function polls, by the debug
         // information of its code).
@@ -482,6 +542,24 @@ impl cfg::Image for Job<'_> {
                 Side::Any => true,
             }
         });
+        if targets.is_empty() && formatting {
+            // A call through a formatting trait object whose vtable the call graph did not
+            // find (a vtable inside a larger constant): from a formatter, its output (any
+            // implementation of `fmt::Write`); from elsewhere in core's formatting, any
+            // implementation of `Display` or `Debug`.
+            let family = if in_frames(FORMATTERS) {
+                FMT_WRITERS
+            } else {
+                FMT_IMPLS
+            };
+            targets = self
+                .elf
+                .funcs
+                .iter()
+                .filter(|(_, (_, n))| family.iter().any(|p| n.contains(p)))
+                .map(|(f, _)| *f)
+                .collect();
+        }
         if targets.is_empty() {
             return Err(format!(
                 "nothing known for the call through a register at {site:#x}"
@@ -494,18 +572,33 @@ impl cfg::Image for Job<'_> {
         if let Some(n) = self.length {
             return Some((n, format!("moves at most {n} bytes (the call's length)")));
         }
-        let function = self.loop_function(site)?;
-        self.annotations
-            .loops
-            .iter()
-            .find(|a| a.function == function && a.applies_to(self.job))
-            .map(|a| (a.bound, a.why.clone()))
+        let (function, chain) = self.loop_function(site)?;
+        let found = self.annotations.loops.iter().find(|a| {
+            a.function == function
+                && a.applies_to(self.job)
+                && a.within.as_ref().is_none_or(|w| chain.contains(w))
+        })?;
+        USED.with(|u| u.borrow_mut().insert(found.function.clone()));
+        Some((found.bound, found.why.clone()))
     }
 
     fn unbounded(&mut self, function: u64, site: &cfg::Site) -> Result<u64, String> {
         let at = site.latches.first().copied().unwrap_or(site.header);
         let written = self
             .loop_function(site)
+            .map(|(f, chain)| {
+                let outer: Vec<&String> = chain.iter().rev().skip(1).take(2).collect();
+                match outer.as_slice() {
+                    [] => f,
+                    o => format!(
+                        "{f} (inlined into {})",
+                        o.iter()
+                            .map(|s| s.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", into ")
+                    ),
+                }
+            })
             .unwrap_or_else(|| "no function the debug information names".to_owned());
         self.unbounded.insert((function, at, written));
         Ok(0)
@@ -567,8 +660,16 @@ fn loop_headers(elf: &Elf, graph: &CallGraph, annotations: &Annotations) -> Vec<
             self.inner.length_register(addr)
         }
         fn indirect(&mut self, function: u64, site: u64) -> Result<Vec<u64>, String> {
+            // Every target the call graph knows: the narrowing needs these sites' sources.
             self.headers.insert(site);
-            Ok(self.inner.indirect(function, site).unwrap_or_default())
+            let side = self.inner.side;
+            Ok(self
+                .inner
+                .graph
+                .targets(function, site, side)
+                .unwrap_or_default()
+                .into_iter()
+                .collect())
         }
         fn annotation(&self, _f: u64, _site: &cfg::Site) -> Option<(u64, String)> {
             Some((1, String::new()))
@@ -622,6 +723,7 @@ impl<'a> Job<'a> {
             loops: Vec::new(),
             unbounded: BTreeSet::new(),
             unsized_calls: BTreeSet::new(),
+            touched: BTreeSet::new(),
             reached: BTreeSet::new(),
             conflicted: BTreeSet::new(),
             constants_conflict: false,
@@ -642,11 +744,15 @@ impl<'a> Job<'a> {
 
     /// The source function a loop is written in: the innermost function whose inlined body
     /// holds every instruction of the loop (library plumbing aside: a `for` over a slice is
-    /// its caller's loop).
-    fn loop_function(&self, site: &cfg::Site) -> Option<String> {
+    /// its caller's loop); and the functions that hold it, outermost first.
+    fn loop_function(&self, site: &cfg::Site) -> Option<(String, Vec<String>)> {
         let mut common: Option<Vec<&String>> = None;
         for a in &site.body {
-            let chain: Vec<&String> = self.sources.get(a)?.iter().rev().collect();
+            // An instruction the line table leaves out (`??`) says nothing.
+            let Some(frames) = self.sources.get(a).filter(|f| f.iter().all(|n| n != "??")) else {
+                continue;
+            };
+            let chain: Vec<&String> = frames.iter().rev().collect();
             common = Some(match common {
                 None => chain,
                 Some(c) => c
@@ -657,11 +763,10 @@ impl<'a> Job<'a> {
                     .collect(),
             });
         }
-        common?
-            .iter()
-            .rev()
-            .find(|f| !plumbing(f))
-            .map(|f| (*f).clone())
+        let common = common?;
+        let at = common.iter().rposition(|f| !plumbing(f))?;
+        let chain: Vec<String> = common.iter().take(at + 1).map(|f| (*f).clone()).collect();
+        Some((chain.last()?.clone(), chain))
     }
 
     /// The source functions the instruction at `addr` is written in, innermost first, library
@@ -673,13 +778,9 @@ impl<'a> Job<'a> {
             .unwrap_or_default()
     }
 
-    /// The lines of code the job may run: every function it reaches, whole.
+    /// The lines of code (and its literals and jump tables) the job may touch.
     fn footprint(&self) -> BTreeSet<u64> {
-        self.reached
-            .iter()
-            .filter_map(|f| self.elf.funcs.get(f).map(|(end, _)| (*f, *end)))
-            .flat_map(|(s, e)| (s / LINE)..e.div_ceil(LINE))
-            .collect()
+        self.touched.clone()
     }
 }
 
@@ -690,20 +791,159 @@ fn job(
     annotations: &Annotations,
     sources: &HashMap<u64, Vec<String>>,
     spec: JobSpec,
-) -> Result<JobWcet, String> {
-    let mut first = Job::new(elf, graph, annotations, sources, spec.side, spec.name);
+) -> Result<(JobWcet, HashMap<u64, Option<u64>>), String> {
+    let probe = Job::new(elf, graph, annotations, sources, spec.side, spec.name);
     let entry = match graph.by_name(spec.entry) {
         Some(e) => e,
         // A task: its poll function.
         None => elf
             .funcs
             .iter()
-            .find(|(f, (_, n))| n.starts_with(TASK_POLL) && first.polls_task(**f, spec.entry))
+            .find(|(f, (_, n))| n.starts_with(TASK_POLL) && probe.polls_task(**f, spec.entry))
             .map(|(f, _)| *f)
             .ok_or_else(|| format!("the image has no {}", spec.entry))?,
     };
-    use cfg::Image;
-    first.call(entry)?;
+    let run = |j: &mut Job<'_>| {
+        use cfg::Image;
+        j.call(entry)
+    };
+    let (mut wcet, reached) = bounded(&probe, spec.name, &run)?;
+    if spec.handler {
+        // Entry and return, and the vector's word: a constant in flash, one more line.
+        let extra = EXCEPTION_ENTRY + EXCEPTION_RETURN + XIP_MISS;
+        wcet.cycles += extra;
+        wcet.xip_cycles += XIP_MISS;
+    }
+    Ok((wcet, reached))
+}
+
+/// The longest critical section (interrupts off: embassy-rp's spinlock 31, or defmt's logger,
+/// which holds one from a message's start to its end) in `functions`.
+fn critical(
+    elf: &Elf,
+    graph: &CallGraph,
+    annotations: &Annotations,
+    sources: &HashMap<u64, Vec<String>>,
+    functions: &HashMap<u64, Option<u64>>,
+) -> Result<JobWcet, String> {
+    let find = |names: &[&str]| -> Result<Vec<u64>, String> {
+        names
+            .iter()
+            .map(|n| {
+                graph
+                    .by_name(n)
+                    .ok_or_else(|| format!("the image has no {n}"))
+            })
+            .collect()
+    };
+    let acquire = find(ACQUIRES)?;
+    let release = find(RELEASES)?;
+    let probe = Job::new(elf, graph, annotations, sources, Side::Any, "critical");
+    let mut worst: Option<JobWcet> = None;
+    // Functions that return (a section in one that never does never ends).
+    let mut reached: Vec<u64> = functions
+        .iter()
+        .filter(|(f, w)| !acquire.contains(f) && w.is_some())
+        .map(|(f, _)| *f)
+        .collect();
+    reached.sort_unstable();
+    for f in &reached {
+        let Some((end, _)) = elf.funcs.get(f).cloned() else {
+            continue;
+        };
+        let (starts, joins) = cfg::section_starts(&mut Scan(&probe, functions), *f, end, &acquire)?;
+        for from in starts {
+            // embassy-rp's release is always inlined: a section ends at its `CPSIE`, or at
+            // defmt's release.
+            let section = cfg::Section {
+                from,
+                release: &release,
+                joins: &joins,
+            };
+            let run = |j: &mut Job<'_>| {
+                j.reached.insert(*f);
+                let w = cfg::analyse_from(j, *f, end, Some(section))?;
+                j.touched.extend(w.touched.iter().map(|a| a / LINE));
+                j.loops.extend(w.loops.iter().map(|l| LoopReport {
+                    function: elf.name(*f),
+                    address: format!("{:#x}", l.header),
+                    bound: l.bound,
+                    source: l.source.clone(),
+                    iteration_cycles: l.iteration,
+                }));
+                Ok(w.cycles)
+            };
+            let (w, _) = bounded(&probe, "critical", &run).map_err(|e| {
+                format!("the critical section at {from:#x} in {}: {e}", elf.name(*f))
+            })?;
+            if worst.as_ref().is_none_or(|m| w.cycles > m.cycles) {
+                worst = Some(w);
+            }
+        }
+    }
+    worst.ok_or_else(|| "no critical section found".to_owned())
+}
+
+/// An image that only decodes: every call returns at once (finding where critical sections
+/// begin needs the code, not its costs).
+struct Scan<'a, 'b>(&'a Job<'b>, &'a HashMap<u64, Option<u64>>);
+
+impl cfg::Image for Scan<'_, '_> {
+    fn code(&self, addr: u64) -> Option<&[u8]> {
+        self.0.code(addr)
+    }
+    fn word(&self, addr: u64) -> Option<u64> {
+        self.0.word(addr)
+    }
+    fn call(&mut self, addr: u64) -> Result<Option<u64>, String> {
+        // What the jobs found: a call that never returns ends the path.
+        let name = self.0.elf.funcs.get(&addr).map(|(_, n)| n.as_str());
+        Ok(match self.1.get(&addr) {
+            Some(None) => None,
+            _ if name.is_some_and(|n| DIVERGES.contains(&n)) => None,
+            _ => Some(0),
+        })
+    }
+    fn indirect(&mut self, _function: u64, _site: u64) -> Result<Vec<u64>, String> {
+        // Any function the jobs found returning: the call returns.
+        Ok(self
+            .1
+            .iter()
+            .find(|(_, w)| w.is_some())
+            .map(|(f, _)| vec![*f])
+            .unwrap_or_default())
+    }
+    fn annotation(&self, _function: u64, _site: &cfg::Site) -> Option<(u64, String)> {
+        Some((0, String::new()))
+    }
+}
+
+/// What takes a critical section and returns holding it: the lock's acquire (its release is
+/// inlined, a `CPSIE`), and defmt's start of a message.
+const ACQUIRES: &[&str] = &[
+    "<embassy_rp::critical_section_impl::RpSpinlockCs as critical_section::Impl>::acquire",
+    "_defmt_acquire",
+    "defmt::export::acquire_and_header",
+];
+/// What ends one that a function other than its own took: defmt's end of a message.
+const RELEASES: &[&str] = &["_defmt_release"];
+
+/// What `run` costs: a first pass finds the code it reaches (and fails on anything without a
+/// bound), two more charge the XIP cache; the functions reached.
+fn bounded(
+    probe: &Job<'_>,
+    name: &str,
+    run: &dyn Fn(&mut Job<'_>) -> Result<Option<u64>, String>,
+) -> Result<(JobWcet, HashMap<u64, Option<u64>>), String> {
+    let mut first = Job::new(
+        probe.elf,
+        probe.graph,
+        probe.annotations,
+        probe.sources,
+        probe.side,
+        probe.job,
+    );
+    let core = run(&mut first)?;
     if !first.unbounded.is_empty() || !first.unsized_calls.is_empty() {
         let sizes = first.unsized_calls.iter().map(|at| {
             let written = first.frames(*at).join(", inlined into ");
@@ -715,7 +955,7 @@ fn job(
             .map(|(f, at, written)| {
                 format!(
                     "\n  the loop with its back edge at {at:#x} in {}, written in {written}",
-                    elf.name(*f)
+                    first.elf.name(*f)
                 )
             })
             .chain(sizes)
@@ -727,35 +967,27 @@ fn job(
             list.concat()
         ));
     }
-    let core = first
-        .memo
-        .get(&entry)
-        .copied()
-        .flatten()
-        .ok_or_else(|| format!("{} never returns", spec.entry))?;
+    let core = core.ok_or("it never completes")?;
     let code = first.footprint();
-    let r = &elf.rodata;
-    let constants: BTreeSet<u64> = (r.start / LINE..r.end.div_ceil(LINE)).collect();
-    // Two bounds of the misses, both sound; the job's is the smaller. (a) Every line of the
-    // constants misses once, like the code's; (b) the constants are left out of the cold
-    // lines and every load the analysis cannot place misses instead.
-    let with_constants: BTreeSet<u64> = code.union(&constants).copied().collect();
-    let (a, loops) = with_misses(&first, entry, &with_constants, false)?;
-    let (b, _) = with_misses(&first, entry, &code, true)?;
-    let handler = if spec.handler {
-        // The vector's word is a constant in flash: one more line.
-        EXCEPTION_ENTRY + EXCEPTION_RETURN + XIP_MISS
-    } else {
-        0
-    };
-    let cycles = a.min(b) + handler;
-    Ok(JobWcet {
-        job: spec.name.to_owned(),
-        cycles,
-        xip_cycles: cycles - core,
-        lines: code.len(),
-        loops,
-    })
+    // Constants may be read through any pointer: every load the analysis cannot place is
+    // charged a miss (the lines of `.rodata` stay out of the cold code's, so the bound does
+    // not move with the constants' size: the panic locations hold the checkout's path).
+    let (cycles, loops) = with_misses(&first, run, &code, true)?;
+    let memo = first
+        .reached
+        .iter()
+        .map(|f| (*f, first.memo.get(f).copied().flatten()))
+        .collect();
+    Ok((
+        JobWcet {
+            job: name.to_owned(),
+            cycles,
+            xip_cycles: cycles.saturating_sub(core),
+            lines: code.len(),
+            loops,
+        },
+        memo,
+    ))
 }
 
 /// The job's cycles with the XIP cache's misses for the cold `lines`: each once, or, for a
@@ -763,11 +995,10 @@ fn job(
 /// load the analysis cannot place if a constant's line is one, or `every_load`).
 fn with_misses(
     first: &Job<'_>,
-    entry: u64,
+    run: &dyn Fn(&mut Job<'_>) -> Result<Option<u64>, String>,
     lines: &BTreeSet<u64>,
     every_load: bool,
 ) -> Result<(u64, Vec<LoopReport>), String> {
-    use cfg::Image;
     let mut per_set: BTreeMap<u64, usize> = BTreeMap::new();
     for l in lines {
         *per_set.entry(l % SETS).or_default() += 1;
@@ -791,7 +1022,7 @@ fn with_misses(
             .iter()
             .any(|l| (r.start / LINE..r.end.div_ceil(LINE)).contains(l));
     job.conflicted = conflicted;
-    let core = job.call(entry)?.ok_or("the job never returns")?;
+    let core = run(&mut job)?.ok_or("it never completes")?;
     let cold = (lines.len() - job.conflicted.len()) as u64 * XIP_MISS;
     let mut loops = job.loops;
     loops.sort_by(|a, b| a.address.cmp(&b.address));
@@ -799,14 +1030,64 @@ fn with_misses(
     Ok((core + cold, loops))
 }
 
-/// Runs the analysis: prints each job's bound, or fails naming what it cannot bound.
-pub fn run(json: bool) -> Result<(), String> {
-    let analysed = CallGraph::build_pico()?;
-    let shipped = CallGraph::shipped_pico()?;
-    if !CallGraph::same_code(&analysed, &shipped)? {
-        return Err("the image built for the analysis differs from the shipped one".to_owned());
+/// The whole report: each job, and each sensor's reaction bound from them.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    pub jobs: Vec<JobWcet>,
+    /// By the mission's sensor names: the response-time bound of a reaction (cycles), from
+    /// the static costs; `null` when the analysis cannot give one (`reaction_error`).
+    pub reaction_bound_cycles: BTreeMap<String, Option<u64>>,
+    /// Why there is no bound, if there is none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reaction_error: Option<String>,
+}
+
+impl Report {
+    /// The costs the response-time analysis takes, by job.
+    pub fn costs(&self) -> Option<Costs> {
+        let get = |n: &str| self.jobs.iter().find(|j| j.job == n).map(|j| j.cycles);
+        Some(Costs {
+            sensing_poll: get("sensing_poll")?,
+            alarm: get("alarm")?,
+            gpio: get("gpio")?,
+            deciding: get("deciding")?,
+            critical: get("critical")?,
+        })
     }
-    let results = analyse(&analysed)?;
+}
+
+/// The mission's sampling periods of the sonar and the bumper, ms.
+fn periods_ms() -> Result<[u64; 2], String> {
+    use psmpa_drivers::robot::fetch_tea::{MISSION, Sensor};
+    let period = |s: Sensor| match MISSION.domain.sensor(s.id()).map(|a| a.mode) {
+        Some(psmpa_core::SensorMode::Cyclic { period }) => Ok(period.as_millis()),
+        _ => Err(format!("the mission's {s:?} is not cyclic")),
+    };
+    Ok([period(Sensor::Sonar)?, period(Sensor::Bumper)?])
+}
+
+/// Runs the analysis: prints each job's bound; fails (1) naming the first loop or length it
+/// cannot bound, or an annotation that matches nothing; 2 when its annotations do not load.
+pub fn run(json: bool) -> Ending {
+    let analysed = match CallGraph::build_pico().and_then(|a| {
+        let shipped = CallGraph::shipped_pico()?;
+        if CallGraph::same_code(&a, &shipped)? {
+            Ok(a)
+        } else {
+            Err("the image built for the analysis differs from the shipped one".to_owned())
+        }
+    }) {
+        Ok(a) => a,
+        Err(e) => return Ending::Failed(e),
+    };
+    let annotations = match Annotations::load() {
+        Ok(a) => a,
+        Err(e) => return Ending::BadInput(e),
+    };
+    let (results, used) = match analyse(&analysed, &annotations) {
+        Ok(r) => r,
+        Err(e) => return Ending::Failed(e),
+    };
     let mut failures = Vec::new();
     let mut jobs = Vec::new();
     for r in results {
@@ -815,45 +1096,185 @@ pub fn run(json: bool) -> Result<(), String> {
             Err(e) => failures.push(e),
         }
     }
-    if json {
-        let report = serde_json::json!({ "jobs": jobs });
-        println!("{report}");
-    } else {
-        for j in &jobs {
-            println!(
-                "{:<14} {:>9} cycles ({:>7} of them XIP misses, {} lines), {} loops",
-                j.job,
-                j.cycles,
-                j.xip_cycles,
-                j.lines,
-                j.loops.len()
-            );
-            for l in &j.loops {
-                println!(
-                    "    loop at {} in {}: {} back edges of at most {} cycles ({})",
-                    l.address, l.function, l.bound, l.iteration_cycles, l.source
-                );
-            }
+    let stale: Vec<&Annotation> = annotations
+        .loops
+        .iter()
+        .chain(&annotations.lengths)
+        .filter(|a| !used.contains(&a.function))
+        .collect();
+    if failures.is_empty() {
+        for a in stale {
+            failures.push(format!(
+                "{}: the annotation for {} matches no loop or call of an analysed job: the code changed, update or remove it",
+                Annotations::path().display(),
+                a.function
+            ));
         }
     }
+    let mut report = Report {
+        jobs,
+        reaction_bound_cycles: BTreeMap::new(),
+        reaction_error: None,
+    };
+    match (report.costs(), periods_ms()) {
+        (Some(costs), Ok(periods)) => match bound::bounds(&costs, periods) {
+            Ok([sonar, bumper]) => {
+                report
+                    .reaction_bound_cycles
+                    .insert("sonar".to_owned(), Some(sonar));
+                report
+                    .reaction_bound_cycles
+                    .insert("bumper".to_owned(), Some(bumper));
+            }
+            Err(e) => {
+                report
+                    .reaction_bound_cycles
+                    .insert("sonar".to_owned(), None);
+                report
+                    .reaction_bound_cycles
+                    .insert("bumper".to_owned(), None);
+                report.reaction_error = Some(format!(
+                    "the static costs at the mission's periods ({} and {} ms): {e}",
+                    periods[0], periods[1]
+                ));
+            }
+        },
+        (None, _) => report.reaction_error = Some("a job has no bound".to_owned()),
+        (_, Err(e)) => report.reaction_error = Some(e),
+    }
+    if failures.is_empty()
+        && let Err(e) = figures(&report)
+    {
+        failures.push(e);
+    }
+    if json {
+        match serde_json::to_string(&report) {
+            Ok(text) => println!("{text}"),
+            Err(e) => return Ending::Failed(e.to_string()),
+        }
+    } else {
+        print!("{}", text(&report));
+    }
     match failures.first() {
-        None => Ok(()),
-        Some(_) => Err(failures.join("\n")),
+        None => Ending::Passed,
+        Some(first) => Ending::Failed(first.clone()),
     }
 }
 
-/// The analysis of an image built for it, job by job.
-fn analyse(path: &Path) -> Result<Vec<Result<JobWcet, String>>, String> {
+/// Writes the jobs' bounds beside the bench's committed budget into `docs/firmware.md`.
+fn figures(report: &Report) -> Result<(), String> {
+    let budget = bound::Budget::load()?;
+    let group = crate::hil::thousands;
+    let mut text = String::from(
+        "\n| job | static bound, cycles | of which XIP misses | instructions only | measured on the bench (budget) | bound / measured |\n|---|---|---|---|---|---|\n",
+    );
+    for j in &report.jobs {
+        let measured = budget
+            .measured
+            .named()
+            .iter()
+            .find(|(n, _)| *n == j.job)
+            .map(|(_, c)| *c);
+        let budgeted = budget
+            .budget
+            .named()
+            .iter()
+            .find(|(n, _)| *n == j.job)
+            .map(|(_, c)| *c);
+        let (m, ratio) = match (measured, budgeted) {
+            (Some(m), Some(b)) if m > 0 => (
+                format!("{} ({})", group(m), group(b)),
+                format!("{:.0}x", j.cycles as f64 / m as f64),
+            ),
+            _ => ("".to_owned(), "".to_owned()),
+        };
+        text += &format!(
+            "| {} | {} | {} | {} | {m} | {ratio} |\n",
+            j.job,
+            group(j.cycles),
+            group(j.xip_cycles),
+            group(j.cycles - j.xip_cycles)
+        );
+    }
+    match &report.reaction_error {
+        Some(e) => text += &format!("\nNo reaction bound: {e}.\n"),
+        None => {
+            for (sensor, b) in &report.reaction_bound_cycles {
+                if let Some(b) = b {
+                    text += &format!("\nReaction bound of the {sensor}: {} cycles.\n", group(*b));
+                }
+            }
+        }
+    }
+    let root = crate::firmware::root();
+    crate::hil::write_between(&root.join("docs/firmware.md"), "wcet-figures", &text)?;
+    let alarm = report.jobs.iter().find(|j| j.job == "alarm");
+    let cell = match (alarm, &report.reaction_error) {
+        (Some(a), Some(_)) => format!(
+            "{} jobs bounded (alarm {} cycles); no reaction bound: the bounds need more than the processor",
+            report.jobs.len(),
+            group(a.cycles)
+        ),
+        (Some(a), None) => format!(
+            "{} jobs bounded (alarm {} cycles); reaction bounds from them",
+            report.jobs.len(),
+            group(a.cycles)
+        ),
+        (None, _) => format!("{} jobs bounded", report.jobs.len()),
+    };
+    crate::hil::write_between(&root.join("README.md"), "wcet", &cell)
+}
+
+/// The report in words.
+fn text(report: &Report) -> String {
+    let mut out = String::new();
+    for j in &report.jobs {
+        out += &format!(
+            "{:<14} {:>13} cycles: {:>11} of instructions, {:>13} of XIP misses ({} lines), {} loops\n",
+            j.job,
+            j.cycles,
+            j.cycles - j.xip_cycles,
+            j.xip_cycles,
+            j.lines,
+            j.loops.len()
+        );
+    }
+    for (sensor, b) in &report.reaction_bound_cycles {
+        match b {
+            Some(b) => out += &format!("reaction bound of the {sensor}: {b} cycles\n"),
+            None => out += &format!("reaction bound of the {sensor}: none\n"),
+        }
+    }
+    if let Some(e) = &report.reaction_error {
+        out += &format!("no reaction bound: {e}\n");
+    }
+    out
+}
+
+/// The analysis of an image built for it, job by job; and the annotations it used.
+#[allow(clippy::type_complexity)]
+fn analyse(
+    path: &Path,
+    annotations: &Annotations,
+) -> Result<(Vec<Result<JobWcet, String>>, BTreeSet<String>), String> {
     let elf = Elf::read(path)?;
     let graph = CallGraph::of(path)?;
-    let annotations = Annotations::load()?;
-    let headers = loop_headers(&elf, &graph, &annotations);
+    let headers = loop_headers(&elf, &graph, annotations);
     let sources = source_functions(&elf.path, &headers)?;
-    Ok(JOBS
-        .iter()
-        .map(|spec| {
-            job(&elf, &graph, &annotations, &sources, *spec)
-                .map_err(|e| format!("{}: {e}", spec.name))
-        })
-        .collect())
+    let mut reached = HashMap::new();
+    let mut out: Vec<Result<JobWcet, String>> = Vec::new();
+    for spec in JOBS {
+        out.push(match job(&elf, &graph, annotations, &sources, *spec) {
+            Ok((w, r)) => {
+                reached.extend(r);
+                Ok(w)
+            }
+            Err(e) => Err(format!("{}: {e}", spec.name)),
+        });
+    }
+    out.push(
+        critical(&elf, &graph, annotations, &sources, &reached)
+            .map_err(|e| format!("critical: {e}")),
+    );
+    Ok((out, USED.with(|u| u.borrow().clone())))
 }

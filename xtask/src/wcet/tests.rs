@@ -106,6 +106,39 @@ fn a_counted_loop_is_bounded_from_the_code() {
 }
 
 #[test]
+fn a_loop_to_a_limit_in_a_register_is_bounded_from_the_code() {
+    // 0: movs r1, #0; 2: movs r2, #125; 4: lsls r2, r2, #3 (1000); 6: adds r1, r1, #1;
+    // 8: cmp r1, r2; 10: bne 6; 12: bx lr.
+    // Run: 1000 iterations: 3 + 999 * 4 + 3 + 2 = 4004. Bound: 1001 back edges of 4 cycles:
+    // 3 + 1001 * 4 + 3 + 2 = 4012.
+    let mut f =
+        Fixture::new(&[0x2100, 0x227d, 0x00d2, 0x1c49, 0x4291, 0xd1fc, BX_LR]).function(0, 14);
+    let w = f.worst(0).expect("bounded");
+    assert_eq!(w.loops.first().map(|l| l.bound), Some(1001));
+    assert_eq!(w.cycles, Some(4012));
+}
+
+#[test]
+fn a_compare_of_the_limit_with_the_counter_is_read_either_way_round() {
+    // 0: movs r1, #0; 2: movs r2, #10; 4: adds r1, r1, #1; 6: cmp r2, r1; 8: bhi 4; 10: bx lr.
+    // Goes on while 10 > r1: 10 iterations. Bound: 11 back edges of 4 cycles:
+    // 2 + 11 * 4 + 3 + 2 = 51.
+    let mut f = Fixture::new(&[0x2100, 0x220a, 0x1c49, 0x428a, 0xd8fc, BX_LR]).function(0, 12);
+    let w = f.worst(0).expect("bounded");
+    assert_eq!(w.loops.first().map(|l| l.bound), Some(11));
+    assert_eq!(w.cycles, Some(51));
+}
+
+#[test]
+fn a_counter_that_goes_on_past_its_limit_is_not_counted() {
+    // 0: movs r1, #9; 2: adds r1, r1, #1; 4: cmp r1, #10; 6: bhs 2; 8: bx lr: goes on while
+    // r1 >= 10, which after the first step is for ever (until it wraps).
+    let mut f = Fixture::new(&[0x2109, 0x1c49, 0x290a, 0xd2fc, BX_LR]).function(0, 10);
+    let e = f.worst(0).expect_err("no bound");
+    assert!(e.contains("no bound"), "{e}");
+}
+
+#[test]
 fn a_loop_over_set_bits_is_bounded_by_the_word() {
     // 0: cmp r0, #0; 2: beq 10; 4: subs r1, r0, #1; 6: ands r0, r1; 8: b 0; 10: bx lr.
     // At most 32 bits to clear: 32 back edges of 1 + 1 + 1 + 1 + 2 = 6, then cmp, beq

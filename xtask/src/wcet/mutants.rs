@@ -1,0 +1,155 @@
+//! `cargo xtask wcet --mutants`: the analysis must be able to fail. Each mutant is a bug
+//! planted in a scratch copy of the sources (`target/mutants/wcet-tree`), built as the
+//! analysis builds the Pico's image, and analysed; it is caught when the analysis does what it
+//! exists for: a busy computation added to the sonar's sampling path raises the sensing job's
+//! bound by at least what it costs, and a busy wait on time in the safety stop (`halt`) makes
+//! the analysis fail, naming it.
+
+use std::path::Path;
+
+use super::{Annotations, JobWcet, analyse};
+use crate::firmware;
+use crate::hil::Ending;
+use crate::hil::mutants::{copy_tree, warm_target};
+use crate::stack::CallGraph;
+
+/// What catches a mutant.
+enum Expect {
+    /// The named job's instruction cycles rise by at least this many (its XIP misses move
+    /// with the layout of the whole image, by more than a small change costs).
+    Rises(&'static str, u64),
+    /// The analysis fails with a message holding this.
+    Fails(&'static str),
+}
+
+/// A planted bug: its file and the exact text it replaces (which must occur once).
+struct Mutant {
+    name: &'static str,
+    what: &'static str,
+    file: &'static str,
+    find: &'static str,
+    replace: &'static str,
+    expect: Expect,
+}
+
+const MUTANTS: &[Mutant] = &[
+    Mutant {
+        name: "sonar-busy-loop",
+        what: "the sonar's driver computes 1,000 rounds after each echo",
+        // In a function of its own: inlined, LLVM keeps the limit in a stack slot, which the
+        // analysis does not follow (it then refuses the loop, unbounded).
+        file: "drivers/src/hcsr04.rs",
+        find: "        let width = Instant::now().saturating_duration_since(rose);",
+        replace: "        let width = Instant::now().saturating_duration_since(rose);
+        #[inline(never)]
+        fn busy() {
+            for i in 0..1000u32 {
+                core::hint::black_box(i);
+            }
+        }
+        busy();",
+        // A round is at least an add, a compare and a taken branch: 4 cycles.
+        expect: Expect::Rises("sensing_poll", 3_000),
+    },
+    Mutant {
+        name: "busy-halt",
+        what: "the safety stop waits 1 ms on the clock before it brakes",
+        file: "drivers/src/robot.rs",
+        find: "        // Nothing more to do if even braking fails.
+        let _ = self.wheels(Drive::brake);",
+        replace: "        embassy_time::block_for(Duration::from_millis(1));
+        let _ = self.wheels(Drive::brake);",
+        expect: Expect::Fails("embassy_time::delay::block_for"),
+    },
+];
+
+/// The analysed jobs of the image at `path`, or why the analysis failed.
+fn jobs(path: &Path, annotations: &Annotations) -> Result<Vec<JobWcet>, String> {
+    let (results, _) = analyse(path, annotations)?;
+    results.into_iter().collect()
+}
+
+/// Plants each mutant, analyses it, and says which were caught; exit 0 only if all were.
+pub fn run() -> Ending {
+    match catch() {
+        Ok(missed) if missed.is_empty() => Ending::Passed,
+        Ok(missed) => Ending::Failed(format!("not caught: {}", missed.join(", "))),
+        Err(e) => Ending::Failed(e),
+    }
+}
+
+fn catch() -> Result<Vec<String>, String> {
+    let root = firmware::root();
+    let tree = root.join("target/mutants/wcet-tree");
+    let target = root.join("target/mutants/wcet-target");
+    copy_tree(&root, &tree)?;
+    warm_target(&firmware::boards().join("target/stack"), &target)?;
+    let annotations = Annotations::load()?;
+    // The clean image, built where the mutants are, as the baseline.
+    for m in MUTANTS {
+        restore(m, &root, &tree)?;
+    }
+    let clean = jobs(&CallGraph::build_pico_in(&tree, &target)?, &annotations)
+        .map_err(|e| format!("the clean image does not pass the analysis: {e}"))?;
+    let mut missed = Vec::new();
+    println!("{:<16} {:<56} caught", "mutant", "bug");
+    for m in MUTANTS {
+        plant(m, &root, &tree)?;
+        let built = CallGraph::build_pico_in(&tree, &target);
+        restore(m, &root, &tree)?;
+        let analysed = jobs(&built?, &annotations);
+        let verdict = match (&m.expect, analysed) {
+            (Expect::Rises(job, at_least), Ok(jobs)) => {
+                let get = |js: &[JobWcet]| {
+                    js.iter()
+                        .find(|j| j.job == *job)
+                        .map(|j| j.cycles - j.xip_cycles)
+                };
+                match (get(&clean), get(&jobs)) {
+                    (Some(before), Some(after)) if after >= before.saturating_add(*at_least) => {
+                        Ok(format!("{job}: {before} -> {after} cycles of instructions"))
+                    }
+                    (before, after) => Err(format!(
+                        "{job}: {before:?} -> {after:?} cycles of instructions, not {at_least} more"
+                    )),
+                }
+            }
+            (Expect::Rises(..), Err(e)) => Err(format!("the analysis failed: {e}")),
+            (Expect::Fails(what), Err(e)) if e.contains(what) => Ok(format!(
+                "refused: {}",
+                e.lines().last().unwrap_or("").trim()
+            )),
+            (Expect::Fails(what), Err(e)) => Err(format!("failed without naming {what}: {e}")),
+            (Expect::Fails(what), Ok(_)) => Err(format!("passed: {what} went unnoticed")),
+        };
+        match verdict {
+            Ok(how) => println!("{:<16} {:<56} yes: {how}", m.name, m.what),
+            Err(why) => {
+                println!("{:<16} {:<56} NO: {why}", m.name, m.what);
+                missed.push(m.name.to_owned());
+            }
+        }
+    }
+    Ok(missed)
+}
+
+/// Plants `m` in `tree`; why not, if its text is not in its file once.
+fn plant(m: &Mutant, root: &Path, tree: &Path) -> Result<(), String> {
+    let original =
+        std::fs::read_to_string(root.join(m.file)).map_err(|e| format!("{}: {e}", m.file))?;
+    if original.matches(m.find).count() != 1 {
+        return Err(format!(
+            "mutant {}: {} does not hold its text once: the code changed, update the mutant",
+            m.name, m.file
+        ));
+    }
+    std::fs::write(tree.join(m.file), original.replacen(m.find, m.replace, 1))
+        .map_err(|e| format!("{}: {e}", m.file))
+}
+
+/// Restores `m`'s file in `tree`.
+fn restore(m: &Mutant, root: &Path, tree: &Path) -> Result<(), String> {
+    std::fs::copy(root.join(m.file), tree.join(m.file))
+        .map(|_| ())
+        .map_err(|e| format!("{}: {e}", m.file))
+}
