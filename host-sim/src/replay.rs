@@ -203,6 +203,13 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
         )));
     }
     let prologue = &body[4..4 + len];
+    // No larger than a scenario file may be: what a loader reads at most.
+    if len as u64 > crate::cli::files::MAX_INPUT {
+        return Err(fail(format!(
+            "its prologue holds {len} bytes, more than a scenario file may ({} bytes)",
+            crate::cli::files::MAX_INPUT
+        )));
+    }
     let source = match body[4 + len] {
         BOARD => {
             if header.mission != fetch_tea::HASH {
@@ -242,6 +249,15 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
                         "its scenario, in canonical form, does not read: {e}"
                     ))
                 })?;
+                // Made from a validated file, it holds only values a file may: checked as one.
+                let checked = Scenario::validate(&s.to_file())
+                    .map_err(|e| fail(format!("its scenario, in canonical form: {e}")))?;
+                if canonical(&checked) != canonical(&s) {
+                    return Err(fail(
+                        "its scenario, in canonical form, holds values no scenario file gives"
+                            .into(),
+                    ));
+                }
                 s
             } else {
                 crate::load::parse(file, &scenario_json).map_err(|e| e.to_string())?
@@ -282,6 +298,14 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
     Ok(Recording { source, frames })
 }
 
+/// A scenario's canonical bytes, to compare two.
+fn canonical(s: &Scenario) -> Option<std::vec::Vec<u8>> {
+    let mut out = vec![0u8; crate::cli::files::MAX_INPUT as usize];
+    let n = s.to_canonical(&mut out).ok()?;
+    out.truncate(n);
+    Some(out)
+}
+
 /// The first event where the replay and the recording differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Divergence {
@@ -308,6 +332,9 @@ pub struct Replayed {
     /// The most an equal event came earlier or later than recorded, ms (0 unless a lag is
     /// allowed).
     pub skew_ms: u64,
+    /// The instant the replay ran to, seconds: the run's end, or a second past the last
+    /// recorded frame, whichever is sooner.
+    pub replayed_s: f64,
 }
 
 /// How far the replay has traced: the platform hands each input over when every recorded
@@ -646,14 +673,17 @@ pub fn replay(
                 robot::config(scenario, *arch),
             );
             let mut space = robot::PlannerSpace::new();
-            let end = Instant::from_millis(scenario.max_ms);
-            drive(
+            // The run's end, or a second past the last frame: a cut recording replays no
+            // longer than it lasted.
+            let last = Instant::from_ticks(frames.last().map_or(0, |f| f.ticks));
+            let end = Instant::from_millis(scenario.max_ms).min(last + Duration::from_secs(1));
+            let ran_to = drive(
                 runtime.sensing(),
                 runtime.run_planning(&robot::PLANNER, &mut space),
                 start,
                 end,
             )?;
-            finish(runtime.into_sink())
+            finish(runtime.into_sink(), ran_to)
         }
         Source::Board { settings } => {
             // As the board does: the compiled mission, its periods from the calibration.
@@ -681,8 +711,8 @@ pub fn replay(
             // A second past the last frame: what the board traced at its last instant too.
             let end =
                 Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);
-            drive(runtime.sensing(), runtime.run(), start, end)?;
-            finish(runtime.into_sink())
+            let ran_to = drive(runtime.sensing(), runtime.run(), start, end)?;
+            finish(runtime.into_sink(), ran_to)
         }
     }
 }
@@ -695,13 +725,14 @@ fn on_demand<const W: usize>(sensors: &[psmpa_core::SensorAction<'_, W>]) -> Vec
         .collect()
 }
 
-/// Runs a replay's two sides until the deciding side ends or `end` (a second's margin).
+/// Runs a replay's two sides until the deciding side ends or `end` (a second's margin); the
+/// instant it ran to.
 fn drive<S: core::future::Future, F: core::future::Future>(
     sensing: S,
     deciding: F,
     start: Instant,
     end: Instant,
-) -> Result<(), String> {
+) -> Result<Instant, String> {
     let run = async {
         // The runtime started at the first recorded instant: a board boots first.
         crate::backend::advance_to(start);
@@ -709,15 +740,16 @@ fn drive<S: core::future::Future, F: core::future::Future>(
         let deciding = pin!(select(deciding, Timer::at(end)));
         // SAFETY: run to completion inside `simulate`, on this thread.
         let _ = unsafe { Prioritized.beside(sensing, deciding) }.await;
+        Instant::now()
     };
     let limit = Duration::from_ticks(end.as_ticks()) + Duration::from_secs(1);
     simulate(run, limit)
-        .map(|_| ())
+        .map(|done| done.output)
         .map_err(|e| format!("the replay failed: {e}"))
 }
 
 /// The last comparison (a recording longer than its replay), and the result.
-fn finish(mut compare: Compare<'_>) -> Result<(Replayed, Option<Output>), String> {
+fn finish(mut compare: Compare<'_>, ran_to: Instant) -> Result<(Replayed, Option<Output>), String> {
     if compare.divergence.is_none() && compare.next < compare.expected.len() {
         let want = &compare.expected[compare.next];
         compare.divergence = Some(Divergence {
@@ -741,6 +773,7 @@ fn finish(mut compare: Compare<'_>) -> Result<(Replayed, Option<Output>), String
             diverged: compare.divergence.is_some(),
             divergence: compare.divergence,
             skew_ms: Duration::from_ticks(compare.skew).as_millis(),
+            replayed_s: seconds(ran_to.as_ticks()),
         },
         log,
     ))

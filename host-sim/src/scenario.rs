@@ -1090,6 +1090,69 @@ impl Scenario {
         Ok(s)
     }
 
+    /// The file this scenario comes from, in its own units: what a canonical form read from
+    /// outside (a recording's prologue) is checked against, since one made from a validated
+    /// file comes back from [`validate`](Self::validate) unchanged.
+    pub fn to_file(&self) -> ScenarioFile {
+        let m = |um: i64| um as f64 / 1e6;
+        let s = |ms: u64| ms as f64 / 1e3;
+        let ms = |ms: u64| Some(ms as f64);
+        let o = &self.sonar;
+        let mut interferences = Vec::new();
+        for i in &self.interferences {
+            // As many as the scenario holds: the same capacity.
+            let _ = interferences.push(InterferenceFile {
+                kind: Some(i.kind),
+                at_s: Some(f64::from(i.at_ms) / 1e3),
+                ahead_m: Some(f64::from(i.ahead_um) / 1e6),
+                hold_s: Some(f64::from(i.hold_ms) / 1e3),
+                speed_mps: Some(f64::from(i.speed_um_per_ms) / 1e3),
+                height_m: Some(f64::from(i.height_um) / 1e6),
+            });
+        }
+        ScenarioFile {
+            name: self.name.clone(),
+            seed: Some(self.seed),
+            door_m: Some(m(self.door_um)),
+            max_s: Some(s(self.max_ms)),
+            robot: Some(RobotFile {
+                speed_mps: Some(self.speed_um_per_ms as f64 / 1e3),
+                avoid_s: Some(s(self.avoid_ms)),
+                slow_m: Some(m(self.slow_um)),
+                plan_us: Some(f64::from(self.plan_us)),
+            }),
+            sonar: Some(SonarFile {
+                period_ms: ms(o.period_ms),
+                min_m: Some(m(o.min_um)),
+                max_m: Some(m(o.max_um)),
+                threshold_m: Some(m(o.threshold_um)),
+                noise_m: Some(m(o.noise_um)),
+                dropout: Some(o.dropout as f64 / 4_294_967_296.0),
+                latency_ms: ms(o.latency_ms),
+                height_m: Some(m(o.height_um)),
+                cone_slope: Some(o.cone_slope_ppm as f64 / 1e6),
+            }),
+            bumper: Some(BumperFile {
+                period_ms: ms(self.bumper_period_ms),
+                latency_ms: ms(self.bumper_latency_ms),
+                min_contact_ms: ms(self.bumper_min_contact_ms),
+            }),
+            smpa: Some(SmpaFile {
+                sense_ms: ms(self.sense_ms),
+                act_ms: ms(self.act_ms),
+            }),
+            doors: Some(DoorsFile {
+                locked: Some(self.door_locked),
+                back_door_m: Some(m(self.back_door_um)),
+            }),
+            fault: self.fault.map(|(kind, at)| FaultFile {
+                kind,
+                at_s: Some(f64::from(at) / 1e3),
+            }),
+            interferences: Interferences(interferences),
+        }
+    }
+
     /// Parses and validates a scenario file.
     pub fn parse(json: &[u8]) -> Result<Self, ScenarioError> {
         // Room to decode the longest string with escape sequences (a name).

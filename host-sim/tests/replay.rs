@@ -287,3 +287,109 @@ fn a_decoded_log_replays_as_its_recording() {
     assert_eq!(status, Some(2));
     assert!(stderr.contains("before any header"), "{stderr}");
 }
+
+/// A chip's recording whose prologue carries `scenario` (canonical form) instead, with its
+/// length, the header's mission hash and the prologue's checksum made good: what a hostile
+/// file can hold past every integrity check.
+fn with_scenario(bytes: &[u8], scenario: &[u8]) -> Vec<u8> {
+    use psmpa_sim::robot::{Arch, mission_hash};
+    let at = record::HEADER_LEN;
+    let len = u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+    let arch_byte = bytes[at + 4 + len];
+    let arch = if arch_byte == 0 {
+        Arch::PSmpa
+    } else {
+        Arch::Smpa
+    };
+    let mut header = record::Header::decode(bytes).unwrap();
+    header.mission = mission_hash(scenario, arch);
+    let mut out = header.encode().to_vec();
+    out.extend_from_slice(&(scenario.len() as u32).to_le_bytes());
+    out.extend_from_slice(scenario);
+    out.push(arch_byte);
+    let crc = record::crc32(&out[at..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out.extend_from_slice(&bytes[at + 4 + len + 1 + 4..]);
+    out
+}
+
+/// A chip's recording carries its scenario in canonical form: one a file could not give is
+/// refused in one line naming the field, exit 2, before any replay (a run of u64::MAX ms used
+/// to overflow the replay's clock, a sampling period of 0 to print a type's name).
+#[test]
+fn a_prologue_scenario_out_of_a_files_range_is_refused_naming_its_field() {
+    let dir = folder("replay-prologue");
+    let bytes = std::fs::read(repo("host-sim/tests/data/quiet.smpa.mps2-an386.rec")).unwrap();
+    let at = record::HEADER_LEN;
+    let len = u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+    let scenario = String::from_utf8(bytes[at + 4..at + 4 + len].to_vec()).unwrap();
+    assert!(scenario.contains(",600000,"), "{scenario}");
+    // The same recording rebuilt unchanged still replays: the rebuilding is sound.
+    let same = dir.join("same.rec");
+    std::fs::write(&same, with_scenario(&bytes, scenario.as_bytes())).unwrap();
+    let out = bin()
+        .arg("replay")
+        .arg(&same)
+        .args(["--lag-ms", "2"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    for (name, from, to, says) in [
+        ("forever", ",600000,", ",18446744073709551615,", "max_s"),
+        ("no-period", ",[100,", ",[0,", "sonar.period_ms"),
+        (
+            "no-door",
+            "\"quiet\",7,2000000,",
+            "\"quiet\",7,0,",
+            "door_m",
+        ),
+    ] {
+        let changed = scenario.replacen(from, to, 1);
+        assert_ne!(changed, scenario, "{name}");
+        let path = dir.join(format!("{name}.rec"));
+        std::fs::write(&path, with_scenario(&bytes, changed.as_bytes())).unwrap();
+        let (status, _, stderr) = replay(&path);
+        assert_eq!(status, Some(2), "{name}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{name}: {stderr}");
+        assert!(stderr.contains(says), "{name}: {stderr}");
+        assert!(stderr.contains(&path.display().to_string()), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+/// A prologue larger than a scenario file may be (1 MiB) is refused before it is read.
+#[test]
+fn a_prologue_larger_than_a_scenario_file_is_refused() {
+    let dir = folder("replay-large-prologue");
+    let bytes = std::fs::read(repo("host-sim/tests/data/quiet.smpa.mps2-an386.rec")).unwrap();
+    let mut scenario = b"[\"quiet\"".to_vec();
+    scenario.resize((1 << 20) + 10, b' ');
+    let path = dir.join("large.rec");
+    std::fs::write(&path, with_scenario(&bytes, &scenario)).unwrap();
+    let (status, _, stderr) = replay(&path);
+    assert_eq!(status, Some(2), "{stderr}");
+    assert!(stderr.contains("more than a scenario file may"), "{stderr}");
+}
+
+/// A host's recording cut at a frame boundary replays no longer than it lasted: its replay
+/// ends a second past its last frame, not at the scenario's longest run (SMPA's sense and act
+/// phases go on by their timers where a recording stops).
+#[test]
+fn a_cut_recording_replays_no_longer_than_it_lasted() {
+    let dir = folder("replay-cut");
+    let rec = record(&repo("scenarios/locked-door.json"), "smpa", &dir);
+    let bytes = std::fs::read(&rec).unwrap();
+    let (start, all) = frames(&bytes);
+    let half = all.len() / 2;
+    let cut = dir.join("cut-at-frame.rec");
+    std::fs::write(&cut, &bytes[..start + half * record::frame_len(1)]).unwrap();
+    let last_s = all[half - 1].ticks as f64 / embassy_time::TICK_HZ as f64;
+    let (status, v, stderr) = replay(&cut);
+    // The replay goes on deciding where the recording stopped: a divergence.
+    assert_eq!(status, Some(1), "{v} {stderr}");
+    let ran = v["replayed_s"].as_f64().unwrap_or(f64::MAX);
+    assert!(
+        ran <= last_s + 1.0 + 1e-6,
+        "replayed to {ran} s, the recording ends at {last_s} s: {v}"
+    );
+}
