@@ -510,20 +510,9 @@ fn u64_at(bytes: &[u8], i: usize) -> u64 {
     u64::from_le_bytes(b)
 }
 
-/// A mission file's hash, for a recording's [`Header`]: FNV-1a over its bytes, at compile
-/// time (`include_mission!` gives it as `HASH`) or at run time.
-#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
-pub const fn mission_hash(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut i = 0;
-    // `i < len` keeps the index in range; a `while` because `for` is not `const`.
-    while i < bytes.len() {
-        h ^= bytes[i] as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        i += 1;
-    }
-    h
-}
+/// A mission file's hash, for a recording's [`Header`]: FNV-1a over its bytes
+/// (`include_mission!` computes it as `HASH` when the robot is built).
+pub use psmpa_model::mission::mission_hash;
 
 /// The remainders of the 16 nibbles, for [`crc32`]. (Evaluated at build time: an index out
 /// of range fails the build.)

@@ -23,6 +23,8 @@ use syn::{Attribute, Ident, LitInt, LitStr, Token, Visibility};
 const MAX_WORDS: usize = 4;
 /// The most facts a compiled mission may name.
 const MAX_FACTS: usize = 64 * MAX_WORDS;
+/// The most keys a data store may hold: a `psmpa_core::store::Key` is a `u8`.
+const MAX_KEYS: u64 = 256;
 
 /// `VIS mod NAME = "PATH"` and, optionally, `, keys = N`.
 struct Input {
@@ -103,44 +105,56 @@ fn expand(input: &Input) -> syn::Result<Tokens> {
     let given = input.path.value();
     let root = std::env::var_os("CARGO_MANIFEST_DIR").map_or_else(PathBuf::new, PathBuf::from);
     let file = root.join(&given);
-    let bytes = std::fs::read(&file).map_err(|e| {
-        syn::Error::new(
-            span,
-            format!("cannot read the mission file {}: {e}", file.display()),
-        )
-    })?;
+    // A regular file of at most 1 MiB, as psmpa-sim reads one: a FIFO would block the
+    // compiler for ever, `/dev/zero` fill its memory.
+    let bytes = check::read_input(&file, "mission").map_err(|e| syn::Error::new(span, e))?;
     let keys = match &input.keys {
         Some(k) => {
-            let n: usize = k.base10_parse()?;
-            if n == 0 {
-                return Err(syn::Error::new(
-                    k.span(),
-                    "a data store holds at least 1 key",
-                ));
-            }
+            // A key is a `u8`: 256 distinct ones at most.
+            let n = k
+                .base10_parse::<u64>()
+                .ok()
+                .filter(|n| (1..=MAX_KEYS).contains(n))
+                .ok_or_else(|| {
+                    syn::Error::new(
+                        k.span(),
+                        format!(
+                            "keys = {}: a data store holds from 1 to {MAX_KEYS} keys (a key is a u8)",
+                            k.base10_digits()
+                        ),
+                    )
+                })? as usize;
             quote!(#n)
         }
         None => quote!({ ::psmpa_core::platform::MAX_PAIRS + 1 }),
     };
+    // Computed here: a `const fn` over a large file's bytes exceeds the compiler's budget.
+    let hash = psmpa_model::mission::mission_hash(&bytes);
     check::check::<_, MAX_WORDS, MAX_FACTS>(Path::new(&given), &bytes, |m| {
-        generate(input, m, &file, &keys)
+        generate(input, m, &file, &keys, hash)
     })
     .map_err(|e| syn::Error::new(span, e))?
 }
 
-/// An UpperCamelCase identifier for a mission's name: words split at anything that is not a
-/// letter or digit (`go to door`, `path_clear`, `GetIn Kitchen` are `GoToDoor`, `PathClear`,
-/// `GetInKitchen`); `N` before a leading digit; `Self_` for `self`.
+/// An UpperCamelCase identifier for a mission's name: words split at anything that cannot
+/// continue a Rust identifier (`go to door`, `path_clear`, `GetIn Kitchen` are `GoToDoor`,
+/// `PathClear`, `GetInKitchen`; `x²` is `X`); `N` before anything that cannot start one (a
+/// digit, `٣`); `Self_` for `self`.
 fn variant(name: &str) -> String {
     let mut out = String::new();
-    for word in name.split(|c: char| !c.is_alphanumeric()) {
+    for word in name.split(|c: char| c == '_' || !unicode_ident::is_xid_continue(c)) {
         let mut chars = word.chars();
         if let Some(first) = chars.next() {
-            out.extend(first.to_uppercase());
+            // Upper case only where that is still one character that continues an identifier.
+            let mut upper = first.to_uppercase();
+            match (upper.next(), upper.next()) {
+                (Some(u), None) if unicode_ident::is_xid_continue(u) => out.push(u),
+                _ => out.push(first),
+            }
             out.push_str(chars.as_str());
         }
     }
-    if out.starts_with(|c: char| c.is_ascii_digit()) {
+    if out.starts_with(|c: char| !unicode_ident::is_xid_start(c)) {
         out.insert(0, 'N');
     }
     match out.as_str() {
@@ -166,9 +180,19 @@ fn variants(table: &str, names: &[&str], span: Span) -> syn::Result<Vec<Ident>> 
                 ),
             ));
         }
-        seen.push((v.clone(), name));
-        // Not a raw identifier: a name is never a keyword once it starts upper case.
-        out.push(Ident::new(&v, span));
+        // Not a raw identifier: a name is never a keyword once it starts upper case. Parsed,
+        // not built: what is not an identifier is an error naming it, never a panic.
+        let ident = syn::parse_str::<Ident>(&v).map_err(|_| {
+            syn::Error::new(
+                span,
+                format!(
+                    "{table} \"{}\" makes no Rust identifier ({v}): rename it",
+                    check::printable(name)
+                ),
+            )
+        })?;
+        out.push(Ident::new(&ident.to_string(), span));
+        seen.push((v, name));
     }
     Ok(out)
 }
@@ -202,10 +226,13 @@ fn names_enum(
         .iter()
         .map(|s| format!("`{}`", s.replace('`', "'")))
         .collect();
+    // An enum with no variants has no representation to give (E0084): a mission with no
+    // sensors or no plans has no value of that type at all.
+    let repr_attr = (n > 0).then(|| quote!(#[repr(#repr)]));
     quote! {
         #[doc = #doc]
         #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-        #[repr(#repr)]
+        #repr_attr
         pub enum #ty {
             #( #[doc = #variant_docs] #variants = #index as #repr, )*
         }
@@ -258,6 +285,7 @@ fn generate(
     m: &Large<'_, MAX_WORDS, MAX_FACTS>,
     file: &Path,
     keys: &Tokens,
+    hash: u64,
 ) -> syn::Result<Tokens> {
     let span = input.path.span();
     let d = &m.domain;
@@ -397,9 +425,10 @@ fn generate(
         #[doc = #doc]
         #vis mod #module {
             /// The mission file's hash ([`psmpa_core::record::mission_hash`]): a flight
-            /// recording names its mission with it. (Including the file also builds the crate
-            /// again when it changes.)
-            pub const HASH: u64 = ::psmpa_core::record::mission_hash(::core::include_bytes!(#file));
+            /// recording names its mission with it.
+            pub const HASH: u64 = #hash;
+            // Included so that the crate is built again when the file changes.
+            const _: &[u8] = ::core::include_bytes!(#file);
 
             /// Words in the mission's fact sets.
             pub const W: usize = #w;
@@ -445,4 +474,53 @@ fn generate(
             };
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_large_missions_hash_is_computed_here_not_by_the_compiler() {
+        // About 600 KB (a long description): a `const fn` hash of it exceeds rustc's budget.
+        let mission = include_str!("../../missions/fetch-tea.json");
+        let big = mission.replacen(
+            "\"description\": \"",
+            &format!("\"description\": \"{}", "x".repeat(600_000)),
+            1,
+        );
+        let file = std::env::temp_dir().join(format!("psmpa-big-{}.json", std::process::id()));
+        std::fs::write(&file, &big).unwrap();
+        let call = format!("mod big = {:?}", file.display().to_string());
+        let tokens = expand(&syn::parse_str::<Input>(&call).unwrap());
+        std::fs::remove_file(&file).unwrap();
+        let text = tokens.unwrap().to_string();
+        let hash = psmpa_model::mission::mission_hash(big.as_bytes());
+        assert!(
+            text.contains(&format!("HASH : u64 = {hash}u64")),
+            "{}",
+            &text[..400]
+        );
+        assert!(!text.contains("mission_hash ("));
+    }
+
+    #[test]
+    fn every_name_makes_an_identifier_or_an_error() {
+        for (name, v) in [
+            ("go to door", "GoToDoor"),
+            ("x²", "X"),
+            ("٣x", "N٣x"),
+            ("①", "Unnamed"),
+            ("½cup", "Cup"),
+            ("straße", "Straße"),
+            ("self", "Self_"),
+            ("3 m", "N3M"),
+        ] {
+            assert_eq!(variant(name), v);
+            assert!(
+                variants("facts", &[name], Span::call_site()).is_ok(),
+                "{name}"
+            );
+        }
+    }
 }

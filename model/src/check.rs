@@ -8,6 +8,8 @@
 //! * Its goal is reachable ([`unreachable_goal`]).
 
 use std::format;
+use std::fs::{File, Metadata};
+use std::io::Read as _;
 use std::path::Path;
 use std::string::{String, ToString};
 use std::vec::Vec;
@@ -75,6 +77,79 @@ pub fn unreachable_goal<
     }
 }
 
+/// The largest input file a host tool reads: scenarios and missions are a few kilobytes, and a
+/// file that never ends (`/dev/zero`) must not fill memory.
+pub const MAX_INPUT: u64 = 1 << 20;
+
+fn kind(meta: &Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt as _;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+    }
+    if meta.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Reads the input file at `path`, `what` it should be (`"scenario"`, `"mission"`): a regular
+/// file of at most [`MAX_INPUT`] bytes. A FIFO, device or directory is refused before it is
+/// opened (opening a FIFO waits for a writer forever; a device may never end).
+pub fn read_input(path: &Path, what: &str) -> Result<Vec<u8>, String> {
+    read_limited(path, what, MAX_INPUT)
+}
+
+/// [`read_input`] with a limit of `max` bytes (a recording may be larger than a scenario).
+pub fn read_limited(path: &Path, what: &str, max: u64) -> Result<Vec<u8>, String> {
+    let at = |message: String| format!("{}: {message}", path.display());
+    let refuse = |meta: &Metadata| {
+        at(format!(
+            "is {}, not a {what} file: give the path of a file",
+            kind(meta)
+        ))
+    };
+    let meta = std::fs::metadata(path).map_err(|e| at(format!("cannot read the file: {e}")))?;
+    if !meta.is_file() {
+        return Err(refuse(&meta));
+    }
+    let file = File::open(path).map_err(|e| at(format!("cannot read the file: {e}")))?;
+    // What was opened, in case the path changed since it was looked at.
+    let meta = file
+        .metadata()
+        .map_err(|e| at(format!("cannot read the file: {e}")))?;
+    if !meta.is_file() {
+        return Err(refuse(&meta));
+    }
+    let too_large = || {
+        at(format!(
+            "the file is larger than {} MiB, the limit for a {what} file",
+            max >> 20
+        ))
+    };
+    if meta.len() > max {
+        return Err(too_large());
+    }
+    let mut bytes = Vec::new();
+    file.take(max.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| at(format!("cannot read the file: {e}")))?;
+    if bytes.len() as u64 > max {
+        return Err(too_large());
+    }
+    Ok(bytes)
+}
+
 /// Checks the mission file `file` (its `bytes`) for any platform and hands the mission to
 /// `then`; one line naming the file and what is wrong otherwise.
 pub fn check<R, const W: usize, const NF: usize>(
@@ -112,6 +187,55 @@ mod tests {
         check::<_, 1, 64>(Path::new("m.json"), text.as_bytes(), |m| {
             m.domain.actions().len()
         })
+    }
+
+    /// A fresh directory under the target's temporary space, removed by the test.
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("psmpa-check-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn an_input_that_is_not_a_small_regular_file_is_refused_before_it_is_read() {
+        let dir = scratch("inputs");
+        // A FIFO with no writer: opening it would wait for ever, so it must not be opened.
+        let fifo = dir.join("mission.json");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            let (tx, rx) = std::sync::mpsc::channel();
+            let f = fifo.clone();
+            std::thread::spawn(move || tx.send(read_input(&f, "mission")));
+            let e = rx
+                .recv_timeout(std::time::Duration::from_secs(60))
+                .expect("read_input on a FIFO returned within a minute")
+                .unwrap_err();
+            assert!(
+                e.ends_with("is a FIFO, not a mission file: give the path of a file"),
+                "{e}"
+            );
+        }
+        // A device never ends.
+        let e = read_input(Path::new("/dev/zero"), "mission").unwrap_err();
+        assert_eq!(
+            e,
+            "/dev/zero: is a device, not a mission file: give the path of a file"
+        );
+        // One byte over the limit is refused; the limit itself is read.
+        let big = dir.join("big.json");
+        std::fs::write(&big, std::vec![b' '; MAX_INPUT as usize + 1]).unwrap();
+        let e = read_input(&big, "mission").unwrap_err();
+        assert!(
+            e.ends_with("larger than 1 MiB, the limit for a mission file"),
+            "{e}"
+        );
+        std::fs::write(&big, std::vec![b' '; MAX_INPUT as usize]).unwrap();
+        assert_eq!(
+            read_input(&big, "mission").unwrap().len(),
+            MAX_INPUT as usize
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

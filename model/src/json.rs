@@ -130,6 +130,9 @@ pub fn strict_file<'b>(file: &std::path::Path, bytes: &'b [u8]) -> Result<Cow<'b
     strict(bytes).map_err(|e| format!("{}: {e}", file.display()))
 }
 
+/// The most steps of a path an error shows in full.
+const SHOWN_STEPS: usize = 8;
+
 /// One step of the path to a value.
 enum Step {
     Key(String),
@@ -147,7 +150,13 @@ struct Walk {
 impl Walk {
     fn field(&self) -> Option<String> {
         let mut out = String::new();
-        for step in &self.path {
+        // A path as deep as the nesting limit is 128 steps: its first few say where.
+        let shown = if self.path.len() > SHOWN_STEPS {
+            SHOWN_STEPS / 2
+        } else {
+            SHOWN_STEPS
+        };
+        for step in self.path.iter().take(shown) {
             match step {
                 Step::Key(k) => {
                     if !out.is_empty() {
@@ -157,6 +166,9 @@ impl Walk {
                 }
                 Step::Index(i) => out.push_str(&format!("[{i}]")),
             }
+        }
+        if self.path.len() > shown {
+            out.push_str(&format!("... ({} levels deep)", self.path.len()));
         }
         (!out.is_empty()).then_some(out)
     }
@@ -579,6 +591,13 @@ mod tests {
         assert_eq!(err(b"\xEF\xBB\xBF{}").problem, Problem::ByteOrderMark);
         assert_eq!(err(b"{} x").problem, Problem::TrailingText);
         assert_eq!(err(&[b'['; 200]).problem, Problem::TooDeep);
+        // Past the limit, the path shows where it starts and how deep it went, not 128 steps.
+        let deep = format!("{{\"description\": {}", "[".repeat(200));
+        let e = err(deep.as_bytes());
+        assert_eq!(
+            e.field.as_deref(),
+            Some("description[0][0][0]... (127 levels deep)")
+        );
         let e = err(b"{\"a\": [1, 2");
         assert_eq!(e.problem, Problem::UnexpectedEnd("a list"));
         assert_eq!(e.field.as_deref(), Some("a"));

@@ -1011,31 +1011,73 @@ pub fn reachable<const NS: usize, const NA: usize, const W: usize, const NF: usi
 pub const MAX_DEPTH: usize = 8;
 
 /// Whether arrays and objects in `json` nest deeper than `limit`, outside strings. O(n).
-fn too_deep(json: &[u8], limit: usize) -> bool {
+fn too_deep(json: &[u8], limit: usize) -> Option<Location> {
     let (mut depth, mut in_string, mut escaped) = (0usize, false, false);
-    for &c in json {
+    // Where the scan is: the last string read at the top level, the top-level key whose value
+    // it is in, and the element of that value's list.
+    let (mut string_at, mut key, mut index, mut list) = (0usize, None, 0u16, false);
+    let mut last_string: &[u8] = &[];
+    for (i, &c) in json.iter().enumerate() {
         if in_string {
             match (escaped, c) {
                 (true, _) => escaped = false,
                 (false, b'\\') => escaped = true,
-                (false, b'"') => in_string = false,
+                (false, b'"') => {
+                    in_string = false;
+                    if depth == 1 {
+                        last_string = json.get(string_at..i).unwrap_or_default();
+                    }
+                }
                 _ => {}
             }
             continue;
         }
         match c {
-            b'"' => in_string = true,
+            b'"' => {
+                in_string = true;
+                string_at = i.saturating_add(1);
+            }
+            b':' if depth == 1 => {
+                key = TOP_KEYS
+                    .iter()
+                    .find(|k| k.as_bytes() == last_string)
+                    .copied();
+                (index, list) = (0, false);
+            }
+            b',' if depth == 2 && list => index = index.saturating_add(1),
             b'[' | b'{' => {
                 depth = depth.saturating_add(1);
+                if depth == 2 {
+                    list = c == b'[';
+                }
                 if depth > limit {
-                    return true;
+                    return Some(Location {
+                        section: key,
+                        index: (list && depth > 2).then_some(index),
+                        field: None,
+                    });
                 }
             }
             b']' | b'}' => depth = depth.saturating_sub(1),
             _ => {}
         }
     }
-    false
+    None
+}
+
+/// A mission file's hash, as a flight recording's header names its mission: FNV-1a over its
+/// bytes, at compile time or at run time.
+#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+pub const fn mission_hash(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut i = 0;
+    // `i < len` keeps the index in range; a `while` because `for` is not `const`.
+    while i < bytes.len() {
+        h ^= bytes[i] as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        i += 1;
+    }
+    h
 }
 
 /// Loads a mission file, binding its behaviours through `registry`.
@@ -1109,9 +1151,9 @@ pub fn load_into<
         goal: FactSetOf::EMPTY,
     };
     bindings.clear();
-    if too_deep(json, MAX_DEPTH) {
+    if let Some(at) = too_deep(json, MAX_DEPTH) {
         return Err(LoadError {
-            at: Location::default(),
+            at,
             problem: Problem::TooDeep,
         });
     }
@@ -1376,7 +1418,13 @@ mod tests {
         assert!(load_str(&nested(MAX_DEPTH - 1)).is_ok());
         let deep = nested(MAX_DEPTH);
         assert_eq!(load_str(&deep).unwrap_err().problem, Problem::TooDeep);
-        assert_eq!(error(&deep), "top level: nested deeper than 8 levels");
+        // Named where it is: the key whose value nests too deep.
+        assert_eq!(error(&deep), "description[0]: nested deeper than 8 levels");
+        let in_plans = SMALL.replace(
+            r#""body": ["x"]}]"#,
+            r#""body": ["x"]}, {"name": [[[[[[[[[]]]]]]]]]}]"#,
+        );
+        assert_eq!(error(&in_plans), "plans[1]: nested deeper than 8 levels");
         // What a microcontroller's stack could never parse is refused just as fast.
         let hostile = nested(100_000);
         assert_eq!(load_str(&hostile).unwrap_err().problem, Problem::TooDeep);

@@ -148,3 +148,80 @@ fn a_compiled_runtime_is_named_by_its_module_and_built_by_inference() {
     assert!(report.beliefs.contains(dock::Fact::Docked.id()));
     assert_eq!(rt.into_sink().plans_selected(), [dock::Plan::DriveIn.id()]);
 }
+
+psmpa_core::include_mission!(mod blind = "missions/no-sensors.json");
+psmpa_core::include_mission!(mod unplanned = "missions/no-plans.json");
+
+/// A robot with no sensors: its sensor enum has no value, so it has nothing to match.
+struct Blind;
+
+impl psmpa_core::Sensor for Blind {
+    type Id = blind::Sensor;
+
+    async fn switch_on(&self, id: blind::Sensor) -> Result<(), psmpa_core::SensorFault> {
+        match id {}
+    }
+    async fn switch_off(&self, id: blind::Sensor) {
+        match id {}
+    }
+    async fn sample(
+        &self,
+        id: blind::Sensor,
+    ) -> Result<Option<psmpa_core::Reading>, psmpa_core::SensorFault> {
+        match id {}
+    }
+}
+
+impl psmpa_core::Actuator for Blind {
+    type Id = blind::Action;
+
+    async fn run(&self, _: blind::Action, _: &psmpa_core::ActionIo<'_>) -> psmpa_core::Outcome {
+        psmpa_core::Outcome::Success
+    }
+}
+
+impl psmpa_core::Platform for Blind {
+    type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
+}
+
+#[test]
+fn a_mission_with_no_sensors_or_no_plans_compiles_as_check_accepts_it() {
+    assert_eq!((blind::NS, unplanned::NP), (0, 0));
+    assert!(blind::Sensor::ALL.is_empty() && unplanned::Plan::ALL.is_empty());
+    assert_eq!(
+        blind::Sensor::from_id(psmpa_core::SensorId::new(0).unwrap()),
+        None
+    );
+    // With no sensor, the plan's actions still run to the goal.
+    let rt = blind::Runtime::new(
+        &blind::MISSION,
+        &Blind,
+        psmpa_testkit::Recorder::default(),
+        psmpa_core::Config::default(),
+    );
+    let done =
+        psmpa_testkit::simulate(rt.run_with_sensing(), embassy_time::Duration::from_secs(10))
+            .unwrap();
+    assert!(
+        done.output
+            .unwrap()
+            .beliefs
+            .contains(blind::Fact::Done.id())
+    );
+}
+
+psmpa_core::include_mission!(mod symbols = "missions/unicode-names.json");
+
+#[test]
+fn names_of_digits_and_symbols_outside_ascii_make_identifiers() {
+    // `²`, `①`, `½` continue no identifier (split there); `٣` continues one but cannot start it.
+    assert_eq!(
+        format!("{:?}", symbols::Fact::ALL),
+        "[X, N\u{663}x, Unnamed, Cup]"
+    );
+    assert_eq!(
+        symbols::Fact::ALL.map(symbols::Fact::name),
+        ["x²", "٣x", "①", "½cup"]
+    );
+    assert_eq!(format!("{:?}", symbols::Plan::ALL), "[Pour]");
+}

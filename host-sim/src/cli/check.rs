@@ -165,10 +165,12 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
             } else {
                 writeln!(
                     out,
-                    "\nplanner, from the initial state with every percept holding: {} ({} actions, {} nodes expanded)",
+                    "\nplanner, from the initial state with every percept holding: {} ({} action{}, {} node{} expanded)",
                     steps.join(" → "),
                     steps.len(),
-                    found.expanded
+                    if steps.len() == 1 { "" } else { "s" },
+                    found.expanded,
+                    if found.expanded == 1 { "" } else { "s" }
                 )
             };
         }

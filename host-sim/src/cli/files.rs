@@ -3,7 +3,7 @@
 //! and an exit status; no output file is ever left half-written.
 
 use std::fs::{File, Metadata, OpenOptions};
-use std::io::{self, BufWriter, Read as _, Write};
+use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
@@ -46,9 +46,7 @@ impl Drop for Registered {
     }
 }
 
-/// The largest input read: scenarios and missions are a few kilobytes, and a file that never
-/// ends (`/dev/zero`) must not fill memory.
-pub const MAX_INPUT: u64 = 1 << 20;
+pub use psmpa_model::check::{MAX_INPUT, read_input, read_limited};
 
 /// Why a command stopped before the end.
 #[derive(Debug)]
@@ -77,75 +75,6 @@ impl Stop {
     pub fn internal(message: impl ToString) -> Self {
         Self::Internal(message.to_string())
     }
-}
-
-fn kind(meta: &Metadata) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt as _;
-        let t = meta.file_type();
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-    }
-    if meta.is_dir() {
-        "a directory"
-    } else {
-        "not a regular file"
-    }
-}
-
-/// Reads the input file at `path`, `what` it should be (`"scenario"`, `"mission"`): a regular
-/// file of at most [`MAX_INPUT`] bytes. A FIFO, device or directory is refused before it is
-/// opened (opening a FIFO waits for a writer forever; a device may never end).
-pub fn read_input(path: &Path, what: &str) -> Result<Vec<u8>, String> {
-    read_limited(path, what, MAX_INPUT)
-}
-
-/// [`read_input`] with a limit of `max` bytes (a recording may be larger than a scenario).
-pub fn read_limited(path: &Path, what: &str, max: u64) -> Result<Vec<u8>, String> {
-    let at = |message: String| format!("{}: {message}", path.display());
-    let refuse = |meta: &Metadata| {
-        at(format!(
-            "is {}, not a {what} file: give the path of a file",
-            kind(meta)
-        ))
-    };
-    let meta = std::fs::metadata(path).map_err(|e| at(format!("cannot read the file: {e}")))?;
-    if !meta.is_file() {
-        return Err(refuse(&meta));
-    }
-    let file = File::open(path).map_err(|e| at(format!("cannot read the file: {e}")))?;
-    // What was opened, in case the path changed since it was looked at.
-    let meta = file
-        .metadata()
-        .map_err(|e| at(format!("cannot read the file: {e}")))?;
-    if !meta.is_file() {
-        return Err(refuse(&meta));
-    }
-    let too_large = || {
-        at(format!(
-            "the file is larger than {} MiB, the limit for a {what} file",
-            max >> 20
-        ))
-    };
-    if meta.len() > max {
-        return Err(too_large());
-    }
-    let mut bytes = Vec::new();
-    file.take(max + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| at(format!("cannot read the file: {e}")))?;
-    if bytes.len() as u64 > max {
-        return Err(too_large());
-    }
-    Ok(bytes)
 }
 
 /// Writes `bytes` to standard output: a closed pipe is [`Stop::ClosedPipe`], any other
