@@ -271,6 +271,9 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 named.extend(path.as_deref().map(|p| (flag, p)));
             }
             files::distinct(&named).map_err(Stop::Bad)?;
+            if json {
+                files::not_into_json(named.get(1..).unwrap_or_default()).map_err(Stop::Bad)?;
+            }
             if plot.is_some() {
                 outputs::plot_fits(&sc).map_err(Stop::Bad)?;
             }
@@ -346,6 +349,9 @@ fn run(cli: Cli) -> Result<(), Stop> {
             if let Some(out) = &mcap {
                 files::distinct(&[("the recording", &recording), ("--mcap", out)])
                     .map_err(Stop::Bad)?;
+                if json {
+                    files::not_into_json(&[("--mcap", out)]).map_err(Stop::Bad)?;
+                }
             }
             let mcap = create(mcap.as_deref())?;
             let bytes =

@@ -111,6 +111,10 @@ pub struct Output {
     error: Option<io::Error>,
     /// Raised at the first write error ([`Output::alarm`]).
     alarm: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Written through standard output: the report goes to standard error.
+    to_stdout: bool,
+    /// A pipe whose reader has gone: the rest is dropped.
+    closed: bool,
     /// Dropped last, after the temporary file is renamed or removed.
     _pending: Option<Registered>,
 }
@@ -128,11 +132,21 @@ impl Output {
             Ok(meta) if meta.is_dir() => {
                 return Err(format!("{}: is a directory, not a file", path.display()));
             }
-            // The file standard output writes to (`--trace /dev/stdout > log`, `--trace log
-            // > log`): written through standard output itself, whose offset the report then
-            // follows, so that both arrive whole and in order.
-            Ok(meta) if stdout_file().is_some_and(|out| same_file(&out, &meta)) => {
+            // Standard output itself (`--trace /dev/stdout`, to a file, a pipe or a terminal):
+            // written through it, and the report goes to standard error, so that the output
+            // arrives whole (a recording stays a recording).
+            Ok(meta) if stdout_meta().is_some_and(|out| same_file(&out, &meta)) => {
                 use std::os::fd::AsFd as _;
+                // A file named by its own path that the shell also opened for standard output
+                // (`--trace t.csv > t.csv`): the shell has emptied it, and two writers with
+                // their own offsets would overwrite each other.
+                if meta.is_file() && !is_stdout_alias(path) {
+                    return Err(format!(
+                        "{}: is standard output's file too (> {0}): the report and the output \
+                         cannot share it; name another file (or write the output to /dev/stdout)",
+                        path.display()
+                    ));
+                }
                 let fd = io::stdout().as_fd().try_clone_to_owned().map_err(fail)?;
                 return Ok(Self {
                     path: path.to_path_buf(),
@@ -140,6 +154,8 @@ impl Output {
                     sink: Sink::Direct(BufWriter::new(File::from(fd))),
                     error: None,
                     alarm: None,
+                    to_stdout: true,
+                    closed: false,
                     _pending: None,
                 });
             }
@@ -151,6 +167,8 @@ impl Output {
                     sink: Sink::Direct(BufWriter::new(file)),
                     error: None,
                     alarm: None,
+                    to_stdout: false,
+                    closed: false,
                     _pending: None,
                 });
             }
@@ -161,6 +179,13 @@ impl Output {
         let sink = match std::fs::metadata(&target) {
             Ok(meta) if meta.is_dir() => {
                 return Err(format!("{}: is a directory, not a file", path.display()));
+            }
+            // Read-only: `>` and `cp` refuse to write it, and so does this.
+            Ok(meta) if meta.permissions().readonly() => {
+                return Err(format!(
+                    "{}: is read-only: not replaced (make it writable, or name another file)",
+                    path.display()
+                ));
             }
             existing => {
                 let dir = match target.parent() {
@@ -209,6 +234,8 @@ impl Output {
             sink,
             error: None,
             alarm: None,
+            to_stdout: false,
+            closed: false,
             _pending: pending,
         })
     }
@@ -220,6 +247,20 @@ impl Output {
             flag.store(true, std::sync::atomic::Ordering::Relaxed);
         }
         self.alarm = Some(flag);
+    }
+
+    /// Keeps a write's failure for [`Output::finish`] and raises the alarm; a pipe whose
+    /// reader went away (`| head`) is no failure: what it was sent was read, the rest is
+    /// dropped, as for standard output.
+    fn fail(&mut self, e: io::Error) {
+        if e.kind() == io::ErrorKind::BrokenPipe && matches!(self.sink, Sink::Direct(_)) {
+            self.closed = true;
+            return;
+        }
+        self.error.get_or_insert(e);
+        if let Some(flag) = &self.alarm {
+            flag.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
     }
 
     /// The path the output is for.
@@ -234,7 +275,7 @@ impl Output {
             Sink::Direct(w) => w.flush(),
         };
         if let Err(e) = flushed {
-            self.error.get_or_insert(e);
+            self.fail(e);
         }
         match &self.error {
             Some(e) => Err(format!("{}: cannot write: {e}", self.path.display())),
@@ -262,7 +303,7 @@ impl Write for Output {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
         // After a failure the rest is dropped here and the failure reported at `finish`: a
         // streaming writer must not stop the run it records.
-        if self.error.is_some() {
+        if self.error.is_some() || self.closed {
             return Ok(buf.len());
         }
         let written = match &mut self.sink {
@@ -270,10 +311,7 @@ impl Write for Output {
             Sink::Direct(w) => w.write_all(buf),
         };
         if let Err(e) = written {
-            self.error = Some(e);
-            if let Some(flag) = &self.alarm {
-                flag.store(true, std::sync::atomic::Ordering::Relaxed);
-            }
+            self.fail(e);
         }
         Ok(buf.len())
     }
@@ -324,7 +362,13 @@ pub fn print_and_commit(
     for o in &mut outputs {
         o.finish().map_err(Stop::Bad)?;
     }
-    let printed = print(bytes);
+    let printed = if outputs.iter().any(|o| o.to_stdout) {
+        let mut err = io::stderr().lock();
+        let _ = err.write_all(bytes).and_then(|()| err.flush());
+        Ok(())
+    } else {
+        print(bytes)
+    };
     if let Err(Stop::Bad(_)) = printed {
         return printed;
     }
@@ -405,12 +449,35 @@ pub fn distinct(named: &[(&str, &Path)]) -> Result<(), String> {
     Ok(())
 }
 
-/// Standard output's file when it is a regular file (`> out.txt`), else `None` (a terminal, a
-/// pipe, a device, which several writers may share in order).
-fn stdout_file() -> Option<Metadata> {
+/// What standard output is (a file, a pipe, a terminal), if it is open.
+fn stdout_meta() -> Option<Metadata> {
     use std::os::fd::AsFd as _;
     let fd = io::stdout().as_fd().try_clone_to_owned().ok()?;
-    File::from(fd).metadata().ok().filter(Metadata::is_file)
+    File::from(fd).metadata().ok()
+}
+
+/// Whether `path` is a name of standard output itself rather than of a file.
+fn is_stdout_alias(path: &Path) -> bool {
+    ["/dev/stdout", "/dev/fd/1", "/proc/self/fd/1"]
+        .iter()
+        .any(|alias| path == Path::new(alias))
+}
+
+/// With `--json`, standard output carries one JSON object: refuses, before anything runs, an
+/// output (`(option, path)`) that would write into it too (`--record /dev/stdout`).
+pub fn not_into_json(named: &[(&str, &Path)]) -> Result<(), String> {
+    let Some(out) = stdout_meta() else {
+        return Ok(());
+    };
+    for (what, path) in named {
+        if std::fs::metadata(path).is_ok_and(|m| same_file(&out, &m)) {
+            return Err(format!(
+                "{what} {}: standard output carries the --json report; write this output to a file",
+                path.display()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Whether two files' metadata are one file.
