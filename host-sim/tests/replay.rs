@@ -281,6 +281,14 @@ fn a_decoded_log_replays_as_its_recording() {
     let (status, v, stderr) = replay(&file);
     assert_eq!(status, Some(0), "{v} {stderr}");
     assert!(v["decisions"].as_u64().unwrap() > 100, "{v}");
+    // A byte that is not UTF-8 on a line of its own (a serial port's noise) is no matter: it
+    // made the whole log "not a recording".
+    let mut noisy = b"0.000 INFO  boot \xff\xfe garbage\n".to_vec();
+    noisy.extend_from_slice(log.as_bytes());
+    std::fs::write(&file, &noisy).unwrap();
+    let (status, again, stderr) = replay(&file);
+    assert_eq!(status, Some(0), "{stderr}");
+    assert_eq!(again["decisions"], v["decisions"]);
     // A frame before any header is no recording.
     std::fs::write(&file, "0.1 INFO  rec [24, 0, 0]\n").unwrap();
     let (status, _, stderr) = replay(&file);
@@ -392,4 +400,30 @@ fn a_cut_recording_replays_no_longer_than_it_lasted() {
         ran <= last_s + 1.0 + 1e-6,
         "replayed to {ran} s, the recording ends at {last_s} s: {v}"
     );
+}
+
+/// A wider lag accepts whatever a narrower one does: an exact host recording replayed equal
+/// at 0 to 10 ms and diverged from 20 ms (the clock followed the recording across a sensor's
+/// wait, past its timeout); a chip's, from the lag its computing needs upwards.
+#[test]
+fn a_wider_lag_accepts_what_a_narrower_one_does() {
+    let dir = folder("replay-lags");
+    let host = record(&repo("scenarios/person.json"), "psmpa", &dir);
+    let chip = repo("host-sim/tests/data/quiet.smpa.mps2-an386.rec");
+    for (file, lags) in [
+        (&host, &[0, 10, 20, 100, 60_000][..]),
+        (&chip, &[1, 2, 20, 60_000]),
+    ] {
+        for lag in lags {
+            let out = bin()
+                .arg("replay")
+                .arg(file)
+                .args(["--json", "--lag-ms", &lag.to_string()])
+                .output()
+                .unwrap();
+            let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+            assert_eq!(v["diverged"], false, "{} at {lag} ms: {v}", file.display());
+            assert_eq!(out.status.code(), Some(0));
+        }
+    }
 }
