@@ -394,7 +394,12 @@ fn run(cli: Cli) -> Result<(), Stop> {
             let dot = create(dot.as_deref())?;
             // The mission borrows its names from the file for the life of the process.
             let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-            let (report, graph) = check::check(&mission, bytes, any_platform).map_err(Stop::Bad)?;
+            let (report, graph, warnings) =
+                check::check(&mission, bytes, any_platform).map_err(Stop::Bad)?;
+            // Valid, so status 0; what is most likely a mistake, said before the report.
+            for w in warnings {
+                eprintln!("psmpa-sim: warning: {w}");
+            }
             let dot = dot.map(|mut out| {
                 // An `Output` keeps a write error for its commit.
                 let _ = out.write_all(graph.as_bytes());

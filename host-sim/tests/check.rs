@@ -407,3 +407,61 @@ fn a_nao_sensor_perceives_only_what_its_device_gives() {
         assert_eq!(stderr.lines().count(), 1);
     }
 }
+
+/// Valid missions that are most likely mistakes (each accepted with no word before): a body in
+/// an order its preconditions cannot run, a context that can never hold, a sensor timeout of a
+/// day. Each is a warning on stderr naming the file, the field and why; status 0, the report
+/// as ever. The shipped mission has none.
+#[test]
+fn likely_mistakes_are_warnings_that_say_why() {
+    let m = fetch_tea();
+    let cases = [
+        (
+            "order.json",
+            m.replace(
+                r#""body": ["go to door", "open door", "enter kitchen"]"#,
+                r#""body": ["open door", "go to door", "enter kitchen"]"#,
+            ),
+            r#"plans[0].body: "open door" needs {at_door}, which only "go to door", later in the body, adds"#,
+        ),
+        (
+            "never.json",
+            m.replace(
+                r#""context": ["door_unlocked"]"#,
+                r#""context": ["door_unlocked", "chef"]"#,
+            )
+            .replace(
+                r#""back_door_open", "in_kitchen""#,
+                r#""back_door_open", "in_kitchen", "chef""#,
+            ),
+            "plans[0].context: {chef} can never hold",
+        ),
+        (
+            "timeout.json",
+            m.replace(r#""timeout_ms": 50"#, r#""timeout_ms": 86400000"#),
+            "sensors[0].timeout_ms: 86400000 ms: a sensor that stops answering goes unnoticed",
+        ),
+    ];
+    for (name, text, warning) in cases {
+        let out = bin().arg("check").arg(file(name, &text)).output().unwrap();
+        assert_success(&out);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(stderr.lines().count(), 1, "{name}: {stderr}");
+        assert!(stderr.starts_with("psmpa-sim: warning: "), "{stderr}");
+        assert!(
+            stderr.contains(name) && stderr.contains(warning),
+            "{name}: {stderr}"
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).starts_with("mission fetch-tea"));
+    }
+    let out = bin()
+        .arg("check")
+        .arg(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/fetch-tea.json"))
+        .output()
+        .unwrap();
+    assert!(
+        out.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

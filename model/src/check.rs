@@ -77,6 +77,86 @@ pub fn unreachable_goal<
     }
 }
 
+/// A sensor timeout past which `warnings` asks whether it was meant: a minute, longer than a
+/// robot should act on a reading it has not renewed.
+pub const LONG_TIMEOUT_MS: u64 = 60_000;
+
+/// What a mission file allows but is most likely a mistake, each as `field: why` (the file is
+/// valid; the robot runs it as written):
+///
+/// * a plan body in an order its preconditions cannot run: an action needs a fact that only an
+///   action later in the body adds, and that neither the plan's context nor a sensor gives;
+/// * a plan context that can never hold: it needs a fact no action adds, no sensor perceives
+///   and the task does not start with;
+/// * a sensor timeout longer than [`LONG_TIMEOUT_MS`]: a sensor that stops answering goes
+///   unnoticed that long.
+pub fn warnings<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>(
+    m: &Mission<'_, NS, NA, NP, L, W, NF>,
+) -> Vec<String> {
+    let d = &m.domain;
+    let mut out = Vec::new();
+    let perceivable = d.perception_of(SensorSet::from_bits(u32::MAX));
+    let added = d
+        .actions()
+        .iter()
+        .fold(crate::facts::FactSetOf::<W>::EMPTY, |a, x| a.union(x.add));
+    for (i, plan) in m.library.plans().iter().enumerate() {
+        let given = plan.context.union(perceivable);
+        for (k, id) in plan.body.iter().enumerate() {
+            let Some(action) = d.action(*id) else {
+                continue;
+            };
+            let earlier = plan.body.iter().take(k).filter_map(|a| d.action(*a));
+            let before = earlier.fold(given, |a, x| a.union(x.add));
+            let missing = action.pre.difference(before);
+            let later = plan
+                .body
+                .iter()
+                .skip(k.saturating_add(1))
+                .filter_map(|a| d.action(*a))
+                .find(|x| !missing.intersection(x.add).is_empty());
+            if let Some(first) = later.map(|x| x.name) {
+                let missing = missing.intersection(later.map_or(missing, |x| x.add));
+                out.push(format!(
+                    "plans[{i}].body: \"{}\" needs {}, which only \"{}\", later in the body, adds: the plan fails at its step {} unless something else makes it hold",
+                    printable(action.name),
+                    d.names(missing),
+                    printable(first),
+                    k.saturating_add(1)
+                ));
+            }
+        }
+        let never = plan
+            .context
+            .difference(added)
+            .difference(perceivable)
+            .difference(m.task.init);
+        if !never.is_empty() {
+            out.push(format!(
+                "plans[{i}].context: {} can never hold (no action adds it, no sensor perceives it, the task does not start with it): the plan is never chosen",
+                d.names(never)
+            ));
+        }
+    }
+    for (i, sensor) in d.sensors().iter().enumerate() {
+        let ms = sensor.timeout.as_millis();
+        if ms > LONG_TIMEOUT_MS {
+            out.push(format!(
+                "sensors[{i}].timeout_ms: {ms} ms: a sensor that stops answering goes unnoticed that long (more than {} s)",
+                LONG_TIMEOUT_MS / 1000
+            ));
+        }
+    }
+    out
+}
+
 /// The largest input file a host tool reads: scenarios and missions are a few kilobytes, and a
 /// file that never ends (`/dev/zero`) must not fill memory.
 pub const MAX_INPUT: u64 = 1 << 20;

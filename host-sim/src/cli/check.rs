@@ -196,34 +196,38 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
     (out, dot)
 }
 
-/// The description of a loaded mission, or the one line saying its goal is unreachable.
+/// A valid mission's report, its Graphviz graph and what in it is most likely a mistake
+/// ([`psmpa_model::check::warnings`], each a line naming the file and the field).
+pub type Checked = (String, String, Vec<String>);
+
+/// The description of a loaded mission and its warnings, or the one line saying its goal is
+/// unreachable.
 fn reachable_then_describe<const NS: usize, const NA: usize, const NP: usize, const L: usize>(
     file: &Path,
     m: &Mission<'_, NS, NA, NP, L>,
-) -> Result<(String, String), String> {
+) -> Result<Checked, String> {
     match unreachable_goal(m) {
         Some(why) => Err(format!("{}: {why}", file.display())),
-        None => Ok(describe(m)),
+        None => {
+            let (report, graph) = describe(m);
+            let warnings = psmpa_model::check::warnings(m)
+                .into_iter()
+                .map(|w| format!("{}: {}", file.display(), json::printable(&w)))
+                .collect();
+            Ok((report, graph, warnings))
+        }
     }
 }
 
 /// Loads `bytes` for this robot (or for any platform) and describes it. The `'static` bound is
 /// the command line's (it leaks the file); [`check_bytes`] takes any lifetime.
-pub fn check(
-    file: &Path,
-    bytes: &'static [u8],
-    any_platform: bool,
-) -> Result<(String, String), String> {
+pub fn check(file: &Path, bytes: &'static [u8], any_platform: bool) -> Result<Checked, String> {
     check_bytes(file, bytes, any_platform)
 }
 
 /// [`check`] for bytes of any lifetime: the file must be strict JSON ([`json::strict`]); its
 /// decoded text is loaded, and only owned text comes out.
-pub fn check_bytes(
-    file: &Path,
-    bytes: &[u8],
-    any_platform: bool,
-) -> Result<(String, String), String> {
+pub fn check_bytes(file: &Path, bytes: &[u8], any_platform: bool) -> Result<Checked, String> {
     let doc = json::strict_file(file, bytes)?;
     if any_platform {
         let loaded: mission::Loaded<'_, (), (), 32, 64, 32, 16> =
