@@ -1558,12 +1558,17 @@ fn by_name(program: &Program, name: &str) -> Option<u64> {
 /// The bytes of the code and constants, to check that the analysed binary is the shipped one.
 fn code(elf: &Path, sections: &[&str]) -> Result<Vec<u8>, String> {
     let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
-    let file = object::File::parse(&*data).map_err(|e| e.to_string())?;
+    code_of(&data, sections).map_err(|e| format!("{}: {e}", elf.display()))
+}
+
+/// [`code`] of an ELF's bytes.
+fn code_of(data: &[u8], sections: &[&str]) -> Result<Vec<u8>, String> {
+    let file = object::File::parse(data).map_err(|e| e.to_string())?;
     let mut out = Vec::new();
     for name in sections {
         let section = file
             .section_by_name(name)
-            .ok_or_else(|| format!("{}: no {name} section", elf.display()))?;
+            .ok_or_else(|| format!("no {name} section"))?;
         out.extend_from_slice(section.data().map_err(|e| e.to_string())?);
     }
     Ok(out)
@@ -1845,16 +1850,50 @@ pub fn run() -> Result<(), String> {
         failures.push(e);
     }
     println!("\npsmpa-pico (the same robot on a Raspberry Pi Pico, RP2040, Cortex-M0+):");
-    let measured = crate::hil::stack_high_water();
-    if let Err(e) = analyse(&PICO)
-        .and_then(|(_, total)| check_board(firmware::PICO, 256 * 1024, total, measured))
-    {
+    if let Err(e) = analyse(&PICO).and_then(|(_, total)| {
+        let measured = pico_measured()?;
+        check_board(firmware::PICO, 256 * 1024, total, Some(measured))
+    }) {
         failures.push(e);
     }
     if failures.is_empty() {
         Ok(())
     } else {
         Err(failures.join("\n"))
+    }
+}
+
+/// The Pico image's code (its flash sections, from the ELF's bytes), hashed: which image a
+/// bench measurement is of.
+pub fn pico_code_hash(elf: &[u8]) -> Result<u64, String> {
+    Ok(psmpa_core::record::mission_hash(&code_of(
+        elf,
+        PICO.sections,
+    )?))
+}
+
+/// The deepest stack the bench measured on the Pico image as built now: an error, saying what
+/// to run, when it never ran or ran another image (the check would be skipped or trust a
+/// stale figure).
+fn pico_measured() -> Result<u64, String> {
+    let elf = firmware::build_board(firmware::PICO)?;
+    let bytes = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+    measured_on(crate::hil::stack_high_water(), pico_code_hash(&bytes)?)
+}
+
+/// The bench's measurement `stored` (bytes, the code hash it ran) if it is of the image whose
+/// code hash is `now`.
+fn measured_on(stored: Option<(u64, Option<u64>)>, now: u64) -> Result<u64, String> {
+    match stored {
+        None => Err(
+            "psmpa-pico: no stack measured on the bench (target/hil/stack.json): run `cargo xtask hil` first"
+                .to_owned(),
+        ),
+        Some((_, hash)) if hash != Some(now) => Err(
+            "psmpa-pico: target/hil/stack.json was measured on another build of the image: run `cargo xtask hil` again"
+                .to_owned(),
+        ),
+        Some((bytes, _)) => Ok(bytes),
     }
 }
 

@@ -1360,11 +1360,13 @@ fn words(line: &str) -> String {
 /// One run's report and pin log, or why it could not run.
 type Played = Result<(Report, PinLog), String>;
 
-/// The deepest stack the last bench run measured, bytes (`target/hil/stack.json`).
-pub fn stack_high_water() -> Option<u64> {
+/// The deepest stack the last bench run measured, bytes (`target/hil/stack.json`), and the
+/// hash of the image's code it ran ([`crate::stack::pico_code_hash`]).
+pub fn stack_high_water() -> Option<(u64, Option<u64>)> {
     let at = firmware::root().join("target/hil/stack.json");
     let text = std::fs::read(at).ok()?;
-    serde_json::from_slice::<serde_json::Value>(&text).ok()?["stack_bytes"].as_u64()
+    let v = serde_json::from_slice::<serde_json::Value>(&text).ok()?;
+    Some((v["stack_bytes"].as_u64()?, v["code_hash"].as_u64()))
 }
 
 /// Plays every one of `plays` on `fw`, two at a time (each run is one Node process and one
@@ -1511,7 +1513,9 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
     // The deepest stack of the runs, for `cargo xtask stack`'s check of its bound.
     if let Some(deepest) = reports.iter().map(|(r, _)| r.stack_bytes).max() {
         let at = out.join("stack.json");
-        let text = serde_json::json!({ "image": "psmpa-pico", "stack_bytes": deepest }).to_string();
+        let code_hash = crate::stack::pico_code_hash(&fw.elf).ok();
+        let text = serde_json::json!({ "image": "psmpa-pico", "stack_bytes": deepest, "code_hash": code_hash })
+            .to_string();
         if let Err(e) = std::fs::write(&at, text) {
             eprintln!("{}: {e}", at.display());
         }

@@ -6,6 +6,7 @@ use std::collections::{BTreeSet, HashMap};
 
 use super::{
     Analysis, Binary, Insn, NO_TASK, Program, Rules, Site, by_name, disassembly, jump_table,
+    measured_on,
 };
 
 /// No rule: every cycle is unbounded, every pointer may reach every candidate.
@@ -535,4 +536,20 @@ fn a_switch_through_a_table_in_the_function_is_a_branch_not_a_call() {
     let mut other = switch(0x1010);
     other[1] = insn(0x1002, "ldr", "r4, [r0, #4]");
     assert!(!jump_table(&other, 4, 0x1000..0x1100));
+}
+
+/// The Pico's bound is checked against the bench's measurement of the image as built: none,
+/// or one of another build, is an error saying what to run (it was skipped, or trusted).
+#[test]
+fn a_missing_or_stale_bench_measurement_is_an_error() {
+    assert_eq!(measured_on(Some((7000, Some(42))), 42), Ok(7000));
+    let missing = measured_on(None, 42).unwrap_err();
+    assert!(missing.contains("run `cargo xtask hil` first"), "{missing}");
+    for stale in [Some((7000, Some(41))), Some((7000, None))] {
+        let e = measured_on(stale, 42).unwrap_err();
+        assert!(
+            e.contains("another build") && e.contains("cargo xtask hil"),
+            "{e}"
+        );
+    }
 }
