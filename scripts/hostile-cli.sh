@@ -86,7 +86,7 @@ t 40.1b "$B plan high.json"
 # Issue 40: outputs. The report after a trace on standard output's own file; a regular file
 # named through /proc replaced, not appended to; a process substitution as a pipe; a private
 # file kept private; a planner thread the machine will not start (status 3).
-t 40.3 "$B run $S --arch psmpa --json --trace /dev/stdout >so.txt; grep -c '^time_s' so.txt >&2; tail -c 2 so.txt | grep -q '}'"
+t 40.3 "$B run $S --arch psmpa --trace /dev/stdout >so.txt 2>rep.txt; grep -c '^time_s' so.txt >&2; grep -q 'trace hash' rep.txt"
 echo old >p.csv
 t 40.2 "$B run $S --arch psmpa --trace /proc/self/cwd/p.csv >/dev/null; grep -c -e '^time_s' -e '^old' p.csv >&2"
 t 40.8 "$B run $S --arch psmpa --trace >(wc -c >/dev/null) >/dev/null"
@@ -120,4 +120,23 @@ t 40.8 "$B sweep --seed -1"
 printf '{"name": "x", "%s": 1}' "$(head -c 300000 /dev/zero | tr '\0' k)" >k40.json
 t 40.8 "$B run k40.json --arch psmpa 2>&1 | wc -c >&2"
 t clap "$B run --arch"
+# Issue 45: replay, outputs and check. A recording cut mid-frame is refused; an exact recording
+# replays at every lag; outputs through
+# standard output into a closed pipe end quietly; a read-only file is kept; --json refuses an
+# output into standard output; a file that is standard output too is refused; likely mistakes
+# in a mission are warnings.
+$B run "$root/scenarios/locked-door.json" --arch smpa --record cut.rec 2>/dev/null >/dev/null
+head -c $(( $(stat -c %s cut.rec) / 2 )) cut.rec >half.rec
+t 45.3 "$B replay half.rec"
+$B run "$root/scenarios/person.json" --arch psmpa --record p.rec 2>/dev/null >/dev/null
+t 45.6 "$B replay p.rec --lag-ms 20"
+t 45.9 "$B run $S --arch psmpa --record /dev/stdout | head -c 100 >/dev/null; exit \${PIPESTATUS[0]}"
+t 45.9 "$B replay p.rec --mcap /dev/stdout | head -c 100 >/dev/null; exit \${PIPESTATUS[0]}"
+echo keep >ro.csv && chmod 444 ro.csv
+t 45.10 "$B run $S --arch psmpa --trace ro.csv"
+t 45.11 "$B run $S --arch psmpa --json --record /dev/stdout >j.out"
+t 45.23 "$B run $S --arch psmpa --trace same.csv >same.csv"
+sed 's/"go to door", "open door", "enter kitchen"/"open door", "go to door", "enter kitchen"/' "$M" >order.json
+t 45.22 "$B check order.json >/dev/null"
+rm -f cut.rec half.rec p.rec ro.csv j.out same.csv order.json so.txt rep.txt
 echo "files left: $(ls -A | grep -v -e '^tm$' -e '^out$' -e '^err$' | tr '\n' ' ')"
