@@ -87,7 +87,7 @@ cargo xtask size
 figures=$(mktemp -d)
 cp --parents README.md docs/firmware.md boards/README.md "$figures/"
 
-step "the bench: the Pico's firmware on an emulated RP2040 (rp2040js) against the project's world, every scenario and fault, judged from its pins and its flight recording against psmpa-sim and the committed cost budget"
+step "the bench: the Pico's firmware on an emulated RP2040 (rp2040js) against the project's world, every scenario and fault, judged from its pins and its flight recording against psmpa-sim and the committed cost budget, and every annotated loop's back edges counted"
 cargo xtask hil
 
 step "the bench can fail: images with planted bugs (a deaf sonar, a floating bumper, slow brakes, ...) must each fail it"
@@ -99,12 +99,12 @@ cargo xtask stack
 step "static timing: every job of the Pico's image bounded in cycles from its binary (every loop counted or annotated)"
 cargo xtask wcet
 
-step "the static timing can fail: a busy loop planted on the sonar's path raises its bound, a busy wait planted in the safety stop is refused"
+step "the static timing can fail: a busy loop planted in the switches' driver raises the sensing bound, a busy wait planted in the safety stop is refused"
 cargo xtask wcet --mutants
 
 step "the bench's and the static timing's figures on the pages are the ones they measured"
 for page in README.md docs/firmware.md boards/README.md; do
-  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask hil and cargo xtask wcet wrote" >&2; exit 1; }
+  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask hil, stack and wcet wrote" >&2; exit 1; }
 done
 rm -rf "$figures"
 

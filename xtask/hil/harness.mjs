@@ -9,7 +9,8 @@
 // recording in it), and its sensors' health block, a diagnostic the bench judges nothing by.
 // It also counts cycles: each
 // interrupt handler's own, thread mode's busy stretches and the critical sections, for the
-// response-time analysis.
+// response-time analysis; and the back edges of the loops `cargo xtask wcet` takes bounds of on
+// trust (the boot command's `loops`), the most of each on one entry.
 //
 // Commands (xtask -> harness):
 //   {"cmd":"boot","flash":PATH,"symbols":{...},"health_words":N,"outputs":[..],"pwm":[..],
@@ -61,6 +62,8 @@ const WATCHDOG = 0x40058; // its peripheral slot (address >> 12)
 const WATCHDOG_REASON_TIMER = 1;
 const SIO_SPINLOCK31 = 0x17c; // embassy-rp's critical section takes spinlock 31
 const VECTOR_TABLE = 0x10000100; // after the 256 B second-stage bootloader
+const FLASH = 0x10000000;
+const FLASH_BYTES = 2 * 1024 * 1024;
 const EXC_HARDFAULT = 3;
 /** How often a floating input takes a new level, ns. */
 const FLOAT_NS = 1_000_000;
@@ -117,6 +120,7 @@ class Bench {
     this.schedule = []; // [{at, pin, level}], sorted by at
     this.events = [];
     this.accounts = new Accounts();
+    this.watchLoops(config.loops ?? []);
     this.boot(false);
   }
 
@@ -188,6 +192,56 @@ class Bench {
     this.rtt = null;
     this.healthSeen = -1;
     this.busySince = null;
+    // A reset abandons every loop where it was.
+    for (const l of this.loops ?? []) l.count.fill(0);
+  }
+
+  /**
+   * The annotated loops of `cargo xtask wcet`, whose back edges are counted: per entry into a
+   * loop (a jump into its body from the rest of its function, or a call of the function where
+   * it starts in the loop) and per exception level (a handler's run of the loop is its own,
+   * and the interrupted one goes on when it returns), the back edges taken (a latch to an
+   * entry); the most of each is in `stats`. `loopFn` marks each halfword of flash with its
+   * function's index (from 1), so that an instruction outside them costs a lookup.
+   */
+  watchLoops(loops) {
+    this.loops = loops.map((l) => ({
+      bound: l.bound,
+      start: l.function[0],
+      entries: new Set(l.entries),
+      latches: new Set(l.latches),
+      body: new Set(l.body),
+      count: new Int32Array(64),
+      max: 0,
+    }));
+    this.loopFn = null;
+    if (this.loops.length === 0) return;
+    this.loopFn = new Uint16Array(FLASH_BYTES >> 1);
+    this.fnLoops = [null];
+    const byStart = new Map();
+    for (const [i, l] of this.loops.entries()) {
+      let idx = byStart.get(l.start);
+      if (idx === undefined) {
+        idx = this.fnLoops.length;
+        byStart.set(l.start, idx);
+        this.fnLoops.push([]);
+        const [from, to] = loops[i].function;
+        for (let a = from; a < to; a += 2) this.loopFn[(a - FLASH) >>> 1] = idx;
+      }
+      this.fnLoops[idx].push(l);
+    }
+  }
+
+  /** One instruction from `pc` to `npc` at exception level `ctx`, in or into a loop's function. */
+  loopStep(pc, npc, a, b, ctx) {
+    for (const l of this.fnLoops[b || a]) {
+      if (l.latches.has(pc) && l.entries.has(npc)) {
+        const c = ++l.count[ctx];
+        if (c > l.max) l.max = c;
+      } else if (!l.body.has(pc) && l.body.has(npc) && (a === b || npc === l.start)) {
+        l.count[ctx] = 0;
+      }
+    }
   }
 
   /** A pseudo-random bit (xorshift64), the same sequence for the same seed. */
@@ -402,7 +456,16 @@ class Bench {
         if (next) step = Math.min(step, next.nanos - clock.nanos);
         clock.tick(Math.max(step, 0));
       } else {
+        const pc = core.PC;
+        const ctx = core.IPSR;
         this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
+        const loopFn = this.loopFn;
+        if (loopFn !== null) {
+          const npc = core.PC;
+          const a = loopFn[(pc - FLASH) >>> 1] | 0;
+          const b = loopFn[(npc - FLASH) >>> 1] | 0;
+          if ((a | b) !== 0 && core.IPSR === ctx) this.loopStep(pc, npc, a, b, ctx);
+        }
         if (this.faulted) {
           this.faulted = false;
           if (core.IPSR === EXC_HARDFAULT) {
@@ -454,7 +517,13 @@ class Bench {
   }
 
   stats() {
-    out({ ev: 'stats', ns: this.now, ...this.accounts, instructions_per_ns: this.core.cycles / this.now });
+    out({
+      ev: 'stats',
+      ns: this.now,
+      ...this.accounts,
+      instructions_per_ns: this.core.cycles / this.now,
+      loops: this.loops.map((l) => l.max),
+    });
   }
 }
 

@@ -1696,7 +1696,7 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
 }
 
 /// The firmware's bound against the high-water mark it measures in QEMU.
-fn check_firmware(elf: &Path, total: Option<u64>) -> Result<(), String> {
+fn check_firmware(elf: &Path, total: Option<u64>) -> Result<u64, String> {
     let log = firmware::run(elf)?;
     let measured = firmware::stack_high_water(&log)
         .ok_or("the firmware did not report its stack high-water mark")?;
@@ -1707,7 +1707,7 @@ fn check_firmware(elf: &Path, total: Option<u64>) -> Result<(), String> {
                 "bound {bound} B >= measured {measured} B ({:.2}x)",
                 bound as f64 / measured as f64
             );
-            Ok(())
+            Ok(measured)
         }
         Some(bound) => Err(format!(
             "the bound {bound} B is below the measured {measured} B: the analysis is wrong"
@@ -1840,27 +1840,51 @@ impl CallGraph {
 pub fn run() -> Result<(), String> {
     let (elf, total) = analyse(&FIRMWARE)?;
     let mut failures = Vec::new();
-    if let Err(e) = check_firmware(&elf, total) {
-        failures.push(e);
-    }
+    let qemu = check_firmware(&elf, total)
+        .map_err(|e| failures.push(e))
+        .ok();
     println!("\npsmpa-pico2 (the Fetch Tea robot on a Raspberry Pi Pico 2, embassy-rp):");
-    if let Err(e) =
-        analyse(&PICO2).and_then(|(_, total)| check_board(firmware::PICO2, 512 * 1024, total, None))
-    {
-        failures.push(e);
-    }
+    let pico2 = analyse(&PICO2)
+        .and_then(|(_, total)| {
+            check_board(firmware::PICO2, 512 * 1024, total, None)?;
+            Ok(total)
+        })
+        .map_err(|e| failures.push(e))
+        .ok()
+        .flatten();
     println!("\npsmpa-pico (the same robot on a Raspberry Pi Pico, RP2040, Cortex-M0+):");
-    if let Err(e) = analyse(&PICO).and_then(|(_, total)| {
-        let measured = pico_measured()?;
-        check_board(firmware::PICO, 256 * 1024, total, Some(measured))
-    }) {
-        failures.push(e);
+    let pico = analyse(&PICO)
+        .and_then(|(_, total)| {
+            let measured = pico_measured()?;
+            check_board(firmware::PICO, 256 * 1024, total, Some(measured))?;
+            Ok((total, measured))
+        })
+        .map_err(|e| failures.push(e))
+        .ok();
+    if !failures.is_empty() {
+        return Err(failures.join("\n"));
     }
-    if failures.is_empty() {
-        Ok(())
-    } else {
-        Err(failures.join("\n"))
-    }
+    // The figures, written where the pages show them: what was measured, never by hand.
+    let b = |n: Option<u64>| n.map_or_else(|| "?".to_owned(), crate::hil::thousands);
+    let cell = format!(
+        "QEMU {} B ({} B measured); Pico 2 {} B; Pico {} B ({} B measured on the bench)",
+        b(total),
+        b(qemu),
+        b(pico2),
+        b(pico.and_then(|p| p.0)),
+        b(pico.map(|p| p.1)),
+    );
+    crate::hil::write_between(&firmware::root().join("README.md"), "stack", &cell)?;
+    let pico_cell = format!(
+        "{} B (the bench; bound {} B)",
+        b(pico.map(|p| p.1)),
+        b(pico.and_then(|p| p.0))
+    );
+    crate::hil::write_between(
+        &firmware::root().join("docs/firmware.md"),
+        "pico-stack",
+        &pico_cell,
+    )
 }
 
 /// The Pico image's code (its flash sections, from the ELF's bytes), hashed: which image a

@@ -26,6 +26,8 @@ pub struct Boot {
     /// Seeds the floating level of an open input with no pull (a decimal string: JSON's
     /// numbers are doubles in JavaScript).
     pub seed: String,
+    /// Loops whose back edges an entry the harness counts (the most, in [`Stats::loops`]).
+    pub loops: Vec<crate::wcet::BenchLoop>,
 }
 
 /// Addresses in the firmware image.
@@ -73,6 +75,9 @@ pub struct Stats {
     pub thread: HandlerCycles,
     /// Critical sections.
     pub critical: Critical,
+    /// Of each of [`Boot::loops`], the most back edges taken on one entry.
+    #[serde(default)]
+    pub loops: Vec<u64>,
 }
 
 /// Something that happened on the chip.

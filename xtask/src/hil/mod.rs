@@ -236,6 +236,8 @@ struct Firmware {
     ids: [usize; 4],
     /// The stack: from its lowest address to its top (`_stack_end`, `_stack_start`).
     stack: (u32, u32),
+    /// The annotated loops whose back edges the harness counts (`cargo xtask wcet`'s).
+    loops: Vec<crate::wcet::BenchLoop>,
 }
 
 /// Builds the board's RP2040 image (`cargo build --release` in `boards/pico`).
@@ -285,6 +287,7 @@ impl Firmware {
             settings_at,
             ids,
             stack,
+            loops: Vec::new(),
         })
     }
 
@@ -562,6 +565,7 @@ fn play(
         pwm: vec![pin::LEFT[2], pin::RIGHT[2]],
         inputs,
         seed: sc.seed.to_string(),
+        loops: fw.loops.clone(),
     };
     let mut harness = Harness::start(&boot)?;
     let table = defmt_decoder::Table::parse(&fw.elf)
@@ -883,6 +887,10 @@ pub const JUDGED_FROM: &[(&str, &str)] = &[
         "the committed cost budget (boards/pico/bench-budget.json), never this run's costs",
     ),
     (
+        "loops",
+        "the program counter: each annotated loop's back edges an entry, against boards/pico/wcet-loops.json",
+    ),
+    (
         "costs",
         "the emulator's cycle counts of handlers, thread mode and spinlock 31, against the budget",
     ),
@@ -964,6 +972,16 @@ fn report(
     }
     for m in &bw.misreads {
         failures.push(format!("readings: {m}"));
+    }
+    for (l, most) in fw.loops.iter().zip(&stats.loops) {
+        if *most > l.bound {
+            failures.push(format!(
+                "loops: the loop at {:#x} ({}) took {most} back edges on one entry, more than the {} of its annotation in boards/pico/wcet-loops.json",
+                l.entries.first().copied().unwrap_or(l.function[0]),
+                l.annotation,
+                l.bound
+            ));
+        }
     }
     for (i, edge) in &bw.unanswered {
         failures.push(format!(
@@ -1448,6 +1466,12 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
     let fw = match build().and_then(|elf| Firmware::read(&elf)) {
         Ok(fw) => fw,
         Err(e) => return Ending::Failed(e),
+    };
+    // Every loop bound the static timing analysis takes on trust is counted on every run.
+    eprintln!("xtask hil: finding the annotated loops (cargo xtask wcet's analysis)");
+    let fw = match crate::wcet::bench_loops() {
+        Ok(loops) => Firmware { loops, ..fw },
+        Err(e) => return Ending::Failed(format!("the annotated loops: {e}")),
     };
     let out = firmware::root().join("target/hil");
     if let Err(e) = std::fs::create_dir_all(&out) {

@@ -88,6 +88,9 @@ pub struct Loop {
     /// Every instruction in it.
     #[serde(skip)]
     pub body: Vec<u64>,
+    /// Where control enters it (a back edge goes from a latch to one of these).
+    #[serde(skip)]
+    pub entries: Vec<u64>,
 }
 
 /// A function's worst case.
@@ -892,8 +895,13 @@ impl Loops<'_> {
             };
             let (bound, source) = match counted {
                 Some(b) => (b, "auto".to_owned()),
+                // An annotation counts rounds of the loop as written; a round passes each of
+                // the machine loop's entries (an `await`'s resume points) at most once, each
+                // a back edge.
                 None => match image.annotation(start, &site) {
-                    Some(a) => a,
+                    Some((rounds, why)) => {
+                        (rounds.saturating_mul(entries.len().max(1) as u64), why)
+                    }
                     None => (image.unbounded(start, &site)?, "unbounded".to_owned()),
                 },
             };
@@ -929,6 +937,7 @@ impl Loops<'_> {
                 source,
                 iteration: iteration.unwrap_or(0),
                 body: site.body,
+                entries: entries.iter().map(|e| self.nodes[*e].insn.addr).collect(),
             });
         }
         Ok(())

@@ -157,7 +157,8 @@ pub struct Annotations {
 pub struct Annotation {
     /// The source function the loop is written in, as the debug information names it.
     pub function: String,
-    /// Back edges per entry into the loop; for a length, bytes.
+    /// Rounds of the loop as written per entry into it (a round is one back edge for each of
+    /// the machine loop's entries); for a length, bytes.
     pub bound: u64,
     /// Why the code bounds it so.
     pub why: String,
@@ -169,6 +170,10 @@ pub struct Annotation {
     /// design declares, and no other use of the same helper).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub within: Option<String>,
+    /// A busy wait on time the design declares: bounded by its duration (which the bound adds
+    /// elsewhere), not by a count, so the bench does not count its back edges.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub timed: bool,
 }
 
 impl Annotation {
@@ -187,8 +192,13 @@ impl Annotations {
         let path = Self::path();
         let text =
             std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let a: Self =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        Self::parse(&text)
+    }
+
+    /// The annotations in `text` (the file's).
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let path = Self::path();
+        let a: Self = serde_json::from_str(text).map_err(|e| format!("{}: {e}", path.display()))?;
         for l in &a.loops {
             if l.function.trim().is_empty() || l.why.trim().is_empty() {
                 return Err(format!(
@@ -264,6 +274,37 @@ pub struct LoopReport {
     pub source: String,
     /// Cycles of its longest iteration.
     pub iteration_cycles: u64,
+    /// Where it is, for the bench's count of its back edges.
+    #[serde(skip)]
+    pub at: BenchLoop,
+}
+
+/// An annotated loop as the bench checks it: per entry into the loop (a jump into its body from
+/// the rest of its function, or a call of the function where it starts in the loop), the back
+/// edges taken (a latch to an entry) must not exceed `bound`.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BenchLoop {
+    /// The annotation's key (the source function), or empty for a loop bounded from the code.
+    pub annotation: String,
+    pub bound: u64,
+    /// The machine function holding it: `[start, end)`.
+    pub function: [u64; 2],
+    pub entries: Vec<u64>,
+    pub latches: Vec<u64>,
+    pub body: Vec<u64>,
+}
+
+impl BenchLoop {
+    fn of(l: &cfg::Loop, function: [u64; 2]) -> Self {
+        Self {
+            annotation: String::new(),
+            bound: l.bound,
+            function,
+            entries: l.entries.clone(),
+            latches: l.latches.clone(),
+            body: l.body.clone(),
+        }
+    }
 }
 
 /// The image as the analysis reads it.
@@ -436,6 +477,7 @@ impl cfg::Image for Job<'_> {
         self.path.pop();
         let worst = result.map_err(|e| format!("{}: {e}", self.elf.name(addr)))?;
         self.touched.extend(worst.touched.iter().map(|a| a / LINE));
+        let end = self.elf.funcs.get(&addr).map_or(addr, |(e, _)| *e);
         for l in &worst.loops {
             self.loops.push(LoopReport {
                 function: self.elf.name(addr),
@@ -443,6 +485,7 @@ impl cfg::Image for Job<'_> {
                 bound: l.bound,
                 source: l.source.clone(),
                 iteration_cycles: l.iteration,
+                at: BenchLoop::of(l, [addr, end]),
             });
         }
         self.memo.insert(addr, worst.cycles);
@@ -870,6 +913,7 @@ fn critical(
                     bound: l.bound,
                     source: l.source.clone(),
                     iteration_cycles: l.iteration,
+                    at: BenchLoop::of(l, [*f, end]),
                 }));
                 Ok(w.cycles)
             };
@@ -1066,17 +1110,58 @@ fn periods_ms() -> Result<[u64; 2], String> {
     Ok([period(Sensor::Sonar)?, period(Sensor::Bumper)?])
 }
 
+/// The image built for the analysis, checked to be the shipped code byte for byte.
+fn analysed_image() -> Result<PathBuf, String> {
+    let a = CallGraph::build_pico()?;
+    let shipped = CallGraph::shipped_pico()?;
+    if CallGraph::same_code(&a, &shipped)? {
+        Ok(a)
+    } else {
+        Err("the image built for the analysis differs from the shipped one".to_owned())
+    }
+}
+
+/// The annotated loops of the shipped Pico image, where they are, for the bench to count
+/// their back edges: each machine loop an annotation of `loops` bounds, once. A busy wait the
+/// design declares (`timed`: `block_for` in planning) is bounded by time, not by a count, and
+/// is not among them.
+pub fn bench_loops() -> Result<Vec<BenchLoop>, String> {
+    bench_loops_with(&Annotations::load()?)
+}
+
+/// [`bench_loops`] with `annotations` for the file's.
+pub fn bench_loops_with(annotations: &Annotations) -> Result<Vec<BenchLoop>, String> {
+    let (results, _) = analyse(&analysed_image()?, annotations)?;
+    let mut out: Vec<BenchLoop> = Vec::new();
+    for job in results.into_iter().flatten() {
+        for l in job.loops {
+            let Some(a) = annotations
+                .loops
+                .iter()
+                .find(|a| a.why == l.source && !a.timed)
+            else {
+                continue;
+            };
+            let at = BenchLoop {
+                annotation: a.function.clone(),
+                ..l.at
+            };
+            match out
+                .iter_mut()
+                .find(|o| o.function == at.function && o.entries == at.entries)
+            {
+                Some(o) => o.bound = o.bound.max(at.bound),
+                None => out.push(at),
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Runs the analysis: prints each job's bound; fails (1) naming the first loop or length it
 /// cannot bound, or an annotation that matches nothing; 2 when its annotations do not load.
 pub fn run(json: bool) -> Ending {
-    let analysed = match CallGraph::build_pico().and_then(|a| {
-        let shipped = CallGraph::shipped_pico()?;
-        if CallGraph::same_code(&a, &shipped)? {
-            Ok(a)
-        } else {
-            Err("the image built for the analysis differs from the shipped one".to_owned())
-        }
-    }) {
+    let analysed = match analysed_image() {
         Ok(a) => a,
         Err(e) => return Ending::Failed(e),
     };

@@ -1,7 +1,7 @@
 //! `cargo xtask wcet --mutants`: the analysis must be able to fail. Each mutant is a bug
 //! planted in a scratch copy of the sources (`target/mutants/wcet-tree`), built as the
 //! analysis builds the Pico's image, and analysed; it is caught when the analysis does what it
-//! exists for: a busy computation added to the sonar's sampling path raises the sensing job's
+//! exists for: a busy computation added to the switches' sampling path raises the sensing job's
 //! bound by at least what it costs, and a busy wait on time in the safety stop (`halt`) makes
 //! the analysis fail, naming it.
 
@@ -34,13 +34,13 @@ struct Mutant {
 
 const MUTANTS: &[Mutant] = &[
     Mutant {
-        name: "sonar-busy-loop",
-        what: "the sonar's driver computes 1,000 rounds after each echo",
+        name: "switch-busy-loop",
+        what: "the switches' driver computes 1,000 rounds after each read of the pin",
         // In a function of its own: inlined, LLVM keeps the limit in a stack slot, which the
         // analysis does not follow (it then refuses the loop, unbounded).
-        file: "drivers/src/hcsr04.rs",
-        find: "        let width = Instant::now().saturating_duration_since(rose);",
-        replace: "        let width = Instant::now().saturating_duration_since(rose);
+        file: "drivers/src/switch.rs",
+        find: "        let high = self.pin.is_high().map_err(|_| PinError)?;",
+        replace: "        let high = self.pin.is_high().map_err(|_| PinError)?;
         #[inline(never)]
         fn busy() {
             for i in 0..1000u32 {
