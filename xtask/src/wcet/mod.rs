@@ -1247,6 +1247,22 @@ pub fn run(json: bool) -> Ending {
 }
 
 /// Writes the jobs' bounds beside the bench's committed budget into `docs/firmware.md`.
+/// `x` to two significant figures, digits grouped (`≈45,000,000,000`).
+fn about(x: f64) -> String {
+    if x <= 0.0 || !x.is_finite() {
+        return "0".to_owned();
+    }
+    let scale = 10f64.powi(x.log10().floor() as i32 - 1);
+    format!(
+        "≈{}",
+        crate::hil::thousands(((x / scale).round() * scale) as u64)
+    )
+}
+
+/// Writes the figures into the pages. A bound with the XIP cache's misses depends on the link's
+/// layout, which the checkout's folder changes (cargo's crate hashes order the symbols), so
+/// the pages give it to two significant figures; the instructions' bound, which the layout
+/// does not move, exactly.
 fn figures(report: &Report) -> Result<(), String> {
     let budget = bound::Budget::load()?;
     let group = crate::hil::thousands;
@@ -1269,24 +1285,29 @@ fn figures(report: &Report) -> Result<(), String> {
         let (m, ratio) = match (measured, budgeted) {
             (Some(m), Some(b)) if m > 0 => (
                 format!("{} ({})", group(m), group(b)),
-                format!("{:.0}x", j.cycles as f64 / m as f64),
+                format!("{}x", about(j.cycles as f64 / m as f64)),
             ),
             _ => ("".to_owned(), "".to_owned()),
         };
         text += &format!(
             "| {} | {} | {} | {} | {m} | {ratio} |\n",
             j.job,
-            group(j.cycles),
-            group(j.xip_cycles),
+            about(j.cycles as f64),
+            about(j.xip_cycles as f64),
             group(j.cycles - j.xip_cycles)
         );
     }
     match &report.reaction_error {
-        Some(e) => text += &format!("\nNo reaction bound: {e}.\n"),
+        Some(_) => {
+            text += "\nNo reaction bound: at the mission's periods the static costs need more than the processor (`cargo xtask wcet` says how much).\n";
+        }
         None => {
             for (sensor, b) in &report.reaction_bound_cycles {
                 if let Some(b) = b {
-                    text += &format!("\nReaction bound of the {sensor}: {} cycles.\n", group(*b));
+                    text += &format!(
+                        "\nReaction bound of the {sensor}: {} cycles.\n",
+                        about(*b as f64)
+                    );
                 }
             }
         }
@@ -1298,12 +1319,12 @@ fn figures(report: &Report) -> Result<(), String> {
         (Some(a), Some(_)) => format!(
             "{} jobs bounded (alarm {} cycles); no reaction bound: the bounds need more than the processor",
             report.jobs.len(),
-            group(a.cycles)
+            about(a.cycles as f64)
         ),
         (Some(a), None) => format!(
             "{} jobs bounded (alarm {} cycles); reaction bounds from them",
             report.jobs.len(),
-            group(a.cycles)
+            about(a.cycles as f64)
         ),
         (None, _) => format!("{} jobs bounded", report.jobs.len()),
     };

@@ -207,3 +207,16 @@ fn thumb2_outside_armv6m_is_refused() {
     let mut f = Fixture::new(&[0xb100, BX_LR]).function(0, 4);
     assert!(f.worst(0).is_err());
 }
+
+/// The pages give a bound with XIP misses to two significant figures: two checkouts in other
+/// folders link the same code in another order, and their bounds differed in the fifth.
+#[test]
+fn a_layout_dependent_figure_is_given_to_two_significant_figures() {
+    use super::about;
+    assert_eq!(about(44_732_154_604.0), "≈45,000,000,000");
+    assert_eq!(about(44_724_067_628.0), about(44_732_154_604.0));
+    assert_eq!(about(45_272.0), "≈45,000");
+    assert_eq!(about(2_959_454.0), "≈3,000,000");
+    assert_eq!(about(99.06), "≈99");
+    assert_eq!(about(49.0), "≈49");
+}
