@@ -279,26 +279,43 @@ fn build(tree: &Path, target: &Path) -> Result<PathBuf, String> {
     Ok(target.join("thumbv6m-none-eabi/release/psmpa-pico"))
 }
 
-/// Plants `m` in `tree` (its file restored from `root` first); why not, if it cannot be.
-fn plant(m: &Mutant, root: &Path, tree: &Path) -> Result<(), String> {
-    let original =
-        std::fs::read_to_string(root.join(m.file)).map_err(|e| format!("{}: {e}", m.file))?;
-    let found = original.matches(m.find).count();
+/// `file` (read from `root`) with `find`, which must occur in it once, replaced by `replace`;
+/// why not, naming mutant `name`, when the code changed.
+pub(crate) fn patched(
+    name: &str,
+    root: &Path,
+    file: &str,
+    find: &str,
+    replace: &str,
+) -> Result<String, String> {
+    let original = std::fs::read_to_string(root.join(file)).map_err(|e| format!("{file}: {e}"))?;
+    let found = original.matches(find).count();
     if found != 1 {
         return Err(format!(
-            "mutant {}: {} holds its text {found} times, not once: the code changed, update the mutant",
-            m.name, m.file
+            "mutant {name}: {file} holds its text {found} times, not once: the code changed, update the mutant"
         ));
     }
-    std::fs::write(tree.join(m.file), original.replacen(m.find, m.replace, 1))
-        .map_err(|e| format!("{}: {e}", m.file))
+    Ok(original.replacen(find, replace, 1))
 }
 
-/// Restores `m`'s file in `tree`.
-fn unplant(m: &Mutant, root: &Path, tree: &Path) -> Result<(), String> {
-    std::fs::copy(root.join(m.file), tree.join(m.file))
+/// Writes [`patched`] `file` into `tree`.
+pub(crate) fn plant_in(
+    name: &str,
+    root: &Path,
+    tree: &Path,
+    file: &str,
+    find: &str,
+    replace: &str,
+) -> Result<(), String> {
+    let text = patched(name, root, file, find, replace)?;
+    std::fs::write(tree.join(file), text).map_err(|e| format!("{file}: {e}"))
+}
+
+/// Restores `file` in `tree` from `root`.
+pub(crate) fn restore(root: &Path, tree: &Path, file: &str) -> Result<(), String> {
+    std::fs::copy(root.join(file), tree.join(file))
         .map(|_| ())
-        .map_err(|e| format!("{}: {e}", m.file))
+        .map_err(|e| format!("{file}: {e}"))
 }
 
 /// The verdict of one mutant's runs: caught when one failed, or, for one that must fail
@@ -358,14 +375,8 @@ fn clean(annotations: &crate::wcet::Annotations) -> Result<Firmware, String> {
 
 /// The clean image with `m`, a mutant of the annotations, planted in them.
 fn with_annotations(m: &Mutant, root: &Path) -> Result<Firmware, String> {
-    let text =
-        std::fs::read_to_string(root.join(m.file)).map_err(|e| format!("{}: {e}", m.file))?;
-    if text.matches(m.find).count() != 1 {
-        return Err(format!("{}: the text to replace is not there once", m.file));
-    }
-    clean(&crate::wcet::Annotations::parse(
-        &text.replacen(m.find, m.replace, 1),
-    )?)
+    let text = patched(m.name, root, m.file, m.find, m.replace)?;
+    clean(&crate::wcet::Annotations::parse(&text)?)
 }
 
 fn control(files: &[PathBuf], budget: &Budget, out: &Path) -> Result<(), String> {
@@ -429,10 +440,10 @@ pub fn run(json: bool) -> Ending {
         let (built, restored) = if m.file == ANNOTATIONS {
             (with_annotations(m, &root), Ok(()))
         } else {
-            let built = plant(m, &root, &tree)
+            let built = plant_in(m.name, &root, &tree, m.file, m.find, m.replace)
                 .and_then(|()| build(&tree, &target))
                 .and_then(|elf| Firmware::read(&elf));
-            (built, unplant(m, &root, &tree))
+            (built, restore(&root, &tree, m.file))
         };
         let fw = match (built, restored) {
             (Ok(fw), Ok(())) => fw,

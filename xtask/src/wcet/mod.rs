@@ -286,6 +286,9 @@ pub struct LoopReport {
 pub struct BenchLoop {
     /// The annotation's key (the source function), or empty for a loop bounded from the code.
     pub annotation: String,
+    /// Whether the bench counts it: an annotation of `loops` bounds it, not `timed`.
+    #[serde(skip)]
+    pub counted: bool,
     pub bound: u64,
     /// The machine function holding it: `[start, end)`.
     pub function: [u64; 2],
@@ -295,9 +298,11 @@ pub struct BenchLoop {
 }
 
 impl BenchLoop {
-    fn of(l: &cfg::Loop, function: [u64; 2]) -> Self {
+    /// Loop `l` of the machine function `function`, bounded by `annotation` if one did.
+    fn of(l: &cfg::Loop, function: [u64; 2], annotation: Option<&Annotation>) -> Self {
         Self {
-            annotation: String::new(),
+            annotation: annotation.map(|a| a.function.clone()).unwrap_or_default(),
+            counted: annotation.is_some_and(|a| !a.timed),
             bound: l.bound,
             function,
             entries: l.entries.clone(),
@@ -427,6 +432,8 @@ struct Job<'a> {
     /// The job's name, for annotations that hold for some jobs only.
     job: &'a str,
     memo: HashMap<u64, Option<u64>>,
+    /// The annotation (its index in `annotations.loops`) that bounds each loop, by header.
+    annotated: std::cell::RefCell<HashMap<u64, usize>>,
     /// Memory functions' worst cases by (address, length).
     by_length: HashMap<(u64, u64), Option<u64>>,
     /// The length the memory function being analysed moves at most.
@@ -479,13 +486,14 @@ impl cfg::Image for Job<'_> {
         self.touched.extend(worst.touched.iter().map(|a| a / LINE));
         let end = self.elf.funcs.get(&addr).map_or(addr, |(e, _)| *e);
         for l in &worst.loops {
+            let at = BenchLoop::of(l, [addr, end], self.annotation_of(l.header));
             self.loops.push(LoopReport {
                 function: self.elf.name(addr),
                 address: format!("{:#x}", l.header),
                 bound: l.bound,
                 source: l.source.clone(),
                 iteration_cycles: l.iteration,
-                at: BenchLoop::of(l, [addr, end]),
+                at,
             });
         }
         self.memo.insert(addr, worst.cycles);
@@ -616,12 +624,13 @@ impl cfg::Image for Job<'_> {
             return Some((n, format!("moves at most {n} bytes (the call's length)")));
         }
         let (function, chain) = self.loop_function(site)?;
-        let found = self.annotations.loops.iter().find(|a| {
+        let (i, found) = self.annotations.loops.iter().enumerate().find(|(_, a)| {
             a.function == function
                 && a.applies_to(self.job)
                 && a.within.as_ref().is_none_or(|w| chain.contains(w))
         })?;
         USED.with(|u| u.borrow_mut().insert(found.function.clone()));
+        self.annotated.borrow_mut().insert(site.header, i);
         Some((found.bound, found.why.clone()))
     }
 
@@ -744,6 +753,12 @@ fn loop_headers(elf: &Elf, graph: &CallGraph, annotations: &Annotations) -> Vec<
 }
 
 impl<'a> Job<'a> {
+    /// The annotation that bounded the loop at `header`, if one did.
+    fn annotation_of(&self, header: u64) -> Option<&'a Annotation> {
+        let i = self.annotated.borrow().get(&header).copied()?;
+        self.annotations.loops.get(i)
+    }
+
     fn new(
         elf: &'a Elf,
         graph: &'a CallGraph,
@@ -760,6 +775,7 @@ impl<'a> Job<'a> {
             side,
             job,
             memo: HashMap::new(),
+            annotated: std::cell::RefCell::new(HashMap::new()),
             by_length: HashMap::new(),
             length: None,
             path: Vec::new(),
@@ -907,14 +923,19 @@ fn critical(
                 j.reached.insert(*f);
                 let w = cfg::analyse_from(j, *f, end, Some(section))?;
                 j.touched.extend(w.touched.iter().map(|a| a / LINE));
-                j.loops.extend(w.loops.iter().map(|l| LoopReport {
-                    function: elf.name(*f),
-                    address: format!("{:#x}", l.header),
-                    bound: l.bound,
-                    source: l.source.clone(),
-                    iteration_cycles: l.iteration,
-                    at: BenchLoop::of(l, [*f, end]),
-                }));
+                let found: Vec<LoopReport> = w
+                    .loops
+                    .iter()
+                    .map(|l| LoopReport {
+                        function: elf.name(*f),
+                        address: format!("{:#x}", l.header),
+                        bound: l.bound,
+                        source: l.source.clone(),
+                        iteration_cycles: l.iteration,
+                        at: BenchLoop::of(l, [*f, end], j.annotation_of(l.header)),
+                    })
+                    .collect();
+                j.loops.extend(found);
                 Ok(w.cycles)
             };
             let (w, _) = bounded(&probe, "critical", &run).map_err(|e| {
@@ -1134,18 +1155,7 @@ pub fn bench_loops_with(annotations: &Annotations) -> Result<Vec<BenchLoop>, Str
     let (results, _) = analyse(&analysed_image()?, annotations)?;
     let mut out: Vec<BenchLoop> = Vec::new();
     for job in results.into_iter().flatten() {
-        for l in job.loops {
-            let Some(a) = annotations
-                .loops
-                .iter()
-                .find(|a| a.why == l.source && !a.timed)
-            else {
-                continue;
-            };
-            let at = BenchLoop {
-                annotation: a.function.clone(),
-                ..l.at
-            };
+        for at in job.loops.into_iter().map(|l| l.at).filter(|at| at.counted) {
             match out
                 .iter_mut()
                 .find(|o| o.function == at.function && o.entries == at.entries)

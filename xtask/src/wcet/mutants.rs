@@ -10,7 +10,7 @@ use std::path::Path;
 use super::{Annotations, JobWcet, analyse};
 use crate::firmware;
 use crate::hil::Ending;
-use crate::hil::mutants::{copy_tree, warm_target};
+use crate::hil::mutants::{copy_tree, plant_in, restore, warm_target};
 use crate::stack::CallGraph;
 
 /// What catches a mutant.
@@ -87,16 +87,16 @@ fn catch() -> Result<Vec<String>, String> {
     let annotations = Annotations::load()?;
     // The clean image, built where the mutants are, as the baseline.
     for m in MUTANTS {
-        restore(m, &root, &tree)?;
+        restore(&root, &tree, m.file)?;
     }
     let clean = jobs(&CallGraph::build_pico_in(&tree, &target)?, &annotations)
         .map_err(|e| format!("the clean image does not pass the analysis: {e}"))?;
     let mut missed = Vec::new();
     println!("{:<16} {:<56} caught", "mutant", "bug");
     for m in MUTANTS {
-        plant(m, &root, &tree)?;
+        plant_in(m.name, &root, &tree, m.file, m.find, m.replace)?;
         let built = CallGraph::build_pico_in(&tree, &target);
-        restore(m, &root, &tree)?;
+        restore(&root, &tree, m.file)?;
         let analysed = jobs(&built?, &annotations);
         let verdict = match (&m.expect, analysed) {
             (Expect::Rises(job, at_least), Ok(jobs)) => {
@@ -131,25 +131,4 @@ fn catch() -> Result<Vec<String>, String> {
         }
     }
     Ok(missed)
-}
-
-/// Plants `m` in `tree`; why not, if its text is not in its file once.
-fn plant(m: &Mutant, root: &Path, tree: &Path) -> Result<(), String> {
-    let original =
-        std::fs::read_to_string(root.join(m.file)).map_err(|e| format!("{}: {e}", m.file))?;
-    if original.matches(m.find).count() != 1 {
-        return Err(format!(
-            "mutant {}: {} does not hold its text once: the code changed, update the mutant",
-            m.name, m.file
-        ));
-    }
-    std::fs::write(tree.join(m.file), original.replacen(m.find, m.replace, 1))
-        .map_err(|e| format!("{}: {e}", m.file))
-}
-
-/// Restores `m`'s file in `tree`.
-fn restore(m: &Mutant, root: &Path, tree: &Path) -> Result<(), String> {
-    std::fs::copy(root.join(m.file), tree.join(m.file))
-        .map(|_| ())
-        .map_err(|e| format!("{}: {e}", m.file))
 }
