@@ -24,6 +24,10 @@
 //   {"cmd":"stats"}                              the cycle accounts so far
 //   {"cmd":"stack","from":A,"to":B}              bytes of the stack [A, B) used: below B, down to
 //                                                the lowest word no longer 0xcccccccc (the paint)
+//   {"cmd":"call","function":F,"args":[..]}      calls the function at F (before any `run`) with
+//                                                up to four words in r0-r3, to its return; says
+//                                                {"ev":"returned","cycles":N,"r0":..,"r1":..}
+//                                                (for `cargo xtask wcet --emulated`)
 //   {"cmd":"quit"}
 // Events (harness -> xtask), each with the emulated time `ns`:
 //   {"ev":"pin","pin":P,"level":L}      an output's edge (a pin no longer driven reads 0)
@@ -65,6 +69,10 @@ const VECTOR_TABLE = 0x10000100; // after the 256 B second-stage bootloader
 const FLASH = 0x10000000;
 const FLASH_BYTES = 2 * 1024 * 1024;
 const EXC_HARDFAULT = 3;
+/** Where a `call` returns to (SRAM's scratch bank X, never run), and its stack's top. */
+const RETURN = 0x20040000;
+const CALL_STACK = 0x20042000;
+const CALL_LIMIT = 1_000_000;
 /** How often a floating input takes a new level, ns. */
 const FLOAT_NS = 1_000_000;
 
@@ -516,6 +524,29 @@ class Bench {
     out({ ev: 'stack', used: to - at, ns: this.now });
   }
 
+  /**
+   * Calls the function at `fn` with `args` in r0-r3 on a stack of its own, from the chip as
+   * booted, until it returns to RETURN (an address in SRAM it never runs): no clock, no
+   * interrupt, only the instructions and their cycles.
+   */
+  call(fn, args) {
+    const core = this.core;
+    for (let i = 0; i < 4; i++) core.registers[i] = args[i] ?? 0;
+    core.SP = CALL_STACK;
+    core.LR = RETURN | 1;
+    core.PC = fn & ~1;
+    let cycles = 0;
+    while (core.PC !== RETURN) {
+      if (cycles > CALL_LIMIT || this.faulted) {
+        out({ ev: 'error', message: `the call of ${fn.toString(16)} did not return in ${CALL_LIMIT} cycles` });
+        return;
+      }
+      cycles += core.executeInstruction();
+    }
+    const [r0, r1] = core.registers;
+    out({ ev: 'returned', cycles, r0, r1 });
+  }
+
   stats() {
     out({
       ev: 'stats',
@@ -550,6 +581,9 @@ lines.on('line', (line) => {
       break;
     case 'inject':
       bench.inject(cmd.what);
+      break;
+    case 'call':
+      bench.call(cmd.function, cmd.args);
       break;
     case 'stats':
       bench.stats();

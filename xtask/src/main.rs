@@ -99,9 +99,6 @@ enum Task {
         #[arg(long, conflicts_with_all = ["files"])]
         mutants: bool,
     },
-    /// Response-time analysis from step costs measured in QEMU on both machines: a latency
-    /// bound per sensor, checked against every measured reaction; the tables also go to a
-    /// JSON file.
     /// Static worst-case execution times of the Pico image's jobs (cycles of the RP2040's
     /// Cortex-M0+), from the binary: exit 1 naming any loop it cannot bound.
     Wcet {
@@ -115,7 +112,15 @@ enum Task {
         /// the safety stop): exit 0 only when the analysis catches every one.
         #[arg(long, conflicts_with = "json")]
         mutants: bool,
+        /// Check the analysis's cycle costs against rp2040js: call functions of the image on
+        /// the emulated chip with chosen arguments and compare each count with the static bound
+        /// (instructions only: rp2040js models no XIP cache).
+        #[arg(long, conflicts_with_all = ["json", "mutants"])]
+        emulated: bool,
     },
+    /// Response-time analysis from step costs measured in QEMU on both machines: a latency
+    /// bound per sensor, checked against every measured reaction; the tables also go to a
+    /// JSON file.
     Timing {
         /// Core clock the cycle counts of every machine are converted at (default: each
         /// machine's own, 25 MHz on mps2-an386, 20 MHz on mps2-an505).
@@ -158,9 +163,17 @@ fn main() -> ExitCode {
             }
         };
     }
-    if let Task::Wcet { json, mutants, .. } = &task {
+    if let Task::Wcet {
+        json,
+        mutants,
+        emulated,
+        ..
+    } = &task
+    {
         let ending = if *mutants {
             wcet::mutants::run()
+        } else if *emulated {
+            wcet::emulated::run()
         } else {
             wcet::run(*json)
         };

@@ -257,6 +257,18 @@ impl Harness {
             .ok_or_else(|| format!("the harness said {value} of the stack"))
     }
 
+    /// Calls the function at `function` with `args` in r0-r3, on the chip as booted (before any
+    /// [`Harness::run`]), to its return: its cycles, and r0 and r1 on return.
+    pub fn call(&mut self, function: u32, args: [u32; 4]) -> Result<(u64, [u32; 2]), String> {
+        self.send(&serde_json::json!({"cmd": "call", "function": function, "args": args}))?;
+        let value = self.next()?;
+        let word = |k: &str| value[k].as_u64().and_then(|v| u32::try_from(v).ok());
+        match (value["cycles"].as_u64(), word("r0"), word("r1")) {
+            (Some(cycles), Some(r0), Some(r1)) => Ok((cycles, [r0, r1])),
+            _ => Err(format!("the harness said {value} of a call")),
+        }
+    }
+
     /// The cycle accounts so far.
     pub fn stats(&mut self) -> Result<Stats, String> {
         self.send(&serde_json::json!({"cmd": "stats"}))?;

@@ -23,7 +23,7 @@
 pub(crate) mod bound;
 mod chip;
 pub mod fault;
-mod harness;
+pub mod harness;
 pub(crate) mod mutants;
 mod svg;
 pub mod world;
@@ -1377,6 +1377,28 @@ fn words(line: &str) -> String {
 
 /// One run's report and pin log, or why it could not run.
 type Played = Result<(Report, PinLog), String>;
+
+/// The Pico image `elf` booted on the bench's chip with no world (no input driven, no loop
+/// counted), for calling its functions ([`Harness::call`]).
+pub fn chip_for_calls(elf: &Path) -> Result<Harness, String> {
+    harness::check_tools()?;
+    let fw = Firmware::read(elf)?;
+    let dir = firmware::root().join("target/hil");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let image = dir.join("calls.bin");
+    std::fs::write(&image, fw.image(&Settings::DEFAULT))
+        .map_err(|e| format!("{}: {e}", image.display()))?;
+    Harness::start(&Boot {
+        flash: image,
+        symbols: fw.symbols,
+        health_words: fw.health_words,
+        outputs: Vec::new(),
+        pwm: Vec::new(),
+        inputs: BTreeMap::new(),
+        seed: "0".to_owned(),
+        loops: Vec::new(),
+    })
+}
 
 /// The deepest stack the last bench run measured, bytes (`target/hil/stack.json`), and the
 /// hash of the image's code it ran ([`crate::stack::pico_code_hash`]).

@@ -18,8 +18,9 @@
 //! included), the longest critical section, and one poll of the main task (the deciding side).
 
 mod cfg;
+pub mod emulated;
 pub mod mutants;
-mod thumb;
+pub mod thumb;
 
 #[cfg(test)]
 mod tests;
@@ -1365,6 +1366,46 @@ fn text(report: &Report) -> String {
         out += &format!("no reaction bound: {e}\n");
     }
     out
+}
+
+/// The static bound of each of `functions` (by symbol) of the image at `path`: its address and
+/// its cycles of instructions alone (code and constants with no wait state, as rp2040js fetches
+/// them: no XIP miss charged), or why it has none.
+pub fn instruction_cycles(
+    path: &Path,
+    annotations: &Annotations,
+    functions: &[&str],
+    table: thumb::Table,
+) -> Result<Vec<(u64, u64)>, String> {
+    thumb::with_table(table, || {
+        instruction_cycles_now(path, annotations, functions)
+    })
+}
+
+fn instruction_cycles_now(
+    path: &Path,
+    annotations: &Annotations,
+    functions: &[&str],
+) -> Result<Vec<(u64, u64)>, String> {
+    let elf = Elf::read(path)?;
+    let graph = CallGraph::of(path)?;
+    let headers = loop_headers(&elf, &graph, annotations);
+    let sources = source_functions(&elf.path, &headers)?;
+    functions
+        .iter()
+        .map(|name| {
+            let at = graph
+                .by_name(name)
+                .ok_or_else(|| format!("the image has no {name}"))?;
+            let mut j = Job::new(&elf, &graph, annotations, &sources, Side::Any, name);
+            let cycles = cfg::Image::call(&mut j, at)?;
+            if !j.unbounded.is_empty() || !j.unsized_calls.is_empty() {
+                return Err(format!("{name} has a loop or a length with no bound"));
+            }
+            let cycles = cycles.ok_or_else(|| format!("{name} never returns"))?;
+            Ok((at, cycles))
+        })
+        .collect()
 }
 
 /// The analysis of an image built for it, job by job; and the annotations it used.

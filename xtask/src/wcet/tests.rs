@@ -220,3 +220,18 @@ fn a_layout_dependent_figure_is_given_to_two_significant_figures() {
     assert_eq!(about(99.06), "≈99");
     assert_eq!(about(49.0), "≈49");
 }
+
+#[test]
+fn rp2040js_charges_nothing_for_the_link_register_and_the_pc() {
+    // The fixture of `a_call_adds_the_callee`: 14 cycles by the TRM, whose N counts `PUSH`'s LR
+    // and `POP`'s PC; rp2040js counts neither, 12 (what `cargo xtask wcet --emulated` compares).
+    let code = [0xb580, 0xf000, 0xf801, 0xbd80, 0x2000, BX_LR];
+    let cycles = |table| {
+        super::thumb::with_table(table, || {
+            let mut f = Fixture::new(&code).function(0, 8).function(8, 12);
+            f.worst(0).map(|w| w.cycles)
+        })
+    };
+    assert_eq!(cycles(super::thumb::Table::TRM), Ok(Some(14)));
+    assert_eq!(cycles(super::thumb::Table::RP2040JS), Ok(Some(12)));
+}
