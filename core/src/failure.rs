@@ -28,6 +28,21 @@ pub enum SensorFault {
     Unbound,
 }
 
+impl core::fmt::Display for SensorFault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Timeout => f.write_str("no answer within its timeout"),
+            Self::OutOfRange => f.write_str("a value outside its range"),
+            Self::Stuck => f.write_str("stuck on one value"),
+            Self::Silent => f.write_str("too many samples lost in a row"),
+            Self::Device(code) => write!(f, "device error {code}"),
+            Self::Unbound => f.write_str("the platform has no such sensor"),
+        }
+    }
+}
+
+impl core::error::Error for SensorFault {}
+
 /// Why a behaviour state took its failure edge (fact sets of `W` words).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

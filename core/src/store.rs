@@ -72,6 +72,18 @@ pub struct StoreFull {
     pub capacity: usize,
 }
 
+impl core::fmt::Display for StoreFull {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "a data store of {} keys is full: no room for key {}",
+            self.capacity, self.key.0
+        )
+    }
+}
+
+impl core::error::Error for StoreFull {}
+
 /// Read and write access to one data store, whatever its capacity and mutex.
 ///
 /// Object safe, so behaviours see every store through the same `&dyn StoreAccess`.

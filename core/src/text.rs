@@ -6,7 +6,9 @@ use core::fmt;
 
 pub use psmpa_model::names::FactNames;
 
-use crate::action::SensorSet;
+use crate::action::{ActionId, SensorId, SensorSet};
+use crate::domain::EventId;
+use crate::facts::FactSetOf;
 use crate::failure::Failure;
 use crate::mission::Mission;
 use crate::plan::{MAX_PLANS, PlanId, PlanSet};
@@ -103,6 +105,49 @@ impl<
     }
 }
 
+/// What names the ids an error or event holds: a mission (its names, [`Names`]) or nothing
+/// (the ids themselves, [`Ids`]: the plain `Display` of an error).
+trait Namer<const W: usize> {
+    /// Whether a name says what it names ("sensor #1"), or needs the word ("sensor sonar").
+    const KINDED: bool;
+    fn action(&self, a: ActionId) -> impl fmt::Display;
+    fn sensor(&self, s: SensorId) -> impl fmt::Display;
+    fn plan(&self, p: PlanId) -> impl fmt::Display;
+    fn event(&self, e: EventId) -> impl fmt::Display;
+    fn facts(&self, set: FactSetOf<W>) -> impl fmt::Display;
+
+    fn plans(&self, f: &mut fmt::Formatter<'_>, set: PlanSet) -> fmt::Result {
+        let ids = (0..MAX_PLANS)
+            .filter_map(PlanId::new)
+            .filter(|p| set.contains(*p));
+        for (i, p) in ids.enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            write!(f, "{}", self.plan(p))?;
+        }
+        Ok(())
+    }
+    /// "; sensors out of service [sonar]" when any is.
+    fn out_of_service(&self, f: &mut fmt::Formatter<'_>, faulty: SensorSet) -> fmt::Result {
+        if faulty.is_empty() {
+            return Ok(());
+        }
+        f.write_str("; sensors out of service ")?;
+        self.sensors(f, faulty)
+    }
+    fn sensors(&self, f: &mut fmt::Formatter<'_>, set: SensorSet) -> fmt::Result {
+        f.write_str("[")?;
+        for (i, s) in set.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            write!(f, "{}", self.sensor(s))?;
+        }
+        f.write_str("]")
+    }
+}
+
 /// The names the adapters print.
 struct Names<
     'm,
@@ -123,255 +168,260 @@ impl<
     const L: usize,
     const W: usize,
     const NF: usize,
-> Names<'_, 'a, NS, NA, NP, L, W, NF>
+> Namer<W> for Names<'_, 'a, NS, NA, NP, L, W, NF>
 {
-    fn action(&self, a: crate::ActionId) -> &'a str {
+    const KINDED: bool = false;
+    fn action(&self, a: ActionId) -> impl fmt::Display {
         self.0.domain.action(a).map_or("?", |a| a.name)
     }
-    fn sensor(&self, s: crate::SensorId) -> &'a str {
+    fn sensor(&self, s: SensorId) -> impl fmt::Display {
         self.0.domain.sensor(s).map_or("?", |s| s.name)
     }
-    fn plan(&self, p: PlanId) -> &'a str {
+    fn plan(&self, p: PlanId) -> impl fmt::Display {
         self.0.library.get(p).map_or("generated plan", |p| p.name)
     }
-    fn event(&self, e: crate::EventId) -> &'a str {
+    fn event(&self, e: EventId) -> impl fmt::Display {
         self.0.domain.event_name(e).unwrap_or("?")
     }
-    fn plans(&self, f: &mut fmt::Formatter<'_>, set: PlanSet) -> fmt::Result {
-        let ids = (0..MAX_PLANS)
-            .filter_map(PlanId::new)
-            .filter(|p| set.contains(*p));
-        for (i, p) in ids.enumerate() {
-            if i > 0 {
-                f.write_str(", ")?;
-            }
-            f.write_str(self.plan(p))?;
-        }
-        Ok(())
-    }
-    /// "; sensors out of service [sonar]" when any is.
-    fn out_of_service(&self, f: &mut fmt::Formatter<'_>, faulty: SensorSet) -> fmt::Result {
-        if faulty.is_empty() {
-            return Ok(());
-        }
-        f.write_str("; sensors out of service ")?;
-        self.sensors(f, faulty)
-    }
-    fn sensors(&self, f: &mut fmt::Formatter<'_>, set: SensorSet) -> fmt::Result {
-        f.write_str("[")?;
-        for (i, s) in set.iter().enumerate() {
-            if i > 0 {
-                f.write_str(" ")?;
-            }
-            f.write_str(self.sensor(s))?;
-        }
-        f.write_str("]")
+    fn facts(&self, set: FactSetOf<W>) -> impl fmt::Display {
+        self.0.domain.names(set)
     }
 }
 
-impl<
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
-> fmt::Display for Described<'_, '_, Failure<W>, NS, NA, NP, L, W, NF>
-{
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let n = Names(self.mission);
-        let facts = |set| self.mission.domain.names(set);
-        match self.what {
-            Failure::ActionFailed { action } => write!(f, "{} failed", n.action(action)),
-            Failure::ActionInterrupted { action } => {
-                write!(f, "{} was interrupted", n.action(action))
-            }
-            Failure::PreconditionUnmet { action, missing } => write!(
-                f,
-                "{} could not start: {} did not hold",
-                n.action(action),
-                facts(missing)
-            ),
-            Failure::PreconditionViolated { action, missing } => write!(
-                f,
-                "{} stopped: {} stayed false longer than its max_violation",
-                n.action(action),
-                facts(missing)
-            ),
-            Failure::SensorUnavailable { sensor } => {
-                write!(f, "sensor {} is unavailable", n.sensor(sensor))
-            }
-            Failure::SensorFault { sensor, fault } => {
-                write!(f, "sensor {} failed: {fault:?}", n.sensor(sensor))
-            }
-            Failure::StoreFull { key } => write!(f, "a data store is full (key {})", key.0),
-            Failure::InvalidFsm { state } => write!(f, "the FSM has no state {state}"),
-            Failure::SensingStalled => f.write_str("the sensing side does not run"),
-        }
+/// No names: each id as its kind and index ("action #2", facts as `{0, 3}`).
+struct Ids;
+
+impl<const W: usize> Namer<W> for Ids {
+    const KINDED: bool = true;
+    fn action(&self, a: ActionId) -> impl fmt::Display {
+        fmt::from_fn(move |f| write!(f, "action #{}", a.index()))
+    }
+    fn sensor(&self, s: SensorId) -> impl fmt::Display {
+        fmt::from_fn(move |f| write!(f, "sensor #{}", s.index()))
+    }
+    fn plan(&self, p: PlanId) -> impl fmt::Display {
+        fmt::from_fn(move |f| write!(f, "plan #{}", p.index()))
+    }
+    fn event(&self, e: EventId) -> impl fmt::Display {
+        fmt::from_fn(move |f| write!(f, "event #{}", e.index()))
+    }
+    fn facts(&self, set: FactSetOf<W>) -> impl fmt::Display {
+        fmt::from_fn(move |f| write!(f, "{set:?}"))
     }
 }
 
-impl<
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
-> fmt::Display for Described<'_, '_, ControlError<W>, NS, NA, NP, L, W, NF>
-{
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        use ControlError as E;
-        let n = Names(self.mission);
-        let facts = |set| self.mission.domain.names(set);
-        match self.what {
-            E::NoApplicablePlan { event, beliefs } => write!(
+fn failure<const W: usize>(
+    n: &impl Namer<W>,
+    what: Failure<W>,
+    f: &mut fmt::Formatter<'_>,
+) -> fmt::Result {
+    match what {
+        Failure::ActionFailed { action } => write!(f, "{} failed", n.action(action)),
+        Failure::ActionInterrupted { action } => {
+            write!(f, "{} was interrupted", n.action(action))
+        }
+        Failure::PreconditionUnmet { action, missing } => write!(
+            f,
+            "{} could not start: {} did not hold",
+            n.action(action),
+            n.facts(missing)
+        ),
+        Failure::PreconditionViolated { action, missing } => write!(
+            f,
+            "{} stopped: {} stayed false longer than its max_violation",
+            n.action(action),
+            n.facts(missing)
+        ),
+        Failure::SensorUnavailable { sensor } => {
+            write!(f, "{} is unavailable", n.sensor(sensor))
+        }
+        Failure::SensorFault { sensor, fault } => {
+            write!(f, "{} failed: {fault:?}", n.sensor(sensor))
+        }
+        Failure::StoreFull { key } => write!(f, "a data store is full (key {})", key.0),
+        Failure::InvalidFsm { state } => write!(f, "the FSM has no state {state}"),
+        Failure::SensingStalled => f.write_str("the sensing side does not run"),
+    }
+}
+
+fn control_error<const W: usize, N: Namer<W>>(
+    n: &N,
+    what: ControlError<W>,
+    f: &mut fmt::Formatter<'_>,
+) -> fmt::Result {
+    use ControlError as E;
+    let failure = |last| fmt::from_fn(move |f| failure(n, last, f));
+    match what {
+        E::NoApplicablePlan { event, beliefs } => write!(
+            f,
+            "no plan applies to {} under {}",
+            n.event(event),
+            n.facts(beliefs)
+        ),
+        E::Inapplicable {
+            event,
+            skipped,
+            known_false,
+            unknown,
+            faulty,
+        } => {
+            write!(
                 f,
-                "no plan applies to {} under {}",
-                n.event(event),
-                facts(beliefs)
-            ),
-            E::Inapplicable {
-                event,
-                skipped,
-                known_false,
-                unknown,
-                faulty,
-            } => {
-                write!(
-                    f,
-                    "no plan for {} could start: passed over ",
-                    n.event(event)
-                )?;
-                n.plans(f, skipped)?;
-                if !known_false.is_empty() {
-                    write!(f, "; known false {}", facts(known_false))?;
-                }
-                if !unknown.is_empty() {
-                    write!(f, "; never sensed {}", facts(unknown))?;
-                }
-                n.out_of_service(f, faulty)
+                "no plan for {} could start: passed over ",
+                n.event(event)
+            )?;
+            n.plans(f, skipped)?;
+            if !known_false.is_empty() {
+                write!(f, "; known false {}", n.facts(known_false))?;
             }
-            E::Exhausted {
-                event,
-                failed,
-                beliefs,
-                faulty,
-            } => {
-                write!(f, "every plan for {} failed: ", n.event(event))?;
-                n.plans(f, failed)?;
-                write!(f, " (beliefs {})", facts(beliefs))?;
-                n.out_of_service(f, faulty)
+            if !unknown.is_empty() {
+                write!(f, "; never sensed {}", n.facts(unknown))?;
             }
-            E::TooManyFailures { failures, last } => write!(
-                f,
-                "{failures} plans failed, the last: {}",
-                self.mission.describe_failure(last)
-            ),
-            E::PlanLimit { plans } => write!(f, "{plans} plans ran without reaching the goal"),
-            E::Compile { plan, error } => {
-                write!(f, "plan {} does not compile: {error:?}", n.plan(plan))
+            n.out_of_service(f, faulty)
+        }
+        E::Exhausted {
+            event,
+            failed,
+            beliefs,
+            faulty,
+        } => {
+            write!(f, "every plan for {} failed: ", n.event(event))?;
+            n.plans(f, failed)?;
+            write!(f, " (beliefs {})", n.facts(beliefs))?;
+            n.out_of_service(f, faulty)
+        }
+        E::TooManyFailures { failures, last } => {
+            write!(f, "{failures} plans failed, the last: {}", failure(last))
+        }
+        E::PlanLimit { plans } => write!(f, "{plans} plans ran without reaching the goal"),
+        E::Compile { plan, error } => {
+            write!(f, "{} does not compile: {error}", n.plan(plan))
+        }
+        E::Planning { error, faulty } => {
+            write!(f, "no library plan could run, and the planner: {error}")?;
+            n.out_of_service(f, faulty)
+        }
+        E::InitialModel { failure: first } => write!(
+            f,
+            "the initial model could not be established: {}",
+            failure(first)
+        ),
+        E::Unbound { sensor, action } => {
+            f.write_str("the platform is written for another mission: it has no")?;
+            let kind = |k| if N::KINDED { "" } else { k };
+            if let Some(sensor) = sensor {
+                write!(f, " {}{}", kind("sensor "), n.sensor(sensor))?;
             }
-            E::Planning { error, faulty } => {
-                write!(f, "no library plan could run, and the planner: {error}")?;
-                n.out_of_service(f, faulty)
+            if let Some(action) = action {
+                let and = if sensor.is_some() { " and no" } else { "" };
+                write!(f, "{and} {}{}", kind("action "), n.action(action))?;
             }
-            E::InitialModel { failure } => write!(
-                f,
-                "the initial model could not be established: {}",
-                self.mission.describe_failure(failure)
-            ),
-            E::Unbound { sensor, action } => {
-                f.write_str("the platform is written for another mission: it has no")?;
-                if let Some(sensor) = sensor {
-                    write!(f, " sensor {}", n.sensor(sensor))?;
-                }
-                if let Some(action) = action {
-                    let and = if sensor.is_some() { " and no" } else { "" };
-                    write!(f, "{and} action {}", n.action(action))?;
-                }
-                Ok(())
-            }
+            Ok(())
         }
     }
 }
 
-impl<
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
-> fmt::Display for Described<'_, '_, TraceEvent<W>, NS, NA, NP, L, W, NF>
-{
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        use TraceEvent as E;
-        let n = Names(self.mission);
-        let facts = |set| self.mission.domain.names(set);
-        match self.what {
-            E::ModelEstablished { beliefs } => write!(f, "model established {}", facts(beliefs)),
-            E::PlanGenerated { length, expanded } => write!(
-                f,
-                "no library plan could run: the planner generated {length} actions ({expanded} nodes expanded)"
-            ),
-            E::PlanSelected { plan, .. } => write!(f, "plan selected: {}", n.plan(plan)),
-            E::PlanSucceeded { plan } => write!(f, "plan succeeded: {}", n.plan(plan)),
-            E::PlanFailed { plan, reason } => write!(
-                f,
-                "plan failed: {} ({})",
-                n.plan(plan),
-                self.mission.describe_failure(reason)
-            ),
-            E::StateEntered {
-                action, sensors, ..
-            } => {
-                write!(f, "state entered: {} with ", n.action(action))?;
-                n.sensors(f, sensors)
-            }
-            E::StateLeft {
-                action, outcome, ..
-            } => match outcome {
-                Some(o) => write!(f, "state left: {} {o:?}", n.action(action)),
-                None => write!(f, "state left: {} cut short", n.action(action)),
-            },
-            E::PhaseStarted { phase, .. } => write!(f, "{phase:?} phase"),
-            E::SensorOn { sensor } => write!(f, "{} on", n.sensor(sensor)),
-            E::SensorOff { sensor } => write!(f, "{} off", n.sensor(sensor)),
-            E::Sample {
-                sensor,
-                value,
-                holds,
-            } => write!(
-                f,
-                "{} sample {value:?}, holds {}",
-                n.sensor(sensor),
-                facts(holds)
-            ),
-            E::SampleLost { sensor } => write!(f, "{} sample lost", n.sensor(sensor)),
-            E::SensorFailed { sensor, fault } => {
-                write!(f, "{} fault {fault:?}", n.sensor(sensor))
-            }
-            E::PreconditionViolated { action, missing } => write!(
-                f,
-                "precondition of {} violated: {} false",
-                n.action(action),
-                facts(missing)
-            ),
-            E::PreconditionRestored { action } => {
-                write!(f, "precondition of {} restored", n.action(action))
-            }
-            E::EffectsApplied { action, beliefs } => write!(
-                f,
-                "effects of {} applied: {}",
-                n.action(action),
-                facts(beliefs)
-            ),
-            E::GoalReached { beliefs } => write!(f, "goal reached: {}", facts(beliefs)),
-            E::User { code, value } => write!(f, "user event {code}: {value}"),
+fn trace_event<const W: usize>(
+    n: &impl Namer<W>,
+    what: TraceEvent<W>,
+    f: &mut fmt::Formatter<'_>,
+) -> fmt::Result {
+    use TraceEvent as E;
+    match what {
+        E::ModelEstablished { beliefs } => write!(f, "model established {}", n.facts(beliefs)),
+        E::PlanGenerated { length, expanded } => write!(
+            f,
+            "no library plan could run: the planner generated {length} actions ({expanded} nodes expanded)"
+        ),
+        E::PlanSelected { plan, .. } => write!(f, "plan selected: {}", n.plan(plan)),
+        E::PlanSucceeded { plan } => write!(f, "plan succeeded: {}", n.plan(plan)),
+        E::PlanFailed { plan, reason } => write!(
+            f,
+            "plan failed: {} ({})",
+            n.plan(plan),
+            fmt::from_fn(|f| failure(n, reason, f))
+        ),
+        E::StateEntered {
+            action, sensors, ..
+        } => {
+            write!(f, "state entered: {} with ", n.action(action))?;
+            n.sensors(f, sensors)
         }
+        E::StateLeft {
+            action, outcome, ..
+        } => match outcome {
+            Some(o) => write!(f, "state left: {} {o:?}", n.action(action)),
+            None => write!(f, "state left: {} cut short", n.action(action)),
+        },
+        E::PhaseStarted { phase, .. } => write!(f, "{phase:?} phase"),
+        E::SensorOn { sensor } => write!(f, "{} on", n.sensor(sensor)),
+        E::SensorOff { sensor } => write!(f, "{} off", n.sensor(sensor)),
+        E::Sample {
+            sensor,
+            value,
+            holds,
+        } => write!(
+            f,
+            "{} sample {value:?}, holds {}",
+            n.sensor(sensor),
+            n.facts(holds)
+        ),
+        E::SampleLost { sensor } => write!(f, "{} sample lost", n.sensor(sensor)),
+        E::SensorFailed { sensor, fault } => {
+            write!(f, "{} fault {fault:?}", n.sensor(sensor))
+        }
+        E::PreconditionViolated { action, missing } => write!(
+            f,
+            "precondition of {} violated: {} false",
+            n.action(action),
+            n.facts(missing)
+        ),
+        E::PreconditionRestored { action } => {
+            write!(f, "precondition of {} restored", n.action(action))
+        }
+        E::EffectsApplied { action, beliefs } => write!(
+            f,
+            "effects of {} applied: {}",
+            n.action(action),
+            n.facts(beliefs)
+        ),
+        E::GoalReached { beliefs } => write!(f, "goal reached: {}", n.facts(beliefs)),
+        E::User { code, value } => write!(f, "user event {code}: {value}"),
     }
 }
+
+/// Implements `Display` for an adapter with a mission's names, and for the plain value with ids.
+macro_rules! displays {
+    ($ty:ident, $with:ident) => {
+        impl<
+            const NS: usize,
+            const NA: usize,
+            const NP: usize,
+            const L: usize,
+            const W: usize,
+            const NF: usize,
+        > fmt::Display for Described<'_, '_, $ty<W>, NS, NA, NP, L, W, NF>
+        {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                $with(&Names(self.mission), self.what, f)
+            }
+        }
+
+        /// In words, with ids for names (`action #2`); [`Describe`] prints a mission's names.
+        impl<const W: usize> fmt::Display for $ty<W> {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                $with(&Ids, *self, f)
+            }
+        }
+    };
+}
+
+displays!(Failure, failure);
+displays!(ControlError, control_error);
+displays!(TraceEvent, trace_event);
+
+impl<const W: usize> core::error::Error for Failure<W> {}
+impl<const W: usize> core::error::Error for ControlError<W> {}
 
 #[cfg(test)]
 mod tests {
@@ -416,6 +466,52 @@ mod tests {
         assert_eq!(Reading::of(Value::Mm(5), true).holds, FactSet::ALL);
         assert_eq!(Reading::flag(false).holds, FactSet::EMPTY);
         assert_eq!(Reading::<1>::flag(true).value, Value::Bool(true));
+    }
+
+    #[test]
+    fn errors_print_with_ids_and_go_into_an_application_error() {
+        use crate::{ActionId, ControlError, FsmError, Key, PlanId, SensorId, StoreFull};
+        use std::boxed::Box;
+        use std::string::ToString;
+        let walk = ActionId::new(2).unwrap();
+        let failed = Failure::<1>::ActionFailed { action: walk };
+        assert_eq!(failed.to_string(), "action #2 failed");
+        let error = ControlError::<1>::TooManyFailures {
+            failures: 3,
+            last: Failure::SensorFault {
+                sensor: SensorId::new(1).unwrap(),
+                fault: crate::SensorFault::Timeout,
+            },
+        };
+        assert_eq!(
+            error.to_string(),
+            "3 plans failed, the last: sensor #1 failed: Timeout"
+        );
+        let compile = ControlError::<1>::Compile {
+            plan: PlanId::new(0).unwrap(),
+            error: FsmError::EmptyBody,
+        };
+        assert_eq!(
+            compile.to_string(),
+            "plan #0 does not compile: its body is empty"
+        );
+        // `?` into an application's error: each is a `core::error::Error`.
+        fn app(e: impl core::error::Error + 'static) -> Result<(), Box<dyn core::error::Error>> {
+            Err(e)?
+        }
+        let full = StoreFull {
+            key: Key(7),
+            value: Value::Bool(true),
+            capacity: 4,
+        };
+        assert_eq!(
+            app(full).unwrap_err().to_string(),
+            "a data store of 4 keys is full: no room for key 7"
+        );
+        assert!(app(error).is_err() && app(failed).is_err());
+        assert!(app(crate::SensorFault::Device(3)).is_err());
+        assert!(app(crate::DomainError::ZeroPeriod).is_err());
+        assert!(app(crate::PlanError::EmptyBody).is_err());
     }
 
     /// Names, not indices, in a defmt log: the names go out as strings, in the set's order,

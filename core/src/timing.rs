@@ -147,6 +147,8 @@ impl core::fmt::Display for TimingError {
     }
 }
 
+impl core::error::Error for TimingError {}
+
 /// `Σ C/T` in parts per million, rounded up per job. O(jobs).
 pub fn utilisation_ppm(jobs: &[Job]) -> Result<u64, TimingError> {
     jobs.iter().enumerate().try_fold(0u64, |acc, (i, j)| {

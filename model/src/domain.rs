@@ -89,6 +89,33 @@ pub enum DomainError {
     ZeroPeriod,
 }
 
+impl core::fmt::Display for Table {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::Fact => "facts",
+            Self::Event => "events",
+            Self::Sensor => "sensors",
+            Self::Action => "actions",
+        })
+    }
+}
+
+impl core::fmt::Display for DomainError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Full { table, capacity } => {
+                write!(f, "the domain's {table} are full ({capacity})")
+            }
+            Self::Duplicate(table) => write!(f, "a name already among the domain's {table}"),
+            Self::Unknown(table) => write!(f, "no such name among the domain's {table}"),
+            Self::EmptyName(table) => write!(f, "an empty name among the domain's {table}"),
+            Self::ZeroPeriod => f.write_str("a cyclic sensor's period is shorter than a tick"),
+        }
+    }
+}
+
+impl core::error::Error for DomainError {}
+
 /// The planning domain `Δ` with room for `NS` sensor-based and `NA` actuator-based actions
 /// and `NF` facts in fact sets of `W` words (one word and 64 facts by default; `NF` is at
 /// most `64 · W`, else the domain does not compile).

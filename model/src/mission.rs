@@ -338,6 +338,8 @@ impl fmt::Display for LoadError<'_> {
     }
 }
 
+impl core::error::Error for LoadError<'_> {}
+
 /// What the streaming deserializers need from the mission under construction; object safe so
 /// they carry no capacity parameters.
 trait Build<'a, const W: usize> {

@@ -137,6 +137,24 @@ pub enum PlanError {
     EmptyName,
 }
 
+impl core::fmt::Display for PlanError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::BodyTooLong { capacity } => {
+                write!(f, "the body is longer than {capacity} actions")
+            }
+            Self::EmptyBody => f.write_str("the body has no action"),
+            Self::LibraryFull { capacity } => {
+                write!(f, "the library already holds {capacity} plans")
+            }
+            Self::Duplicate => f.write_str("a plan of that name is already in the library"),
+            Self::EmptyName => f.write_str("a plan has an empty name"),
+        }
+    }
+}
+
+impl core::error::Error for PlanError {}
+
 impl<'a, const L: usize, const W: usize> Plan<'a, L, W> {
     /// A plan from its trigger, context and body.
     pub fn new(

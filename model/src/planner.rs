@@ -89,6 +89,8 @@ impl core::fmt::Display for PlanningError {
     }
 }
 
+impl core::error::Error for PlanningError {}
+
 /// A plan and what finding it cost.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Found<const L: usize> {

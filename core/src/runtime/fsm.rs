@@ -79,6 +79,22 @@ pub enum FsmError {
     TooManyStates,
 }
 
+impl core::fmt::Display for FsmError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::UnknownAction(a) => write!(
+                f,
+                "its body names action #{}, which the domain does not have",
+                a.index()
+            ),
+            Self::EmptyBody => f.write_str("its body is empty"),
+            Self::TooManyStates => f.write_str("its body has more than 255 actions"),
+        }
+    }
+}
+
+impl core::error::Error for FsmError {}
+
 /// A finite state machine `f(Λ, T)` compiled from a plan of at most `L` actions.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Fsm<const L: usize> {

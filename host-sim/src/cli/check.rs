@@ -137,7 +137,7 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
                 }
             }
             Err(e) => {
-                let _ = writeln!(out, "  does not compile: {e:?}");
+                let _ = writeln!(out, "  does not compile: {e}");
             }
         }
         let _ = writeln!(dot, "  }}");
