@@ -14,9 +14,9 @@ use core::cell::{Cell, RefCell};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::Duration;
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Domain, FactSet, Key, Mission,
-    Outcome, Plan, PlanLibrary, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId,
-    SensorMode, Task, Value,
+    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, Domain, FactSet,
+    Key, Keys, Mission, Outcome, Plan, PlanLibrary, Plans, Reading, Runtime, Sensor, SensorAction,
+    SensorFault, SensorId, SensorMode, Sensors, Task, Value,
 };
 
 use crate::workload::{STEPS_PER_ACTION, Sonar, path_clear};
@@ -96,6 +96,7 @@ impl psmpa_core::Platform for Platform {
 
 impl Actuator for Platform {
     type Id = ActionId;
+    fn halt(&self, _: ActionId) {} // nothing to stop
 
     async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
         let Some(sonar) = SensorId::new(0) else {
@@ -127,7 +128,8 @@ impl Actuator for Platform {
 }
 
 /// The runtime of the workload: 4 keys per store.
-pub type BenchRuntime<'r> = Runtime<'r, Platform, Caps<1, 3, 1, 3, 4>>;
+pub type BenchRuntime<'r> =
+    Runtime<'r, Platform, Caps<Sensors<1>, Actions<3>, Plans<1>, Body<3>, Keys<4>>>;
 
 /// Runs the plan once on `platform`, from `mission`; returns the action steps it ran.
 pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {

@@ -108,10 +108,13 @@ pub use defmt as __defmt;
 /// # }
 /// # impl Actuator for Robot {
 /// #     type Id = ActionId;
+/// #     fn halt(&self, _: ActionId) {} // nothing to stop
 /// #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
 /// # }
 /// # impl Platform for Robot { type Mutex = psmpa_core::embassy_sync::blocking_mutex::raw::NoopRawMutex; }
-/// type RobotRuntime<'r> = psmpa_core::Runtime<'r, Robot, psmpa_core::Caps<2, 3, 1, 3, 4>>;
+/// use psmpa_core::{Actions, Body, Caps, Keys, Plans, Sensors};
+/// type RobotRuntime<'r> =
+///     psmpa_core::Runtime<'r, Robot, Caps<Sensors<2>, Actions<3>, Plans<1>, Body<3>, Keys<4>>>;
 ///
 /// psmpa_core::compile_runtime!(RobotRuntime<'_>);
 /// # fn main() {}
@@ -164,7 +167,10 @@ pub use platform::{
 pub use runtime::control::{ControlError, Report};
 pub use runtime::engine::{Config, Engine, Policy};
 pub use runtime::fsm::{BehaviourState, Fsm, FsmError, Target};
-pub use runtime::{BindingsOf, Capacity, Caps, LoadedOf, MissionOf, Runtime};
+pub use runtime::{
+    Actions, BindingsOf, Body, Capacity, Caps, Facts, Keys, LoadedOf, MissionOf, Plans, Runtime,
+    Sensors, Words,
+};
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
 pub use text::{Describe, Described, FactNames};
 pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};

@@ -186,11 +186,12 @@ pub trait Actuator<const W: usize = 1> {
         let _ = (action, held);
     }
 
-    /// The runtime cancelled the behaviour (a sensor fault, or the precondition stayed false):
-    /// bring the actuators to a safe stop.
-    fn halt(&self, action: Self::Id) {
-        let _ = action;
-    }
+    /// The safety stop: the runtime cancelled the behaviour (a sensor fault, or the
+    /// precondition stayed false), so bring the actuators to a safe stop now. Required: a
+    /// robot that moves says how it stops (a platform with nothing to stop says so with an
+    /// empty body). Called from the deciding side, synchronously: keep it short and never
+    /// wait on time (`cargo xtask wcet` refuses a busy wait in it).
+    fn halt(&self, action: Self::Id);
 }
 
 /// How a platform names the sensors or actions a call is for ([`Sensor::Id`],

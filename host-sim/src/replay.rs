@@ -524,6 +524,10 @@ impl Actuator for Replay<'_> {
         }
         pending().await
     }
+
+    fn halt(&self, _: ActionId) {
+        // Nothing moves: a replay drives no actuator.
+    }
 }
 
 impl Platform for Replay<'_> {

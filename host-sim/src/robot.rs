@@ -40,7 +40,13 @@ pub const ENTER_KITCHEN: Duration = Duration::from_millis(1_000);
 
 /// Capacities of the robot's missions: 4 sensors, 8 actions, 4 plans of up to 6 actions, 4
 /// keys per data store.
-pub type Caps = psmpa_core::Caps<4, 8, 4, 6, 4>;
+pub type Caps = psmpa_core::Caps<
+    psmpa_core::Sensors<4>,
+    psmpa_core::Actions<8>,
+    psmpa_core::Plans<4>,
+    psmpa_core::Body<6>,
+    psmpa_core::Keys<4>,
+>;
 
 /// A mission of the robot.
 pub type FetchTea<'a> = MissionOf<'a, Caps>;

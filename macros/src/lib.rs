@@ -446,7 +446,15 @@ fn generate(
             pub const K: usize = #keys;
 
             /// The runtime's capacities, from the mission.
-            pub type Caps = ::psmpa_core::Caps<NS, NA, NP, L, K, W, NF>;
+            pub type Caps = ::psmpa_core::Caps<
+                ::psmpa_core::Sensors<NS>,
+                ::psmpa_core::Actions<NA>,
+                ::psmpa_core::Plans<NP>,
+                ::psmpa_core::Body<L>,
+                ::psmpa_core::Keys<K>,
+                ::psmpa_core::Words<W>,
+                ::psmpa_core::Facts<NF>,
+            >;
             /// The mission's type.
             pub type Mission = ::psmpa_core::Mission<'static, NS, NA, NP, L, W, NF>;
             /// The runtime of platform `P` for this mission, tracing into `T`:

@@ -35,8 +35,8 @@ impl Actuator for Robot {
         Outcome::Success
     }
     fn halt(&self, _: hello::Action) {
-        // The runtime cancelled the drive (a sensor failed, the way stayed blocked): a real
-        // robot stops its motors here; the default does nothing.
+        // The safety stop, required: the runtime cancelled the drive (a sensor failed, the
+        // way stayed blocked). A real robot stops its motors here.
     }
 }
 

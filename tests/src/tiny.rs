@@ -5,9 +5,9 @@ use core::cell::RefCell;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Domain, FactSet, Key, Mission,
-    Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor, SensorAction, SensorFault,
-    SensorId, SensorMode, Task, Value,
+    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, Domain, FactSet,
+    Key, Keys, Mission, Outcome, Plan, PlanLibrary, Plans, Platform, Reading, Runtime, Sensor,
+    SensorAction, SensorFault, SensorId, SensorMode, Sensors, Task, Value,
 };
 
 use crate::Recorder;
@@ -15,7 +15,8 @@ use crate::Recorder;
 /// Capacities of the tiny mission: 2 sensors, 4 actions, 4 plans of up to 4 actions.
 pub type TinyMission = Mission<'static, 2, 4, 4, 4>;
 /// The runtime of the tiny mission, keys per store `K`.
-pub type TinyRuntime<'r, const K: usize> = Runtime<'r, TinyWorld, Caps<2, 4, 4, 4, K>, Recorder>;
+pub type TinyRuntime<'r, const K: usize> =
+    Runtime<'r, TinyWorld, Caps<Sensors<2>, Actions<4>, Plans<4>, Body<4>, Keys<K>>, Recorder>;
 
 /// Ids in the tiny mission.
 #[derive(Clone, Copy, Debug)]

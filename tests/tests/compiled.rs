@@ -87,6 +87,7 @@ impl psmpa_core::Sensor for DockOnly {
 
 impl psmpa_core::Actuator for DockOnly {
     type Id = dock::Action;
+    fn halt(&self, _: dock::Action) {} // nothing to stop
 
     async fn run(&self, _: dock::Action, _: &psmpa_core::ActionIo<'_>) -> psmpa_core::Outcome {
         psmpa_core::Outcome::Success
@@ -174,6 +175,7 @@ impl psmpa_core::Sensor for Blind {
 
 impl psmpa_core::Actuator for Blind {
     type Id = blind::Action;
+    fn halt(&self, _: blind::Action) {} // nothing to stop
 
     async fn run(&self, _: blind::Action, _: &psmpa_core::ActionIo<'_>) -> psmpa_core::Outcome {
         psmpa_core::Outcome::Success

@@ -6,8 +6,9 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::mission::{AnyBehaviour, load};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, Caps, Config, ControlError, Failure, LoadedOf, Outcome, Platform,
-    Reading, Report, Runtime, Sensor, SensorFault, SensorId,
+    ActionId, ActionIo, Actions, Actuator, Body, Caps, Config, ControlError, Failure, Keys,
+    LoadedOf, Outcome, Plans, Platform, Reading, Report, Runtime, Sensor, SensorFault, SensorId,
+    Sensors,
 };
 use psmpa_testkit::{Recorder, simulate_split};
 
@@ -19,7 +20,7 @@ const MISSION: &str = r#"{ "name": "pick", "facts": ["item_seen", "picked"], "ev
   "plans": [{ "name": "p", "trigger": "go", "body": ["pick"] }],
   "task": { "event": "go", "init": [], "goal": ["picked"] } }"#;
 
-type PickCaps = Caps<1, 1, 1, 1, 4>;
+type PickCaps = Caps<Sensors<1>, Actions<1>, Plans<1>, Body<1>, Keys<4>>;
 
 /// The camera sees the item (a read takes 20 ms); "pick" asks for it, then picks once the
 /// precondition holds.
@@ -42,6 +43,7 @@ impl Sensor for Picker {
 
 impl Actuator for Picker {
     type Id = ActionId;
+    fn halt(&self, _: ActionId) {} // nothing to stop
 
     async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
         let Some(camera) = SensorId::new(0) else {

@@ -9,9 +9,10 @@ use core::cell::{Cell, RefCell};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, ControlError, Domain, Entry,
-    FactSet, Failure, Key, Mission, Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor,
-    SensorAction, SensorFault, SensorId, SensorMode, Task, TraceEvent, Value,
+    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, ControlError,
+    Domain, Entry, FactSet, Failure, Key, Keys, Mission, Outcome, Plan, PlanLibrary, Plans,
+    Platform, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode, Sensors,
+    Task, TraceEvent, Value,
 };
 use psmpa_testkit::{simulate, simulate_split};
 use psmpa_tests::Recorder;
@@ -255,6 +256,7 @@ impl Robot {
 
 impl Actuator for Robot {
     type Id = ActionId;
+    fn halt(&self, _: ActionId) {} // nothing to stop
 
     async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
         self.started.borrow_mut().push(self.look(io));
@@ -268,7 +270,8 @@ impl Platform for Robot {
     type Mutex = NoopRawMutex;
 }
 
-type PairRuntime<'r> = Runtime<'r, Robot, Caps<2, 2, 1, 2, 4>, Recorder>;
+type PairRuntime<'r> =
+    Runtime<'r, Robot, Caps<Sensors<2>, Actions<2>, Plans<1>, Body<2>, Keys<4>>, Recorder>;
 
 /// Runs the mission; returns the trace and when the drive state started.
 fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
@@ -504,6 +507,7 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
     }
     impl Actuator for Stateless {
         type Id = ActionId;
+        fn halt(&self, _: ActionId) {} // nothing to stop
 
         async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome {
             Outcome::Success
@@ -516,7 +520,8 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
     impl Platform for Stateless {
         type Mutex = CriticalSectionRawMutex;
     }
-    type StatelessRuntime<'r> = Runtime<'r, Stateless, Caps<2, 2, 1, 2, 4>>;
+    type StatelessRuntime<'r> =
+        Runtime<'r, Stateless, Caps<Sensors<2>, Actions<2>, Plans<1>, Body<2>, Keys<4>>>;
     let rt = StatelessRuntime::new(&mission, &Stateless, (), Config::default());
     shared(&rt);
     sendable(&rt.sensing());

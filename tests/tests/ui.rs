@@ -1,4 +1,5 @@
-//! Mistakes in a compiled mission are compile errors that name the field and the name.
+//! Mistakes in a compiled mission are compile errors that name the field and the name; so is
+//! a misuse of the API (an actuator without its safety stop).
 
 #[test]
 fn mission_mistakes_fail_the_build() {

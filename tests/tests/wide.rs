@@ -7,9 +7,10 @@
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, ActuatorAction, Caps, Config, Describe, Domain, FactId,
-    FactSetOf, Mission, Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor,
-    SensorAction, SensorFault, SensorId, SensorMode, Task, TraceEvent, TraceHash, Value,
+    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, Describe, Domain,
+    FactId, FactSetOf, Keys, Mission, Outcome, Plan, PlanLibrary, Plans, Platform, Reading,
+    Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode, Sensors, Task, TraceEvent,
+    TraceHash, Value, Words,
 };
 use psmpa_testkit::simulate_split;
 use psmpa_tests::Recorder;
@@ -19,7 +20,12 @@ const W: usize = 2;
 const NF: usize = 128;
 type Wide = FactSetOf<W>;
 type WideMission = Mission<'static, 1, 1, 1, 1, W, NF>;
-type WideRuntime<'r> = Runtime<'r, Robot, Caps<1, 1, 1, 1, 4, W, NF>, Recorder<W>>;
+type WideRuntime<'r> = Runtime<
+    'r,
+    Robot,
+    Caps<Sensors<1>, Actions<1>, Plans<1>, Body<1>, Keys<4>, Words<W>, psmpa_core::Facts<NF>>,
+    Recorder<W>,
+>;
 
 /// The box stands in the way from .. to, ms.
 const BOX: (u64, u64) = (300, 700);
@@ -103,6 +109,7 @@ impl Sensor<W> for Robot {
 
 impl Actuator<W> for Robot {
     type Id = ActionId;
+    fn halt(&self, _: ActionId) {} // nothing to stop
 
     async fn run(&self, _: ActionId, io: &ActionIo<'_, W>) -> Outcome {
         drive(io).await
@@ -259,6 +266,7 @@ impl Sensor<{ wide200::W }> for Typed {
 
 impl Actuator<{ wide200::W }> for Typed {
     type Id = wide200::Action;
+    fn halt(&self, _: wide200::Action) {} // nothing to stop
 
     async fn run(&self, action: wide200::Action, io: &ActionIo<'_, { wide200::W }>) -> Outcome {
         match action {

@@ -2,8 +2,8 @@
 //!
 //! ```
 //! use embassy_sync::blocking_mutex::raw::NoopRawMutex;
-//! use psmpa_core::{ActionId, ActionIo, Actuator, Caps, Outcome, Platform, Reading, Runtime,
-//!     Sensor, SensorFault, SensorId};
+//! use psmpa_core::{ActionId, ActionIo, Actuator, Actions, Body, Caps, Keys, Outcome, Plans,
+//!     Platform, Reading, Runtime, Sensor, SensorFault, SensorId, Sensors};
 //!
 //! struct Dock;
 //! # impl Sensor for Dock {
@@ -14,6 +14,7 @@
 //! # }
 //! # impl Actuator for Dock {
 //! #     type Id = ActionId;
+//! #     fn halt(&self, _: ActionId) {} // nothing to stop
 //! #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
 //! # }
 //! impl Platform for Dock {
@@ -21,7 +22,7 @@
 //! }
 //!
 //! /// 4 sensors, 6 actions, 2 plans of at most 4 actions, 8 keys per data store.
-//! type DockCaps = Caps<4, 6, 2, 4, 8>;
+//! type DockCaps = Caps<Sensors<4>, Actions<6>, Plans<2>, Body<4>, Keys<8>>;
 //! type DockRuntime = Runtime<'static, Dock, DockCaps>;
 //! ```
 
@@ -31,25 +32,48 @@ pub mod fsm;
 pub mod sensing;
 pub(crate) mod shared;
 
+use core::marker::PhantomData;
+
 use crate::mission::{Bindings, Loaded, Mission};
 use crate::platform::Platform;
 use engine::Engine;
 
-/// Every capacity of a runtime in one type: `NS` sensors, `NA` actions, `NP` plans of at most
-/// `L` actions each, `K` keys per data store, and `NF` facts in fact sets of `W` 64-bit words
-/// (64 facts in one word by default; `NF` is at most `64 · W`). Only a name: it holds nothing.
+/// Every capacity of a runtime in one type, each named by what it counts so that two cannot
+/// be swapped: `Caps<Sensors<4>, Actions<6>, Plans<2>, Body<4>, Keys<8>>` runs 4 sensors, 6
+/// actions, 2 plans of at most 4 actions each, 8 keys per data store, and facts in one 64-bit
+/// word; add `Words<W>, Facts<NF>` for `NF` facts in sets of `W` words (`NF` at most `64 · W`).
+/// Only a name: it holds nothing. A compiled mission's module names its own (`dock::Caps`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Caps<
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-    const W: usize = 1,
-    const NF: usize = 64,
->;
+pub struct Caps<S, A, P, B, K, W = Words<1>, F = Facts<64>>(PhantomData<(S, A, P, B, K, W, F)>);
+
+/// How many sensor-based actions (sensors) a runtime holds: [`Caps`]'s first.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Sensors<const N: usize>;
+/// How many actuator-based actions a runtime holds: [`Caps`]'s second.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Actions<const N: usize>;
+/// How many plans the library holds: [`Caps`]'s third.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Plans<const N: usize>;
+/// The most actions in a plan's body: [`Caps`]'s fourth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Body<const N: usize>;
+/// How many keys each data store holds: [`Caps`]'s fifth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Keys<const N: usize>;
+/// How many 64-bit words a fact set takes: [`Caps`]'s sixth (1 by default).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Words<const N: usize>;
+/// How many facts the domain holds: [`Caps`]'s seventh (64 by default).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Facts<const N: usize>;
 
 /// What a capacity type ([`Caps`]) sizes: the mission, its bindings and the runtime's engine.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a runtime's capacities",
+    label = "not `Caps<Sensors<_>, Actions<_>, Plans<_>, Body<_>, Keys<_>>`",
+    note = "name each capacity, in this order: `Caps<Sensors<NS>, Actions<NA>, Plans<NP>, Body<L>, Keys<K>>`, then `Words<W>, Facts<NF>` for more than 64 facts"
+)]
 pub trait Capacity {
     /// The mission of these capacities.
     type Mission<'a>;
@@ -69,7 +93,7 @@ impl<
     const K: usize,
     const W: usize,
     const NF: usize,
-> Capacity for Caps<NS, NA, NP, L, K, W, NF>
+> Capacity for Caps<Sensors<NS>, Actions<NA>, Plans<NP>, Body<L>, Keys<K>, Words<W>, Facts<NF>>
 {
     type Mission<'a> = Mission<'a, NS, NA, NP, L, W, NF>;
     type Loaded<'a, S, A> = Loaded<'a, S, A, NS, NA, NP, L, W, NF>;

@@ -71,6 +71,7 @@ mod product {
 
     impl Actuator for Stubs {
         type Id = fetch_tea::Action;
+        fn halt(&self, _: fetch_tea::Action) {} // nothing to stop
 
         async fn run(&self, action: fetch_tea::Action, io: &ActionIo<'_>) -> Outcome {
             use fetch_tea::Action::{
