@@ -58,6 +58,10 @@ step "a crate outside the workspace, at its own tick rate, compiles its mission 
 cargo test --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 cargo build --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside --target thumbv7em-none-eabihf
 
+step "a mission whose period a slow tick rate cannot represent fails the build, naming the sensor, the period and the rate (tests/slow-tick: 10 Hz)"
+# Its trybuild cases resolve their mission beside the target directory: an absolute one.
+CARGO_TARGET_DIR="$PWD/target/outside" cargo test --locked --manifest-path tests/slow-tick/Cargo.toml
+
 step "the dock example, copied out of the checkout as docs/guide.md says (\"Your own robot\"), passes its tests there"
 own=$(mktemp -d)
 trap 'rm -rf "$own"' EXIT

@@ -255,11 +255,92 @@ pub fn latency_bound(response: Response, max_lost: u8, margin_ns: u64) -> u64 {
         .saturating_add(response.response_ns)
 }
 
+/// The ticks `ms` milliseconds take at a tick rate of `hz`: rounded up, as
+/// `embassy_time::Duration::from_millis` rounds them (at 10 Hz, 20 ms is 1 tick: 100 ms).
+pub const fn ms_in_ticks(ms: u64, hz: u64) -> u128 {
+    (ms as u128).saturating_mul(hz as u128).div_ceil(1000)
+}
+
+/// Whether `ms` milliseconds at a tick rate of `hz` come out within 1 % of themselves (a whole
+/// number of ticks at most 1 % longer; never shorter). `include_mission!` refuses a mission
+/// with a period or a timeout that does not, at the crate's `embassy_time::TICK_HZ`.
+pub const fn ms_represented(ms: u64, hz: u64) -> bool {
+    // ticks / hz <= ms / 1000 · 1.01, in integers.
+    let exact = (ms as u128).saturating_mul(hz as u128);
+    ms_in_ticks(ms, hz).saturating_mul(100_000) <= exact.saturating_mul(101)
+}
+
+/// What `include_mission!` emits for each period or timeout of a mission: a build-time check
+/// that the crate's tick rate represents it within 1 %, failing the build with a message
+/// naming the value and the rate (`docs/guide.md`, "Milliseconds and ticks").
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __tick_rate_check {
+    ($what:literal, $ms:literal) => {
+        const _: () = if !$crate::timing::ms_represented($ms, $crate::embassy_time::TICK_HZ) {
+            $crate::__tick_rate_panic!(
+                $what,
+                (1, "1"),
+                (2, "2"),
+                (4, "4"),
+                (8, "8"),
+                (10, "10"),
+                (16, "16"),
+                (32, "32"),
+                (64, "64"),
+                (100, "100"),
+                (128, "128"),
+                (256, "256"),
+                (512, "512"),
+                (1_024, "1_024"),
+                (2_048, "2_048"),
+                (4_096, "4_096"),
+                (8_192, "8_192"),
+                (16_384, "16_384"),
+                (32_768, "32_768")
+            )
+        };
+    };
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __tick_rate_panic {
+    ($what:literal, $(($hz:literal, $name:literal)),*) => {
+        match $crate::embassy_time::TICK_HZ {
+            $($hz => panic!(concat!(
+                $what,
+                " is not within 1 % of a whole number of ticks at embassy-time's tick-hz-",
+                $name,
+                " (a duration rounds up to whole ticks): choose a multiple of the tick, or a faster tick rate"
+            )),)*
+            _ => panic!(concat!(
+                $what,
+                " is not within 1 % of a whole number of ticks at this crate's embassy-time tick rate (a duration rounds up to whole ticks): choose a multiple of the tick, or a faster tick rate"
+            )),
+        }
+    };
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     const MS: u64 = 1_000_000;
+
+    #[test]
+    fn milliseconds_round_up_to_ticks_and_a_percent_off_is_refused() {
+        // 20 ms at 10 Hz is one tick, 100 ms.
+        assert_eq!(ms_in_ticks(20, 10), 1);
+        assert!(!ms_represented(20, 10));
+        assert!(ms_represented(100, 10) && ms_represented(20, 1_000));
+        // 1,024 Hz: 1 ms is 2 ticks (1.95 ms); 100 ms is 103 ticks (100.6 ms, within 1 %).
+        assert!(!ms_represented(1, 1_024) && ms_represented(100, 1_024));
+        // 32,768 Hz: 1 ms is 33 ticks, 0.7 % long.
+        assert!(ms_represented(1, 32_768));
+        // The largest values do not overflow.
+        assert!(ms_represented(u64::from(u32::MAX), 5_242_880_000));
+    }
 
     fn job(period_ms: u64, cost_ns: u64, latency_ms: u64) -> Job {
         Job {

@@ -353,6 +353,27 @@ fn generate(
         ),
     ];
 
+    // Every period and timeout, checked against the crate's tick rate where it compiles.
+    let mut durations: Vec<(String, u64)> = Vec::new();
+    for s in d.sensors() {
+        if let SensorMode::Cyclic { period } = s.mode {
+            let what = format!("sensor `{}`: period_ms = {}", s.name, millis(period));
+            durations.push((what, millis(period)));
+        }
+        let what = format!("sensor `{}`: timeout_ms = {}", s.name, millis(s.timeout));
+        durations.push((what, millis(s.timeout)));
+    }
+    for a in d.actions() {
+        if let Some(t) = a.max_violation {
+            let what = format!("action `{}`: max_violation_ms = {}", a.name, millis(t));
+            durations.push((what, millis(t)));
+        }
+    }
+    let tick_checks = durations.iter().filter(|(_, ms)| *ms > 0).map(|(what, ms)| {
+        let ms = proc_macro2::Literal::u64_unsuffixed(*ms);
+        quote!(::psmpa_core::__tick_rate_check!(#what, #ms);)
+    });
+
     let sensors = d.sensors().iter().map(|s| {
         let (name, pre, per) = (s.name, facts(s.pre, w), facts(s.per, w));
         let mode = match s.mode {
@@ -461,6 +482,8 @@ fn generate(
             /// `Runtime::new(&MISSION, &robot, (), config)`.
             pub type Runtime<'r, P, T = ()> =
                 ::psmpa_core::Engine<'r, P, T, NS, NA, NP, L, K, W, NF>;
+
+            #(#tick_checks)*
 
             #(#enums)*
 
