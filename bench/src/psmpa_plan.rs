@@ -135,13 +135,11 @@ pub type BenchRuntime<'r> =
 pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
     let mut config = Config::default();
     config.max_violation = Duration::from_ticks(0);
-    let runtime = BenchRuntime::new(mission, platform, (), config);
+    let mut runtime = BenchRuntime::new(mission, platform, (), config);
     let before = platform.steps.get();
-    let done = psmpa_sim::backend::simulate_split(
-        runtime.sensing(),
-        runtime.run(),
-        Duration::from_secs(60),
-    );
+    let (mut sensing, mut deciding) = runtime.split();
+    let done =
+        psmpa_sim::backend::simulate_split(sensing.run(), deciding.run(), Duration::from_secs(60));
     match done {
         Ok(done) if done.output.is_ok() => platform.steps.get() - before,
         _ => 0,

@@ -97,7 +97,7 @@ pub enum Failure<const W: usize = 1> {
         state: u8,
     },
     /// The sensing side did not answer within the sensors' own timeouts: nothing polls
-    /// [`Engine::sensing`](crate::Engine::sensing). Run it beside the deciding side.
+    /// [`SensingSide::run`](crate::SensingSide::run). Run it beside the deciding side.
     SensingStalled,
 }
 

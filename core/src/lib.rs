@@ -29,8 +29,9 @@
 //!
 //! The platform (a robot, or a simulator) implements [`platform::Sensor`] and
 //! [`platform::Actuator`]. The core only exposes futures: the sensing side
-//! ([`Runtime::sensing`](Engine::sensing): every sensor samples on its own schedule) and the deciding side
-//! ([`Runtime::run`](Engine::run): the control loop, the FSM, the behaviours). The platform places them, on
+//! ([`SensingSide`]: every sensor samples on its own schedule) and the deciding side
+//! ([`DecidingSide`]: the control loop, the FSM, the behaviours), handed out once by
+//! [`Engine::split`]. The platform places them, on
 //! one executor or sensing at a higher priority. The core never spawns a task and never reads a
 //! clock other than `embassy-time`, so the same code runs on a microcontroller under the
 //! embassy executor and on a host in virtual time. Capacities are const generics; a full
@@ -126,7 +127,7 @@ macro_rules! compile_runtime {
         /// never called.
         #[doc(hidden)]
         pub fn __psmpa_compile_runtime(
-            runtime: &$runtime,
+            runtime: &mut $runtime,
             cx: &mut ::core::task::Context<'_>,
         ) -> ::core::task::Poll<()> {
             let run = ::core::pin::pin!(runtime.run_with_sensing());
@@ -167,6 +168,7 @@ pub use platform::{
 pub use runtime::control::{ControlError, Report};
 pub use runtime::engine::{Config, Engine, Policy};
 pub use runtime::fsm::{BehaviourState, Fsm, FsmError, Target};
+pub use runtime::sides::{DecidingSide, SensingSide};
 pub use runtime::{
     Actions, BindingsOf, Body, Capacity, Caps, Facts, Keys, LoadedOf, MissionOf, Plans, Runtime,
     Sensors, Words,

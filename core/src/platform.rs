@@ -117,7 +117,7 @@ pub enum Outcome {
 
 /// The sensors of a platform (the sensing side: the paper's sensory controller).
 ///
-/// Every running sensor has a sampler of its own in [`Engine::sensing`](crate::runtime::engine::Engine::sensing):
+/// Every running sensor has a sampler of its own in [`SensingSide::run`](crate::SensingSide::run):
 /// its methods are called for one sensor at a time, but calls for *different* sensors overlap.
 ///
 /// * A call may await I/O for as long as the device needs (an ultrasonic echo up to 38 ms, a

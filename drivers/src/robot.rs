@@ -57,10 +57,11 @@
 //!     },
 //!     Settings::DEFAULT,
 //! );
-//! let runtime = FetchTeaRuntime::new(&fetch_tea::MISSION, &robot, (), Config::default());
-//! // On the board: `runtime.sensing()` in a task on an interrupt executor, `runtime.run()`
-//! // in a task on the thread-mode one.
-//! # let _ = runtime;
+//! let mut runtime = FetchTeaRuntime::new(&fetch_tea::MISSION, &robot, (), Config::default());
+//! // On the board: the sensing side's `run()` in a task on an interrupt executor, the
+//! // deciding side's in a task on the thread-mode one.
+//! let (sensing, deciding) = runtime.split();
+//! # let _ = (sensing, deciding);
 //! ```
 
 use core::cell::RefCell;

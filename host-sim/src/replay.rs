@@ -672,7 +672,7 @@ pub fn replay(
             let robot = robot::fetch_tea(scenario).map_err(|e| e.to_string())?;
             let describe = |e: &TraceEvent| crate::cli::outputs::describe(&robot.mission, e);
             let platform = platform(on_demand(robot.mission.domain.sensors()));
-            let runtime = Runtime::<'_, Replay<'_>, Caps, Compare<'_>>::new(
+            let mut runtime = Runtime::<'_, Replay<'_>, Caps, Compare<'_>>::new(
                 &robot.mission,
                 &platform,
                 compare(&describe, mcap(scenario)?),
@@ -683,9 +683,10 @@ pub fn replay(
             // longer than it lasted.
             let last = Instant::from_ticks(frames.last().map_or(0, |f| f.ticks));
             let end = Instant::from_millis(scenario.max_ms).min(last + Duration::from_secs(1));
+            let (mut sensing, mut deciding) = runtime.split();
             let ran_to = drive(
-                runtime.sensing(),
-                runtime.run_planning(&robot::PLANNER, &mut space),
+                sensing.run(),
+                deciding.run_planning(&robot::PLANNER, &mut space),
                 start,
                 end,
             )?;
@@ -708,7 +709,7 @@ pub fn replay(
             let describe =
                 |e: &TraceEvent| psmpa_core::text::Describe::describe(&mission, *e).to_string();
             let platform = platform(on_demand(mission.domain.sensors()));
-            let runtime = fetch_tea::Runtime::<'_, Replay<'_>, Compare<'_>>::new(
+            let mut runtime = fetch_tea::Runtime::<'_, Replay<'_>, Compare<'_>>::new(
                 &mission,
                 &platform,
                 compare(&describe, mcap(&Scenario::empty())?),
@@ -717,7 +718,8 @@ pub fn replay(
             // A second past the last frame: what the board traced at its last instant too.
             let end =
                 Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);
-            let ran_to = drive(runtime.sensing(), runtime.run(), start, end)?;
+            let (mut sensing, mut deciding) = runtime.split();
+            let ran_to = drive(sensing.run(), deciding.run(), start, end)?;
             finish(runtime.into_sink(), ran_to)
         }
     }

@@ -102,7 +102,7 @@ pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
 ) -> (Summary, L, T) {
     let world: World<'_, L, P::Mutex> = World::new(scenario, log);
     let nao = Nao::new(&world, robot).with_compute(P::compute);
-    let runtime = robot::NaoRuntime::<'_, '_, '_, L, T, P::Mutex>::new(
+    let mut runtime = robot::NaoRuntime::<'_, '_, '_, L, T, P::Mutex>::new(
         &robot.mission,
         &nao,
         sink,
@@ -110,10 +110,11 @@ pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
     );
     let ending = {
         let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
+        let (mut sensing, mut deciding) = runtime.split();
         // Built where they stay: neither side is ever copied.
-        let sensing = pin!(runtime.sensing());
+        let sensing = pin!(sensing.run());
         let deciding = pin!(select(
-            runtime.run_planning(&robot::PLANNER, space),
+            deciding.run_planning(&robot::PLANNER, space),
             deadline
         ));
         // SAFETY: this future is not leaked and stays where it is polled: the caller's

@@ -369,10 +369,13 @@ fn generate(
             durations.push((what, millis(t)));
         }
     }
-    let tick_checks = durations.iter().filter(|(_, ms)| *ms > 0).map(|(what, ms)| {
-        let ms = proc_macro2::Literal::u64_unsuffixed(*ms);
-        quote!(::psmpa_core::__tick_rate_check!(#what, #ms);)
-    });
+    let tick_checks = durations
+        .iter()
+        .filter(|(_, ms)| *ms > 0)
+        .map(|(what, ms)| {
+            let ms = proc_macro2::Literal::u64_unsuffixed(*ms);
+            quote!(::psmpa_core::__tick_rate_check!(#what, #ms);)
+        });
 
     let sensors = d.sensors().iter().map(|s| {
         let (name, pre, per) = (s.name, facts(s.pre, w), facts(s.per, w));

@@ -46,7 +46,7 @@ impl Platform for Robot {
 
 #[test]
 fn the_robot_gets_there_in_virtual_time() {
-    let rt = hello::Runtime::new(
+    let mut rt = hello::Runtime::new(
         &hello::MISSION,
         &Robot,
         Recorder::default(),

@@ -102,7 +102,7 @@ impl psmpa_core::Platform for DockOnly {
 fn a_platform_written_for_another_mission_is_an_error_before_anything_runs() {
     use fetch_tea::{K, L, NA, NF, NP, NS, W};
     // Fetch Tea has six actions, the dock's enum four: the fifth has no name on the platform.
-    let rt: psmpa_core::Engine<'_, DockOnly, psmpa_testkit::Recorder, NS, NA, NP, L, K, W, NF> =
+    let mut rt: psmpa_core::Engine<'_, DockOnly, psmpa_testkit::Recorder, NS, NA, NP, L, K, W, NF> =
         psmpa_core::Engine::new(
             &fetch_tea::MISSION,
             &DockOnly,
@@ -135,7 +135,7 @@ fn a_platform_written_for_another_mission_is_an_error_before_anything_runs() {
 #[test]
 fn a_compiled_runtime_is_named_by_its_module_and_built_by_inference() {
     // `dock::Runtime::new` infers the platform and the sink from its arguments.
-    let rt = dock::Runtime::new(
+    let mut rt = dock::Runtime::new(
         &dock::MISSION,
         &DockOnly,
         psmpa_testkit::Recorder::default(),
@@ -195,7 +195,7 @@ fn a_mission_with_no_sensors_or_no_plans_compiles_as_check_accepts_it() {
         None
     );
     // With no sensor, the plan's actions still run to the goal.
-    let rt = blind::Runtime::new(
+    let mut rt = blind::Runtime::new(
         &blind::MISSION,
         &Blind,
         psmpa_testkit::Recorder::default(),

@@ -71,14 +71,15 @@ fn run(tolerance_ms: u32) -> (Result<Report, ControlError>, Vec<(Instant, Failur
     let json = MISSION.replace("TOLERANCE", &tolerance_ms.to_string());
     let loaded: LoadedOf<'_, AnyBehaviour, PickCaps> =
         load(json.as_bytes(), &AnyBehaviour).unwrap_or_else(|e| panic!("the mission loads: {e}"));
-    let rt = Runtime::<'_, Picker, PickCaps, Recorder>::new(
+    let mut rt = Runtime::<'_, Picker, PickCaps, Recorder>::new(
         &loaded.mission,
         &Picker,
         Recorder::default(),
         Config::default(),
     );
-    let done =
-        simulate_split(rt.sensing(), rt.run(), Duration::from_secs(10)).expect("the run ends");
+    let (mut sensing, mut deciding) = rt.split();
+    let done = simulate_split(sensing.run(), deciding.run(), Duration::from_secs(10))
+        .expect("the run ends");
     let failures = rt
         .into_sink()
         .plan_failures()

@@ -31,8 +31,9 @@ fn run_with(
 
 /// Runs `mission` on `world` under `policy` to its end.
 fn run_on(mission: &tiny::TinyMission, world: &TinyWorld, policy: Policy) -> Run {
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(mission, world, tiny::config(policy));
-    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).expect("simulation completes");
+    let mut rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(mission, world, tiny::config(policy));
+    let (mut sensing, mut deciding) = rt.split();
+    let done = simulate_split(sensing.run(), deciding.run(), LIMIT).expect("simulation completes");
     let hash = rt.trace_hash().value();
     Run {
         result: done.output,
@@ -314,8 +315,10 @@ fn no_applicable_plan_is_a_clear_error_not_a_hang() {
         .unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
-    let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
+    let mut rt: tiny::TinyRuntime<'_, 4> =
+        tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let (mut sensing, mut deciding) = rt.split();
+    let out = simulate_split(sensing.run(), deciding.run(), LIMIT)
         .unwrap()
         .output;
     assert!(
@@ -341,8 +344,10 @@ fn repeated_failure_ends_with_exhausted_not_a_loop() {
         .unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
-    let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
+    let mut rt: tiny::TinyRuntime<'_, 4> =
+        tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let (mut sensing, mut deciding) = rt.split();
+    let out = simulate_split(sensing.run(), deciding.run(), LIMIT)
         .unwrap()
         .output;
     assert!(
@@ -399,20 +404,26 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
     world.camera_answers.set(false);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let mut rt: tiny::TinyRuntime<'_, 4> =
+        tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let planner =
         psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
     let mut space = psmpa_core::planner::Search::<64>::new();
+    let (mut sensing, mut deciding) = rt.split();
     let (broken, planned, repaired) = simulate_split(
-        rt.sensing(),
+        sensing.run(),
         async {
-            let broken = (rt.run().await, rt.faulty_sensors(), Instant::now());
+            let broken = (
+                deciding.run().await,
+                deciding.faulty_sensors(),
+                Instant::now(),
+            );
             // The planner cannot count on the camera either: no action needing it applies.
-            let planned = rt.run_planning(&planner, &mut space).await;
+            let planned = deciding.run_planning(&planner, &mut space).await;
             // The camera is repaired.
             world.camera_answers.set(true);
-            rt.clear_faults();
-            (broken, planned, rt.run().await)
+            deciding.clear_faults();
+            (broken, planned, deciding.run().await)
         },
         LIMIT,
     )
@@ -559,8 +570,9 @@ fn a_precondition_that_stays_violated_fails_the_state() {
     let mut config = tiny::config(Policy::PSmpa);
     config.max_violation = Duration::from_secs(3);
     config.max_failures = 0;
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, config);
-    let out = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
+    let mut rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, config);
+    let (mut sensing, mut deciding) = rt.split();
+    let out = simulate_split(sensing.run(), deciding.run(), LIMIT).unwrap();
     assert!(matches!(
         out.output,
         Err(ControlError::TooManyFailures {
@@ -579,8 +591,9 @@ fn a_full_sensor_store_is_an_error_not_a_silent_drop() {
     let world = TinyWorld::new(ids, &[]);
     let mut config = tiny::config(Policy::PSmpa);
     config.max_failures = 0;
-    let rt: tiny::TinyRuntime<'_, 0> = tiny::runtime(&mission, &world, config);
-    let out = simulate_split(rt.sensing(), rt.run(), LIMIT)
+    let mut rt: tiny::TinyRuntime<'_, 0> = tiny::runtime(&mission, &world, config);
+    let (mut sensing, mut deciding) = rt.split();
+    let out = simulate_split(sensing.run(), deciding.run(), LIMIT)
         .unwrap()
         .output;
     // The very first sample, establishing the model, finds no room.
@@ -635,8 +648,10 @@ fn the_same_run_gives_the_same_trace_hash_twice_and_on_8_parallel_threads() {
 fn sensor_stores_keep_the_latest_sample_with_its_time() {
     let (mission, ids) = tiny::mission(false);
     let world = TinyWorld::new(ids, &[]);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
-    simulate_split(rt.sensing(), rt.run(), LIMIT)
+    let mut rt: tiny::TinyRuntime<'_, 4> =
+        tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let (mut sensing, mut deciding) = rt.split();
+    simulate_split(sensing.run(), deciding.run(), LIMIT)
         .unwrap()
         .output
         .unwrap();
@@ -842,10 +857,12 @@ fn a_new_run_does_not_know_what_an_earlier_run_sensed() {
     library.add(get_in.unwrap()).unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let mut rt: tiny::TinyRuntime<'_, 4> =
+        tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let (mut sensing, mut deciding) = rt.split();
     let (first, second) = simulate_split(
-        rt.sensing(),
-        async { (rt.run().await, rt.run().await) },
+        sensing.run(),
+        async { (deciding.run().await, deciding.run().await) },
         LIMIT,
     )
     .unwrap()
@@ -947,13 +964,19 @@ fn a_plan_known_to_be_inapplicable_is_skipped() {
 fn a_planner_that_finds_nothing_keeps_the_reason_plans_were_passed_over() {
     let (mission, ids) = tiny::mission(true);
     let world = TinyWorld::new(ids, &[(0, 60_000)]);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let mut rt: tiny::TinyRuntime<'_, 4> =
+        tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let planner =
         psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
     let mut space = psmpa_core::planner::Search::<64>::new();
-    let out = simulate_split(rt.sensing(), rt.run_planning(&planner, &mut space), LIMIT)
-        .unwrap()
-        .output;
+    let (mut sensing, mut deciding) = rt.split();
+    let out = simulate_split(
+        sensing.run(),
+        deciding.run_planning(&planner, &mut space),
+        LIMIT,
+    )
+    .unwrap()
+    .output;
     let clear = psmpa_core::FactSet::single(psmpa_core::FactId::new(0).unwrap());
     match out {
         Err(ControlError::Inapplicable {
@@ -980,13 +1003,19 @@ fn a_planner_that_finds_nothing_keeps_the_reason_plans_were_passed_over() {
         ))
         .unwrap();
     let world = TinyWorld::new(ids, &[(0, 60_000)]);
-    let rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
+    let mut rt: tiny::TinyRuntime<'_, 4> =
+        tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let mut small =
         psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
     small.budget = 1;
-    let out = simulate_split(rt.sensing(), rt.run_planning(&small, &mut space), LIMIT)
-        .unwrap()
-        .output;
+    let (mut sensing, mut deciding) = rt.split();
+    let out = simulate_split(
+        sensing.run(),
+        deciding.run_planning(&small, &mut space),
+        LIMIT,
+    )
+    .unwrap()
+    .output;
     assert!(
         matches!(
             out,

@@ -279,8 +279,9 @@ fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
 }
 
 fn run_mission(robot: &Robot, mission: Pair) -> (Vec<(Instant, TraceEvent)>, Instant) {
-    let rt = PairRuntime::new(&mission, robot, Recorder::default(), Config::default());
-    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).unwrap();
+    let mut rt = PairRuntime::new(&mission, robot, Recorder::default(), Config::default());
+    let (mut sensing, mut deciding) = rt.split();
+    let done = simulate_split(sensing.run(), deciding.run(), LIMIT).unwrap();
     done.output.unwrap();
     let trace = rt.into_sink().0;
     let start = trace
@@ -471,9 +472,10 @@ fn a_read_cancelled_by_the_end_of_a_state_is_taken_again_by_the_next() {
 fn a_control_loop_without_its_sensing_side_fails_clearly_instead_of_hanging() {
     let robot = Robot::new(0, 200);
     let (mission, _) = mission();
-    let rt = PairRuntime::new(&mission, &robot, Recorder::default(), Config::default());
-    // Nobody runs `rt.sensing()`.
-    let done = simulate(rt.run(), LIMIT).unwrap();
+    let mut rt = PairRuntime::new(&mission, &robot, Recorder::default(), Config::default());
+    // Nobody runs the sensing side.
+    let (_sensing, mut deciding) = rt.split();
+    let done = simulate(deciding.run(), LIMIT).unwrap();
     assert_eq!(
         done.output,
         Err(ControlError::InitialModel {
@@ -522,7 +524,8 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
     }
     type StatelessRuntime<'r> =
         Runtime<'r, Stateless, Caps<Sensors<2>, Actions<2>, Plans<1>, Body<2>, Keys<4>>>;
-    let rt = StatelessRuntime::new(&mission, &Stateless, (), Config::default());
+    let mut rt = StatelessRuntime::new(&mission, &Stateless, (), Config::default());
     shared(&rt);
-    sendable(&rt.sensing());
+    let (mut sensing, _) = rt.split();
+    sendable(&sensing.run());
 }

@@ -141,8 +141,9 @@ impl Platform for Robot {
 fn run() -> (WideMission, Vec<(Instant, TraceEvent<W>)>, TraceHash) {
     let (mission, _) = mission();
     let trace = {
-        let rt = WideRuntime::new(&mission, &Robot, Recorder::default(), Config::default());
-        let done = simulate_split(rt.sensing(), rt.run(), Duration::from_secs(10)).unwrap();
+        let mut rt = WideRuntime::new(&mission, &Robot, Recorder::default(), Config::default());
+        let (mut sensing, mut deciding) = rt.split();
+        let done = simulate_split(sensing.run(), deciding.run(), Duration::from_secs(10)).unwrap();
         let report = done.output.unwrap();
         assert!(
             report
@@ -288,13 +289,14 @@ fn a_compiled_mission_of_200_facts_runs_end_to_end_in_four_words() {
         (150, 199)
     );
     let run = || {
-        let rt = wide200::Runtime::new(
+        let mut rt = wide200::Runtime::new(
             &wide200::MISSION,
             &Typed,
             Recorder::<{ wide200::W }>::default(),
             Config::default(),
         );
-        let done = simulate_split(rt.sensing(), rt.run(), Duration::from_secs(10)).unwrap();
+        let (mut sensing, mut deciding) = rt.split();
+        let done = simulate_split(sensing.run(), deciding.run(), Duration::from_secs(10)).unwrap();
         let report = done.output.unwrap();
         let hash = rt.trace_hash();
         (report, rt.into_sink().0, hash)

@@ -45,7 +45,7 @@ use embassy_rp::pwm::{self, Pwm};
 use embassy_rp::watchdog::{ResetReason, Watchdog};
 use embassy_time::{Duration, Instant, Timer};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
-use psmpa_core::{Config, SensorMode};
+use psmpa_core::{Config, DecidingSide, SensingSide, SensorMode};
 use psmpa_drivers::Active;
 use psmpa_drivers::hbridge::{Channel, Drive};
 use psmpa_drivers::hcsr04::Hcsr04;
@@ -163,8 +163,8 @@ fn motor(in1: Peri<'static, impl Pin>, in2: Peri<'static, impl Pin>, pwm: Pwm<'s
 }
 
 #[embassy_executor::task]
-async fn sensing(runtime: &'static Runtime) {
-    match runtime.sensing().await {}
+async fn sensing(mut side: SensingSide<'static, Runtime>) {
+    match side.run().await {}
 }
 
 /// Feeds the watchdog from thread mode: starved of it, the board resets.
@@ -320,18 +320,19 @@ async fn main(spawner: Spawner) {
     static ROBOT: StaticCell<Robot> = StaticCell::new();
     static RUNTIME: StaticCell<Runtime> = StaticCell::new();
     let robot = ROBOT.init(FetchTea::new(devices, settings).with_compute(Busy));
-    let runtime: &'static Runtime = RUNTIME.init(Runtime::new(
+    let runtime: &'static mut Runtime = RUNTIME.init(Runtime::new(
         mission,
         robot,
         Log(mission),
         Config::default(),
     ));
+    let (sensing_side, deciding_side) = runtime.split();
 
     // Sensing above deciding: priority 2 preempts thread mode; GPIO (embassy-rp's bank 0
     // interrupt) is at 3, so an edge's waker only pends the sensing executor.
     interrupt::SWI_IRQ_1.set_priority(Priority::P2);
     let sensing_spawner = SENSING.start(interrupt::SWI_IRQ_1);
-    match sensing(runtime) {
+    match sensing(sensing_side) {
         Ok(task) => sensing_spawner.spawn(task),
         Err(_) => {
             error!("the sensing task is already running");
@@ -339,7 +340,7 @@ async fn main(spawner: Spawner) {
         }
     }
 
-    match control(runtime, mission) {
+    match control(deciding_side, mission) {
         Ok(task) => spawner.spawn(task),
         Err(_) => error!("the control task is already running"),
     }
@@ -348,8 +349,8 @@ async fn main(spawner: Spawner) {
 /// Runs the task once (the control loop, Algorithm 1) in thread mode: a task of its own, so
 /// that each of its polls is a deciding step and no more (`cargo xtask wcet` bounds one).
 #[embassy_executor::task]
-async fn control(runtime: &'static Runtime, mission: &'static fetch_tea::Mission) {
-    let outcome = runtime.run().await;
+async fn control(mut side: DecidingSide<'static, Runtime>, mission: &'static fetch_tea::Mission) {
+    let outcome = side.run().await;
     #[cfg(feature = "recorder")]
     record::flush();
     match outcome {

@@ -168,7 +168,7 @@ impl<
 
     /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor in service
     /// whose `pre(s)` holds is switched on, sampled once and switched off again, all at once.
-    pub async fn establish_initial_model(&self) -> Result<FactSetOf<W>, ControlError<W>> {
+    pub(crate) async fn establish_initial_model(&self) -> Result<FactSetOf<W>, ControlError<W>> {
         let init = self.mission.task.init;
         // A new model: what earlier runs sensed is not known now.
         self.shared.lock(|s| s.sensed.set(FactSetOf::EMPTY));
@@ -195,21 +195,13 @@ impl<
         Ok(beliefs)
     }
 
-    /// Algorithm 1 with plans from the library only: establishes the model, then selects and
-    /// executes plans until the task's goal holds. Ends with an error, never a hang, when no
-    /// plan applies, every applicable plan failed, or the failure or plan limit of the
-    /// [`Config`](crate::runtime::engine::Config) is reached.
-    pub async fn run(&self) -> Result<Report<W>, ControlError<W>> {
+    /// Algorithm 1 with plans from the library only ([`DecidingSide::run`](crate::runtime::sides::DecidingSide::run)).
+    pub(crate) async fn run(&self) -> Result<Report<W>, ControlError<W>> {
         self.control(NoPlanner).await
     }
 
-    /// Algorithm 1 where `generatePlans` falls back on `planner` when no library plan applies,
-    /// and plans again from the current beliefs after a failure. The search runs in `space`
-    /// (keep it in a `static` on a microcontroller), in slices of
-    /// [`Config::plan_slice`](crate::runtime::engine::Config::plan_slice) nodes with a yield between two,
-    /// so that on a cooperative executor it holds the deciding side's turn for one slice at a
-    /// time.
-    pub async fn run_planning<const N: usize>(
+    /// Algorithm 1 with the planner as fallback ([`DecidingSide::run_planning`](crate::runtime::sides::DecidingSide::run_planning)).
+    pub(crate) async fn run_planning<const N: usize>(
         &self,
         planner: &Planner<N, W>,
         space: &mut Search<N, W>,
@@ -217,23 +209,9 @@ impl<
         self.control((planner, space)).await
     }
 
-    /// Both sides on the executor that polls this future: the sensing side
-    /// ([`Engine::sensing`], polled first at every wake, so a due sample is taken before the
-    /// deciding side's turn) beside [`Engine::run`]. Ends with the control loop's result. For
-    /// a robot with one executor; with an interrupt executor, spawn [`Engine::sensing`] on it
-    /// and [`Engine::run`] below it instead.
-    pub async fn run_with_sensing(&self) -> Result<Report<W>, ControlError<W>> {
-        beside_sensing(self.sensing(), self.run()).await
-    }
-
-    /// [`Engine::run_planning`] beside the sensing side, as [`Engine::run_with_sensing`] runs
-    /// [`Engine::run`].
-    pub async fn run_planning_with_sensing<const N: usize>(
-        &self,
-        planner: &Planner<N, W>,
-        space: &mut Search<N, W>,
-    ) -> Result<Report<W>, ControlError<W>> {
-        beside_sensing(self.sensing(), self.run_planning(planner, space)).await
+    /// `run` with the sensing side beside it, sensing polled first; ends when `run` does.
+    pub(crate) async fn beside_sensing<R>(&self, run: impl Future<Output = R>) -> R {
+        beside_sensing(self.sensing(), run).await
     }
 
     /// The actions with the preconditions the planner must satisfy from the beliefs: facts

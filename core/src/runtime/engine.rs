@@ -1,10 +1,10 @@
 //! Executing compiled plans: Algorithm 2 at run time, on two sides that run concurrently.
 //!
-//! * **Sensing** ([`Engine::sensing`], the paper's sensory controller): one sampler per
+//! * **Sensing** ([`SensingSide`](crate::SensingSide), the paper's sensory controller): one sampler per
 //!   sensor, each on its own schedule; a sample is read, stored, fused into the beliefs and
 //!   checked against the running action's precondition, and whoever waits is woken. See
 //!   [`crate::runtime::sensing`].
-//! * **Deciding** ([`Engine::run`], the deliberative controller): the control loop
+//! * **Deciding** ([`DecidingSide`](crate::DecidingSide), the deliberative controller): the control loop
 //!   (Algorithm 1), the FSM of the selected plan and the actuator behaviours. It switches
 //!   sensors on and off by telling the sensing side which sensors the running state needs
 //!   (least commitment), and learns what they perceive from the beliefs and the data stores.
@@ -120,10 +120,10 @@ fn outcome_result<const W: usize>(action: ActionId, outcome: Outcome) -> Result<
 /// and [`Caps`](crate::Caps); its capacities are `NS` sensors, `NA` actions, `NP` plans of at
 /// most `L` actions, `K` keys per data store, `NF` facts in fact sets of `W` words.
 ///
-/// It runs as two futures: [`sensing`](Self::sensing), which never ends, and the control
-/// loop, [`run`](Self::run) or [`run_planning`](Self::run_planning). Run both: on one
-/// executor (`select(rt.sensing(), rt.run())` polls sensing first), or sensing in a task of
-/// a higher-priority executor.
+/// It runs as two sides, handed out once by [`split`](Self::split): the sensing side, which
+/// never ends, and the deciding side's control loop. Run both: on one executor
+/// ([`run_with_sensing`](Self::run_with_sensing) polls sensing first), or sensing in a task
+/// of a higher-priority executor.
 pub struct Engine<
     'r,
     P: Platform,
@@ -646,7 +646,7 @@ impl<
     /// `executePlans` for one plan: runs its FSM from the initial state along the transition
     /// rules `T` until [`Target::Done`] or [`Target::Failed`]. Between two states the work is
     /// bounded: the transition is O(1), switching sensors off and on O(NS), the effects O(1).
-    pub async fn execute(&self, fsm: &Fsm<L>) -> Result<(), Failure<W>> {
+    pub(crate) async fn execute(&self, fsm: &Fsm<L>) -> Result<(), Failure<W>> {
         let mut index = 0u8;
         loop {
             let state = fsm

@@ -31,6 +31,7 @@ pub mod engine;
 pub mod fsm;
 pub mod sensing;
 pub(crate) mod shared;
+pub mod sides;
 
 use core::marker::PhantomData;
 
@@ -120,7 +121,8 @@ pub type BindingsOf<R, C> = <C as Capacity>::Bindings<
 
 /// The P-SMPA runtime of one robot: platform `P`, capacities `C` ([`Caps`]), trace sink `T`
 /// (none by default). A name for the [`Engine`] of those capacities, which does the work:
-/// [`sensing`](Engine::sensing), [`run`](Engine::run), [`beliefs`](Engine::beliefs), ...
+/// [`split`](Engine::split) into its two sides, [`run_with_sensing`](Engine::run_with_sensing),
+/// [`beliefs`](Engine::beliefs), ...
 /// Build it through a concrete name (`DockRuntime::new(&mission, &dock, (), config)`).
 ///
 /// Everything lives inside this value; put it in a `static` (with a `StaticCell`) or on the

@@ -1,7 +1,7 @@
 //! The sensing side of the runtime (the paper's sensory controller): every sensor samples on
 //! its own, above the deciding side.
 //!
-//! [`Engine::sensing`] runs one *sampler* per sensor of the domain. A sampler waits until the
+//! [`SensingSide::run`](crate::SensingSide::run) runs one *sampler* per sensor of the domain. A sampler waits until the
 //! deciding side commands its sensor (a state that needs it started: least commitment), then
 //! switches it on and samples it:
 //!
@@ -79,8 +79,8 @@ pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
 }
 
 pin_project! {
-    /// The sensing side of a runtime ([`Engine::sensing`]): its samplers, each polled in
-    /// place. Never ends.
+    /// The sensing side of a runtime ([`SensingSide::run`](crate::runtime::sides::SensingSide::run)):
+    /// its samplers, each polled in place. Never ends.
     #[must_use = "futures do nothing unless polled"]
     pub struct Sensing<F> {
         #[pin]
@@ -111,17 +111,9 @@ impl<
     const NF: usize,
 > Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
 {
-    /// The sensing side: one sampler per sensor, all concurrent. Never ends; drop it to stop
-    /// sensing. Place it on an executor of higher priority than the deciding side, or run it
-    /// beside the control loop on one executor (`select(rt.sensing(), rt.run())`, which polls
-    /// sensing first).
-    ///
-    /// The samplers are built here, out of line, not in the first poll: the temporaries of
-    /// building `NS` of them stay off the stack of whatever polls them (an interrupt, on a
-    /// microcontroller, on top of the deciding side's stack). Pin the result where it is made
-    /// (`pin!(rt.sensing())`) and it is never copied again.
+    /// The sensing side's samplers ([`SensingSide::run`](crate::runtime::sides::SensingSide::run)).
     #[inline(never)]
-    pub fn sensing(&self) -> Sensing<impl Future<Output = [(); NS]> + '_> {
+    pub(crate) fn sensing(&self) -> Sensing<impl Future<Output = [(); NS]> + '_> {
         let samplers: [_; NS] = core::array::from_fn(|index| self.sampler(index));
         Sensing {
             samplers: join_array(samplers),

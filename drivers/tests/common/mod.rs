@@ -273,13 +273,14 @@ pub fn run_with(world: World, settings: Settings) -> Run {
         },
         settings,
     );
-    let rt = FetchTeaRuntime::new(
+    let mut rt = FetchTeaRuntime::new(
         &fetch_tea::MISSION,
         &robot,
         Recorder::default(),
         Config::default(),
     );
-    let done = simulate_split(rt.sensing(), rt.run(), LIMIT).expect("the run ends in time");
+    let (mut sensing, mut deciding) = rt.split();
+    let done = simulate_split(sensing.run(), deciding.run(), LIMIT).expect("the run ends in time");
     Run {
         result: done.output,
         trace: rt.into_sink(),

@@ -12,7 +12,7 @@ const TOF_PERIOD_MS: u64 = 100;
 /// Runs the mission in `yard`: how it ended, and the trace.
 fn run(yard: &Yard) -> (Result<Report, ControlError>, Recorder) {
     let dock = Dock { yard };
-    let rt = DockRuntime::new(&MISSION, &dock, Recorder::default(), Config::default());
+    let mut rt = DockRuntime::new(&MISSION, &dock, Recorder::default(), Config::default());
     let done = simulate(rt.run_with_sensing(), LIMIT).unwrap();
     (done.output, rt.into_sink())
 }

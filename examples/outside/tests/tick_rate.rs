@@ -10,7 +10,7 @@ fn the_kit_runs_a_mission_at_the_crates_own_tick_rate() {
     assert_eq!(embassy_time_driver::TICK_HZ, 32_768);
     let yard = Yard::new().with_box(2_000, 3_000);
     let dock = Dock { yard: &yard };
-    let rt = DockRuntime::new(
+    let mut rt = DockRuntime::new(
         &psmpa_dock::dock::MISSION,
         &dock,
         Recorder::default(),

@@ -7,8 +7,8 @@
 //! firmware. It runs the task once, logs the outcome, its longest poll and critical section
 //! and its stack, and leaves QEMU. `cargo xtask size` holds it to its budgets.
 //!
-//! It runs the mission's library plan (`Engine::run`, which links no search): re-planning with
-//! the planner (`Engine::run_planning`) would add the search's code and its 1 KiB search
+//! It runs the mission's library plan (`DecidingSide::run`, which links no search): re-planning
+//! with the planner (`DecidingSide::run_planning`) would add the search's code and its 1 KiB search
 //! space, past the RAM budget.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
@@ -31,6 +31,7 @@ mod product {
     use psmpa_core::{
         ActionIo, Actuator, Config, Outcome, Platform, Reading, Sensor, SensorFault, Value,
     };
+    use psmpa_core::{DecidingSide, SensingSide};
     use psmpa_firmware::board::{exit, fail, guard_stack, stack_high_water};
     use psmpa_firmware::executor;
 
@@ -94,13 +95,13 @@ mod product {
     }
 
     #[embassy_executor::task]
-    async fn sensing(runtime: &'static ProductRuntime) {
-        match runtime.sensing().await {}
+    async fn sensing(mut side: SensingSide<'static, ProductRuntime>) {
+        match side.run().await {}
     }
 
     #[embassy_executor::task]
-    async fn deciding(runtime: &'static ProductRuntime) {
-        let result = runtime.run().await;
+    async fn deciding(mut side: DecidingSide<'static, ProductRuntime>) {
+        let result = side.run().await;
         let polls = executor::take_polls();
         match result {
             Ok(report) => info!(
@@ -127,10 +128,10 @@ mod product {
         static mut DECIDING: executor::Slot = MaybeUninit::uninit();
         static mut RUNTIME: MaybeUninit<ProductRuntime> = MaybeUninit::uninit();
         guard_stack();
-        let runtime = init(RUNTIME);
+        let (sensing_side, deciding_side) = init(RUNTIME).split();
         psmpa_firmware::time_driver::start();
         executor::run(DECIDING, |thread, interrupt| {
-            match (deciding(runtime), sensing(runtime)) {
+            match (deciding(deciding_side), sensing(sensing_side)) {
                 (Ok(d), Ok(s)) => {
                     thread.spawn(d);
                     interrupt.spawn(s);
@@ -154,7 +155,7 @@ mod product {
     /// Builds the runtime in its static, out of line: the frame that builds it (on the stack,
     /// then moved) ends before the executors start, instead of staying under them for good.
     #[inline(never)]
-    fn init(runtime: &'static mut MaybeUninit<ProductRuntime>) -> &'static ProductRuntime {
+    fn init(runtime: &'static mut MaybeUninit<ProductRuntime>) -> &'static mut ProductRuntime {
         if cfg!(feature = "inject-fault") {
             overflow(u32::MAX);
         }

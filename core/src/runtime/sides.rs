@@ -1,0 +1,181 @@
+//! The runtime's two sides, handed out once: [`Engine::split`] takes the runtime mutably and
+//! returns the sensing side and the deciding side, so a second sampler, a second control loop
+//! running at once, or a second split while the first is in use does not compile.
+//!
+//! ```
+//! # use psmpa_core::{ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, SensorId};
+//! # use psmpa_core::{Actions, Body, Caps, Config, Keys, Plans, Runtime, Sensors};
+//! # struct Robot;
+//! # impl Sensor for Robot {
+//! #     type Id = SensorId;
+//! #     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> { Ok(()) }
+//! #     async fn switch_off(&self, _: SensorId) {}
+//! #     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> { Ok(None) }
+//! # }
+//! # impl Actuator for Robot {
+//! #     type Id = ActionId;
+//! #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
+//! #     fn halt(&self, _: ActionId) {}
+//! # }
+//! # impl Platform for Robot { type Mutex = psmpa_core::embassy_sync::blocking_mutex::raw::NoopRawMutex; }
+//! # type RobotRuntime<'r> = Runtime<'r, Robot, Caps<Sensors<1>, Actions<1>, Plans<1>, Body<1>, Keys<4>>>;
+//! async fn fly(rt: &mut RobotRuntime<'_>) {
+//!     let (mut sensing, mut deciding) = rt.split();
+//!     // On a microcontroller: sensing in a task on an interrupt executor, deciding below it.
+//!     let sensing = sensing.run();
+//!     let report = deciding.run();
+//! #   let _ = (sensing, report);
+//! }
+//! ```
+
+use core::future::Future;
+use core::ops::Deref;
+
+use crate::planner::{Planner, Search};
+use crate::platform::{Actuator, Platform, Sensor};
+use crate::runtime::control::{ControlError, Report};
+use crate::runtime::engine::Engine;
+use crate::runtime::sensing::Sensing;
+use crate::trace::TraceSink;
+
+/// The sensing side of a runtime ([`Engine::split`]): every sensor samples on its own schedule.
+/// Place its [`run`](SensingSide::run) on an executor of higher priority than the deciding
+/// side, or beside it on one executor ([`Engine::run_with_sensing`]). Dereferences to the
+/// runtime for what it knows (beliefs, stores, faults).
+pub struct SensingSide<'a, E>(&'a E);
+
+/// The deciding side of a runtime ([`Engine::split`]): Algorithm 1's control loop, the FSM,
+/// the behaviours. Its runs take it mutably: one control loop at a time (run again once one
+/// ended). Dereferences to the runtime for what it knows (beliefs, stores, faults).
+pub struct DecidingSide<'a, E>(&'a E);
+
+impl<'a, E> SensingSide<'a, E> {
+    /// The runtime, for the life of the side: what another task may read while it runs.
+    pub fn engine(&self) -> &'a E {
+        self.0
+    }
+}
+
+impl<'a, E> DecidingSide<'a, E> {
+    /// The runtime, for the life of the side: what another task may read while it runs.
+    pub fn engine(&self) -> &'a E {
+        self.0
+    }
+}
+
+impl<E> Deref for SensingSide<'_, E> {
+    type Target = E;
+    fn deref(&self) -> &E {
+        self.0
+    }
+}
+
+impl<E> Deref for DecidingSide<'_, E> {
+    type Target = E;
+    fn deref(&self) -> &E {
+        self.0
+    }
+}
+
+impl<
+    'r,
+    P: Platform + Sensor<W> + Actuator<W>,
+    T: TraceSink<W>,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+    const W: usize,
+    const NF: usize,
+> Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
+{
+    /// The two sides, each handed out once for as long as they are in use.
+    #[allow(clippy::type_complexity)]
+    pub fn split(&mut self) -> (SensingSide<'_, Self>, DecidingSide<'_, Self>) {
+        (SensingSide(self), DecidingSide(self))
+    }
+
+    /// Both sides on the executor that polls this future: the sensing side (polled first at
+    /// every wake, so a due sample is taken before the deciding side's turn) beside the control
+    /// loop with plans from the library only ([`DecidingSide::run`]). Ends with the control
+    /// loop's result. For a robot with one executor; with an interrupt executor, [`split`] the
+    /// runtime and run the sensing side on it.
+    ///
+    /// [`split`]: Engine::split
+    pub async fn run_with_sensing(&mut self) -> Result<Report<W>, ControlError<W>> {
+        self.beside_sensing(self.run()).await
+    }
+
+    /// [`DecidingSide::run_planning`] beside the sensing side, as [`Engine::run_with_sensing`]
+    /// runs [`DecidingSide::run`].
+    pub async fn run_planning_with_sensing<const N: usize>(
+        &mut self,
+        planner: &Planner<N, W>,
+        space: &mut Search<N, W>,
+    ) -> Result<Report<W>, ControlError<W>> {
+        self.beside_sensing(self.run_planning(planner, space)).await
+    }
+}
+
+impl<
+    'a,
+    'r,
+    P: Platform + Sensor<W> + Actuator<W>,
+    T: TraceSink<W>,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+    const W: usize,
+    const NF: usize,
+> SensingSide<'a, Engine<'r, P, T, NS, NA, NP, L, K, W, NF>>
+{
+    /// The samplers, one per sensor, all concurrent. Never ends; drop it to stop sensing.
+    ///
+    /// The samplers are built here, out of line, not in the first poll: the temporaries of
+    /// building `NS` of them stay off the stack of whatever polls them (an interrupt, on a
+    /// microcontroller, on top of the deciding side's stack). Pin the result where it is made
+    /// (`pin!(sensing.run())`) and it is never copied again.
+    pub fn run(&mut self) -> Sensing<impl Future<Output = [(); NS]> + '_> {
+        self.0.sensing()
+    }
+}
+
+impl<
+    'a,
+    'r,
+    P: Platform + Sensor<W> + Actuator<W>,
+    T: TraceSink<W>,
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const K: usize,
+    const W: usize,
+    const NF: usize,
+> DecidingSide<'a, Engine<'r, P, T, NS, NA, NP, L, K, W, NF>>
+{
+    /// Algorithm 1 with plans from the library only: establishes the model, then selects and
+    /// executes plans until the task's goal holds. Ends with an error, never a hang, when no
+    /// plan applies, every applicable plan failed, or the failure or plan limit of the
+    /// [`Config`](crate::runtime::engine::Config) is reached.
+    pub fn run(&mut self) -> impl Future<Output = Result<Report<W>, ControlError<W>>> + '_ {
+        self.0.run()
+    }
+
+    /// Algorithm 1 where `generatePlans` falls back on `planner` when no library plan applies,
+    /// and plans again from the current beliefs after a failure. The search runs in `space`
+    /// (keep it in a `static` on a microcontroller), in slices of
+    /// [`Config::plan_slice`](crate::runtime::engine::Config::plan_slice) nodes with a yield
+    /// between two, so that on a cooperative executor it holds the deciding side's turn for one
+    /// slice at a time.
+    pub fn run_planning<'s, const N: usize>(
+        &'s mut self,
+        planner: &'s Planner<N, W>,
+        space: &'s mut Search<N, W>,
+    ) -> impl Future<Output = Result<Report<W>, ControlError<W>>> + 's {
+        self.0.run_planning(planner, space)
+    }
+}

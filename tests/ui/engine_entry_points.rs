@@ -1,0 +1,13 @@
+// The lower-level entry points are not public: the sides are the way in.
+use psmpa_core::{Actions, Body, Caps, Keys, Plans, Runtime, Sensors};
+use psmpa_tests::tiny::TinyWorld;
+
+type Rt<'r> = Runtime<'r, TinyWorld, Caps<Sensors<2>, Actions<4>, Plans<4>, Body<4>, Keys<4>>>;
+
+fn sampler(rt: &Rt<'_>) {
+    let _ = rt.sensing();
+}
+
+fn main() {
+    let _ = sampler;
+}
