@@ -58,6 +58,15 @@ step "a crate outside the workspace, at its own tick rate, compiles its mission 
 cargo test --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside
 cargo build --locked --manifest-path examples/outside/Cargo.toml --target-dir target/outside --target thumbv7em-none-eabihf
 
+step "a robot on a compiled mission builds no JSON loader for its MCU: no serde, serde-json-core or ryu in the Pico's or the outside crate's target graph"
+for dir in boards/pico examples/outside; do
+  target=$([ "$dir" = boards/pico ] && echo thumbv6m-none-eabi || echo thumbv7em-none-eabihf)
+  if (cd "$dir" && cargo tree --locked -e normal,no-proc-macro --target "$target") | grep -E ' (serde|serde-json-core|ryu) v'; then
+    echo "$dir builds a JSON loader for $target: psmpa-core's feature loader is on" >&2
+    exit 1
+  fi
+done
+
 step "a mission whose period a slow tick rate cannot represent fails the build, naming the sensor, the period and the rate (tests/slow-tick: 10 Hz)"
 # Its trybuild cases resolve their mission beside the target directory: an absolute one.
 CARGO_TARGET_DIR="$PWD/target/outside" cargo test --locked --manifest-path tests/slow-tick/Cargo.toml

@@ -36,14 +36,24 @@
 
 use core::fmt;
 
+#[cfg(feature = "loader")]
 use embassy_time::Duration;
 use heapless::Vec;
+#[cfg(feature = "loader")]
 use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
-use crate::action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode};
-use crate::domain::{Domain, DomainError, EventId, Table};
-use crate::facts::{FactId, FactSetOf};
-use crate::plan::{Plan, PlanError, PlanLibrary};
+use crate::action::{ActionId, SensorId};
+#[cfg(feature = "loader")]
+use crate::action::{ActuatorAction, SensorAction, SensorMode};
+use crate::domain::{Domain, EventId};
+#[cfg(feature = "loader")]
+use crate::domain::{DomainError, Table};
+use crate::facts::FactSetOf;
+#[cfg(feature = "loader")]
+use crate::facts::FactId;
+use crate::plan::PlanLibrary;
+#[cfg(feature = "loader")]
+use crate::plan::{Plan, PlanError};
 use crate::task::Task;
 
 /// The domain (facts, events, sensor-based and actuator-based actions), the plan library and
@@ -342,6 +352,7 @@ impl core::error::Error for LoadError<'_> {}
 
 /// What the streaming deserializers need from the mission under construction; object safe so
 /// they carry no capacity parameters.
+#[cfg(feature = "loader")]
 trait Build<'a, const W: usize> {
     fn at(&self) -> Location;
     fn set_at(&mut self, at: Location);
@@ -368,11 +379,13 @@ trait Build<'a, const W: usize> {
 }
 
 /// Records `problem` and returns the error that stops the parse.
+#[cfg(feature = "loader")]
 fn fail<'a, E: de::Error, const W: usize>(b: &mut dyn Build<'a, W>, problem: Problem<'a>) -> E {
     b.record(problem);
     E::custom("mission error")
 }
 
+#[cfg(feature = "loader")]
 fn field<const W: usize>(b: &mut dyn Build<'_, W>, field: Option<&'static str>) {
     let mut at = b.at();
     at.field = field;
@@ -380,6 +393,7 @@ fn field<const W: usize>(b: &mut dyn Build<'_, W>, field: Option<&'static str>) 
 }
 
 /// The mission being built, the current location and the first problem.
+#[cfg(feature = "loader")]
 struct Builder<
     'a,
     'r,
@@ -400,6 +414,7 @@ struct Builder<
     body: Vec<ActionId, L>,
 }
 
+#[cfg(feature = "loader")]
 fn domain_problem(e: DomainError, name: &str) -> Problem<'_> {
     match e {
         DomainError::Full { table, capacity } => Problem::Capacity {
@@ -418,6 +433,7 @@ fn domain_problem(e: DomainError, name: &str) -> Problem<'_> {
     }
 }
 
+#[cfg(feature = "loader")]
 impl<
     'a,
     R: Registry,
@@ -571,6 +587,7 @@ impl<
 }
 
 /// Which top-level keys a pass reads; it skips the others.
+#[cfg(feature = "loader")]
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Pass {
     Names,
@@ -579,6 +596,7 @@ enum Pass {
 }
 
 /// The top-level keys; all but `sensors` and `description` are required.
+#[cfg(feature = "loader")]
 const TOP_KEYS: [&str; 8] = [
     "name",
     "facts",
@@ -589,20 +607,25 @@ const TOP_KEYS: [&str; 8] = [
     "task",
     "description",
 ];
+#[cfg(feature = "loader")]
 const OPTIONAL_TOP: u16 = 1 << 3 | 1 << 7;
 
 /// A JSON string borrowed from the file.
+#[cfg(feature = "loader")]
 struct Str;
 
 /// A string borrowed as written, escapes and all: the mission's own name, which is only shown
 /// (escaped where shown), never compared.
+#[cfg(feature = "loader")]
 struct Text;
 
 /// The visitor of both: `plain` refuses escapes.
+#[cfg(feature = "loader")]
 struct StrVisitor {
     plain: bool,
 }
 
+#[cfg(feature = "loader")]
 impl<'de> Visitor<'de> for StrVisitor {
     type Value = &'de str;
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -618,6 +641,7 @@ impl<'de> Visitor<'de> for StrVisitor {
     }
 }
 
+#[cfg(feature = "loader")]
 impl<'de> DeserializeSeed<'de> for Str {
     type Value = &'de str;
     fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<&'de str, D::Error> {
@@ -625,6 +649,7 @@ impl<'de> DeserializeSeed<'de> for Str {
     }
 }
 
+#[cfg(feature = "loader")]
 impl<'de> DeserializeSeed<'de> for Text {
     type Value = &'de str;
     fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<&'de str, D::Error> {
@@ -633,6 +658,7 @@ impl<'de> DeserializeSeed<'de> for Text {
 }
 
 /// What a [`NameList`] does with each name.
+#[cfg(feature = "loader")]
 #[derive(Clone, Copy)]
 enum ListKind {
     /// Declare facts.
@@ -646,8 +672,10 @@ enum ListKind {
 }
 
 /// A list of names: declared, resolved into a fact set, or collected into a plan body.
+#[cfg(feature = "loader")]
 struct NameList<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, ListKind);
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> DeserializeSeed<'a> for NameList<'_, 'a, W> {
     type Value = FactSetOf<W>;
     fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<FactSetOf<W>, D::Error> {
@@ -655,6 +683,7 @@ impl<'a, const W: usize> DeserializeSeed<'a> for NameList<'_, 'a, W> {
     }
 }
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> Visitor<'a> for NameList<'_, 'a, W> {
     type Value = FactSetOf<W>;
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -688,8 +717,10 @@ impl<'a, const W: usize> Visitor<'a> for NameList<'_, 'a, W> {
 }
 
 /// A list of objects of one section, each read by [`Entry`].
+#[cfg(feature = "loader")]
 struct Entries<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, Section);
 
+#[cfg(feature = "loader")]
 #[derive(Clone, Copy)]
 enum Section {
     Sensors,
@@ -698,6 +729,7 @@ enum Section {
     Task,
 }
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> DeserializeSeed<'a> for Entries<'_, 'a, W> {
     type Value = ();
     fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
@@ -708,6 +740,7 @@ impl<'a, const W: usize> DeserializeSeed<'a> for Entries<'_, 'a, W> {
     }
 }
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> Visitor<'a> for Entries<'_, 'a, W> {
     type Value = ();
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -730,8 +763,10 @@ impl<'a, const W: usize> Visitor<'a> for Entries<'_, 'a, W> {
 }
 
 /// One sensor, action, plan or the task.
+#[cfg(feature = "loader")]
 struct Entry<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, Section);
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> DeserializeSeed<'a> for Entry<'_, 'a, W> {
     type Value = ();
     fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
@@ -740,12 +775,17 @@ impl<'a, const W: usize> DeserializeSeed<'a> for Entry<'_, 'a, W> {
 }
 
 /// The fields each kind of entry has.
+#[cfg(feature = "loader")]
 const SENSOR_KEYS: [&str; 6] = ["name", "pre", "per", "mode", "period_ms", "timeout_ms"];
+#[cfg(feature = "loader")]
 const ACTION_KEYS: [&str; 5] = ["name", "pre", "add", "del", "max_violation_ms"];
+#[cfg(feature = "loader")]
 const PLAN_KEYS: [&str; 5] = ["name", "trigger", "context", "context_not", "body"];
+#[cfg(feature = "loader")]
 const TASK_KEYS: [&str; 3] = ["event", "init", "goal"];
 
 /// The fields of one entry as read, before they are checked together.
+#[cfg(feature = "loader")]
 #[derive(Default)]
 struct Fields<'a, const W: usize> {
     name: Option<&'a str>,
@@ -757,6 +797,7 @@ struct Fields<'a, const W: usize> {
 }
 
 /// A number of milliseconds, at least 1. Integers only: no float parser on a microcontroller.
+#[cfg(feature = "loader")]
 fn millis<'a>(v: u64) -> Result<Duration, Problem<'a>> {
     if v == 0 {
         return Err(Problem::Period);
@@ -767,6 +808,7 @@ fn millis<'a>(v: u64) -> Result<Duration, Problem<'a>> {
     Ok(Duration::from_millis(v))
 }
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> Visitor<'a> for Entry<'_, 'a, W> {
     type Value = ();
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -922,8 +964,10 @@ impl<'a, const W: usize> Visitor<'a> for Entry<'_, 'a, W> {
 }
 
 /// One pass over the top-level object.
+#[cfg(feature = "loader")]
 struct Top<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>, Pass, &'s mut u16);
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> DeserializeSeed<'a> for Top<'_, 'a, W> {
     type Value = ();
     fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
@@ -931,6 +975,7 @@ impl<'a, const W: usize> DeserializeSeed<'a> for Top<'_, 'a, W> {
     }
 }
 
+#[cfg(feature = "loader")]
 impl<'a, const W: usize> Visitor<'a> for Top<'_, 'a, W> {
     type Value = ();
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -1013,6 +1058,7 @@ pub fn reachable<const NS: usize, const NA: usize, const W: usize, const NF: usi
 pub const MAX_DEPTH: usize = 8;
 
 /// Whether arrays and objects in `json` nest deeper than `limit`, outside strings. O(n).
+#[cfg(feature = "loader")]
 fn too_deep(json: &[u8], limit: usize) -> Option<Location> {
     let (mut depth, mut in_string, mut escaped) = (0usize, false, false);
     // Where the scan is: the last string read at the top level, the top-level key whose value
@@ -1107,6 +1153,7 @@ pub const fn mission_hash(bytes: &[u8]) -> u64 {
 /// let error = load::<_, 1, 1, 1, 1, 1, 64>(bad.as_bytes(), &AnyBehaviour).unwrap_err();
 /// assert!(error.to_string().contains("plans[0].body"), "{error}");
 /// ```
+#[cfg(feature = "loader")]
 pub fn load<
     'a,
     R: Registry,
@@ -1128,6 +1175,7 @@ pub fn load<
 /// [`load`] into `mission` and `bindings`, in place: the mission is never copied, which keeps
 /// a microcontroller's stack small. Both are emptied first; after an error they hold what was
 /// read so far.
+#[cfg(feature = "loader")]
 pub fn load_into<
     'a,
     R: Registry,
@@ -1277,7 +1325,7 @@ impl<
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "loader"))]
 mod tests {
     use super::*;
     use crate::facts::FactSet;
