@@ -16,6 +16,9 @@ cargo clippy --workspace --all-targets -- -D warnings
 
 # Before anything writes files: a clean tree packages.
 step "the library crates package and build as published (psmpa-model, -macros, -core, -testkit, -drivers)"
+# Cargo keeps a dry run's unpacked crates by version and never unpacks the same version again:
+# a 0.3.0-dev packaged earlier from other sources would be built instead of this one.
+rm -rf "${CARGO_HOME:-$HOME/.cargo}"/registry/src/-*/psmpa-*
 cargo publish --workspace --dry-run
 
 step "host tests"
