@@ -120,8 +120,27 @@ pub use defmt as __defmt;
 /// psmpa_core::compile_runtime!(RobotRuntime<'_>);
 /// # fn main() {}
 /// ```
+///
+/// A robot generic over its hardware names the parameters and their bounds: the function is
+/// then generic, and the build type-checks the whole runtime for every hardware the bounds
+/// admit (the firmware that picks one compiles it for that one):
+/// `psmpa_core::compile_runtime!(<H> RobotRuntime<'_, H> where H: Wheels + Ranger);`
 #[macro_export]
 macro_rules! compile_runtime {
+    (<$($param:ident),+> $runtime:ty $(where $($bound:tt)+)?) => {
+        /// Type-checks the runtime for this crate's platforms (`psmpa_core::compile_runtime!`):
+        /// never called.
+        #[doc(hidden)]
+        pub fn __psmpa_compile_runtime<$($param),+>(
+            runtime: &mut $runtime,
+            cx: &mut ::core::task::Context<'_>,
+        ) -> ::core::task::Poll<()>
+        $(where $($bound)+)?
+        {
+            let run = ::core::pin::pin!(runtime.run_with_sensing());
+            ::core::future::Future::poll(run, cx).map(|_| ())
+        }
+    };
     ($runtime:ty) => {
         /// Compiles the runtime for this crate's platform (`psmpa_core::compile_runtime!`):
         /// never called.

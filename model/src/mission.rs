@@ -48,9 +48,9 @@ use crate::action::{ActuatorAction, SensorAction, SensorMode};
 use crate::domain::{Domain, EventId};
 #[cfg(feature = "loader")]
 use crate::domain::{DomainError, Table};
-use crate::facts::FactSetOf;
 #[cfg(feature = "loader")]
 use crate::facts::FactId;
+use crate::facts::FactSetOf;
 use crate::plan::PlanLibrary;
 #[cfg(feature = "loader")]
 use crate::plan::{Plan, PlanError};
