@@ -131,7 +131,7 @@ fn expand(input: &Input) -> syn::Result<Tokens> {
     // Computed here: a `const fn` over a large file's bytes exceeds the compiler's budget.
     let hash = psmpa_model::mission::mission_hash(&bytes);
     check::check::<_, MAX_WORDS, MAX_FACTS>(Path::new(&given), &bytes, |m| {
-        generate(input, m, &file, &keys, hash)
+        generate(input, m, &file, &keys, hash, &Descriptions::of(&bytes))
     })
     .map_err(|e| syn::Error::new(span, e))?
 }
@@ -208,6 +208,34 @@ fn millis(d: embassy_time::Duration) -> u64 {
     d.as_millis()
 }
 
+/// The `description` strings of a mission's sensors, actions and plans, by index (`None`: no
+/// description, or one that is not a string), for the variants' doc comments.
+struct Descriptions {
+    sensors: Vec<Option<String>>,
+    actions: Vec<Option<String>>,
+    plans: Vec<Option<String>>,
+}
+
+impl Descriptions {
+    /// From the mission file's bytes (already checked: anything unreadable has none).
+    fn of(bytes: &[u8]) -> Self {
+        let v: serde_json::Value = serde_json::from_slice(bytes).unwrap_or_default();
+        let of = |section: &str| -> Vec<Option<String>> {
+            v[section].as_array().map_or_else(Vec::new, |items| {
+                items
+                    .iter()
+                    .map(|i| i["description"].as_str().map(str::to_owned))
+                    .collect()
+            })
+        };
+        Self {
+            sensors: of("sensors"),
+            actions: of("actions"),
+            plans: of("plans"),
+        }
+    }
+}
+
 /// One of the generated enums: its variants, ids and names.
 fn names_enum(
     what: &str,
@@ -216,6 +244,7 @@ fn names_enum(
     repr: Tokens,
     variants: &[Ident],
     names: &[&str],
+    described: &[Option<String>],
 ) -> Tokens {
     let n = variants.len();
     let index: Vec<usize> = (0..n).collect();
@@ -224,7 +253,20 @@ fn names_enum(
     );
     let variant_docs: Vec<String> = names
         .iter()
-        .map(|s| format!("`{}`", s.replace('`', "'")))
+        .enumerate()
+        .map(|(i, s)| {
+            let name = format!("`{}`", s.replace('`', "'"));
+            match described.get(i).cloned().flatten() {
+                Some(d) => format!("{name}: {d}"),
+                None => name,
+            }
+        })
+        .collect();
+    let descriptions: Vec<Tokens> = (0..n)
+        .map(|i| match described.get(i).cloned().flatten() {
+            Some(d) => quote!(::core::option::Option::Some(#d)),
+            None => quote!(::core::option::Option::None),
+        })
         .collect();
     // An enum with no variants has no representation to give (E0084): a mission with no
     // sensors or no plans has no value of that type at all.
@@ -245,6 +287,13 @@ fn names_enum(
             pub const fn name(self) -> &'static str {
                 match self {
                     #( Self::#variants => #names, )*
+                }
+            }
+
+            /// The `description` the mission gives it, if it gives a string one.
+            pub const fn description(self) -> ::core::option::Option<&'static str> {
+                match self {
+                    #( Self::#variants => #descriptions, )*
                 }
             }
 
@@ -286,6 +335,7 @@ fn generate(
     file: &Path,
     keys: &Tokens,
     hash: u64,
+    descriptions: &Descriptions,
 ) -> syn::Result<Tokens> {
     let span = input.path.span();
     let d = &m.domain;
@@ -318,6 +368,7 @@ fn generate(
             quote!(u16),
             &fact_v,
             fact_names,
+            &[],
         ),
         names_enum(
             "event",
@@ -326,6 +377,7 @@ fn generate(
             quote!(u8),
             &event_v,
             event_names,
+            &[],
         ),
         names_enum(
             "sensor",
@@ -334,6 +386,7 @@ fn generate(
             quote!(u8),
             &sensor_v,
             &sensor_names,
+            &descriptions.sensors,
         ),
         names_enum(
             "action",
@@ -342,6 +395,7 @@ fn generate(
             quote!(u16),
             &action_v,
             &action_names,
+            &descriptions.actions,
         ),
         names_enum(
             "plan",
@@ -350,6 +404,7 @@ fn generate(
             quote!(u8),
             &plan_v,
             &plan_names,
+            &descriptions.plans,
         ),
     ];
 

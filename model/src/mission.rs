@@ -29,7 +29,9 @@
 //! (default 500) bounds a sample. An action may have `max_violation_ms`
 //! ([`ActuatorAction::max_violation`]; absent: the runtime's `Config::max_violation`), a
 //! plan `context_not`, facts that must not hold ([`Plan::context_not`]), and the file a
-//! top-level `description` (any JSON value, skipped). The `_ms` values are whole numbers of
+//! top-level `description` (any JSON value, skipped). A sensor, an action and a plan may
+//! have a `description` too: skipped by the loader; a string one becomes the doc comment of
+//! its variant in `include_mission!`'s enums. The `_ms` values are whole numbers of
 //! milliseconds: the loader parses integers only, so a microcontroller needs no float
 //! parser (`50.0` or `5e1` is an error). `pre`, `add`, `del`, `context`, `context_not` and
 //! `init` default to `[]`.
@@ -776,11 +778,33 @@ impl<'a, const W: usize> DeserializeSeed<'a> for Entry<'_, 'a, W> {
 
 /// The fields each kind of entry has.
 #[cfg(feature = "loader")]
-const SENSOR_KEYS: [&str; 6] = ["name", "pre", "per", "mode", "period_ms", "timeout_ms"];
+const SENSOR_KEYS: [&str; 7] = [
+    "name",
+    "pre",
+    "per",
+    "mode",
+    "period_ms",
+    "timeout_ms",
+    "description",
+];
 #[cfg(feature = "loader")]
-const ACTION_KEYS: [&str; 5] = ["name", "pre", "add", "del", "max_violation_ms"];
+const ACTION_KEYS: [&str; 6] = [
+    "name",
+    "pre",
+    "add",
+    "del",
+    "max_violation_ms",
+    "description",
+];
 #[cfg(feature = "loader")]
-const PLAN_KEYS: [&str; 5] = ["name", "trigger", "context", "context_not", "body"];
+const PLAN_KEYS: [&str; 6] = [
+    "name",
+    "trigger",
+    "context",
+    "context_not",
+    "body",
+    "description",
+];
 #[cfg(feature = "loader")]
 const TASK_KEYS: [&str; 3] = ["event", "init", "goal"];
 
@@ -837,6 +861,10 @@ impl<'a, const W: usize> Visitor<'a> for Entry<'_, 'a, W> {
                 "period_ms" => f.number[0] = Some(map.next_value()?),
                 "timeout_ms" => f.number[1] = Some(map.next_value()?),
                 "max_violation_ms" => f.number[2] = Some(map.next_value()?),
+                // Prose for people (and, compiled in, the variant's doc comment): skipped.
+                "description" => {
+                    map.next_value::<IgnoredAny>()?;
+                }
                 "body" => {
                     f.body = true;
                     map.next_value_seed(NameList(&mut *b, ListKind::Body))?;
@@ -1411,6 +1439,23 @@ mod tests {
             Bindings::<Dev, Dev, 1, 2>::resolve(&d, &Robot).err(),
             Some("fly")
         );
+    }
+
+    #[test]
+    fn sensors_actions_and_plans_may_have_a_description_of_any_value() {
+        let json = r#"{"name": "m", "facts": ["a", "b"], "events": ["go"],
+            "sensors": [{"name": "s", "per": ["a"], "mode": "one-shot",
+                         "description": "looks ahead"}],
+            "actions": [{"name": "x", "pre": ["a"], "add": ["b"],
+                         "description": {"why": ["any", 1, true]}}],
+            "plans": [{"name": "p", "trigger": "go", "body": ["x"], "description": "the way"}],
+            "task": {"event": "go", "goal": ["b"]}}"#;
+        let m: Loaded<'_, (), (), 1, 1, 1, 1> = load(json.as_bytes(), &AnyBehaviour).unwrap();
+        assert_eq!(m.mission.domain.sensors().len(), 1);
+        // Not on the task: it has no name to describe.
+        let task = json.replace(r#""goal": ["b"]}"#, r#""goal": ["b"], "description": "t"}"#);
+        let error = load::<_, 1, 1, 1, 1, 1, 64>(task.as_bytes(), &AnyBehaviour).unwrap_err();
+        assert_eq!(error.to_string(), "task: unknown field `description`");
     }
 
     #[test]

@@ -227,3 +227,24 @@ fn names_of_digits_and_symbols_outside_ascii_make_identifiers() {
     );
     assert_eq!(format!("{:?}", symbols::Plan::ALL), "[Pour]");
 }
+
+psmpa_core::include_mission!(mod described = "missions/described.json");
+
+#[test]
+fn a_description_reaches_its_variant_and_loads_at_run_time() {
+    assert_eq!(
+        described::Sensor::Bumper.description(),
+        Some("A switch on the front bumper, closed by a touch.")
+    );
+    // Not a string: no description (and no doc comment).
+    assert_eq!(described::Action::Drive.description(), None);
+    assert_eq!(
+        described::Plan::GoThere.description(),
+        Some("Straight ahead.")
+    );
+    // The loader reads the same file.
+    let json = include_bytes!("../missions/described.json");
+    let loaded: psmpa_core::LoadedOf<'_, psmpa_core::mission::AnyBehaviour, described::Caps> =
+        psmpa_core::mission::load(json, &psmpa_core::mission::AnyBehaviour).unwrap();
+    assert_eq!(loaded.mission.domain, described::MISSION.domain);
+}
