@@ -16,6 +16,7 @@ use embassy_time::{Duration, Instant, Timer};
 use crate::action::{ActionId, SensorId};
 use crate::facts::FactSetOf;
 use crate::failure::{SensorFault, Violation};
+use crate::plan::PlanId;
 use crate::store::{Entry, Key, MutualStore, SAMPLE_KEY, StoreFull, Value};
 
 /// Most `(key, value)` pairs one [`Reading`] carries besides its main value.
@@ -212,6 +213,37 @@ impl FromId<SensorId> for SensorId {
 impl FromId<ActionId> for ActionId {
     fn from_id(id: ActionId) -> Option<Self> {
         Some(id)
+    }
+}
+
+impl FromId<PlanId> for PlanId {
+    fn from_id(id: PlanId) -> Option<Self> {
+        Some(id)
+    }
+}
+
+impl<const W: usize> crate::failure::Failure<W> {
+    /// The action the failure is about, in the type the platform names actions by (a compiled
+    /// mission's `Action`, or [`ActionId`]); `None` if it is about none.
+    pub fn action<A: FromId<ActionId>>(&self) -> Option<A> {
+        use crate::failure::Failure as F;
+        match *self {
+            F::ActionFailed { action }
+            | F::ActionInterrupted { action }
+            | F::PreconditionUnmet { action, .. }
+            | F::PreconditionViolated { action, .. } => A::from_id(action),
+            _ => None,
+        }
+    }
+
+    /// The sensor the failure is about, as [`Failure::action`](crate::Failure::action) names
+    /// an action.
+    pub fn sensor<S: FromId<SensorId>>(&self) -> Option<S> {
+        use crate::failure::Failure as F;
+        match *self {
+            F::SensorUnavailable { sensor } | F::SensorFault { sensor, .. } => S::from_id(sensor),
+            _ => None,
+        }
     }
 }
 

@@ -12,7 +12,7 @@ use crate::facts::FactSetOf;
 use crate::failure::Failure;
 use crate::failure::SensorFault;
 use crate::plan::PlanId;
-use crate::platform::Outcome;
+use crate::platform::{FromId, Outcome};
 use crate::store::Value;
 
 /// The two phases of the SMPA baseline.
@@ -148,6 +148,48 @@ pub enum TraceEvent<const W: usize = 1> {
         /// Application-defined value.
         value: i32,
     },
+}
+
+impl<const W: usize> TraceEvent<W> {
+    /// The action the event is about, in the type the platform names actions by (a compiled
+    /// mission's `Action`, or [`ActionId`]); `None` if it is about none.
+    pub fn action<A: FromId<ActionId>>(&self) -> Option<A> {
+        match *self {
+            Self::StateEntered { action, .. }
+            | Self::StateLeft { action, .. }
+            | Self::PhaseStarted { action, .. }
+            | Self::PreconditionViolated { action, .. }
+            | Self::PreconditionRestored { action }
+            | Self::EffectsApplied { action, .. } => A::from_id(action),
+            Self::PlanFailed { reason, .. } => reason.action(),
+            _ => None,
+        }
+    }
+
+    /// The sensor the event is about, as [`TraceEvent::action`] names an action.
+    pub fn sensor<S: FromId<SensorId>>(&self) -> Option<S> {
+        match *self {
+            Self::SensorOn { sensor }
+            | Self::SensorOff { sensor }
+            | Self::Sample { sensor, .. }
+            | Self::SampleLost { sensor }
+            | Self::SensorFailed { sensor, .. } => S::from_id(sensor),
+            Self::PlanFailed { reason, .. } => reason.sensor(),
+            _ => None,
+        }
+    }
+
+    /// The plan the event is about (a compiled mission's `Plan`, or [`PlanId`]); a plan the
+    /// planner generated has no `Plan` of the mission: `None` then, and `Some` as a
+    /// [`PlanId`] ([`PlanId::GENERATED`]).
+    pub fn plan<P: FromId<PlanId>>(&self) -> Option<P> {
+        match *self {
+            Self::PlanSelected { plan, .. }
+            | Self::PlanSucceeded { plan }
+            | Self::PlanFailed { plan, .. } => P::from_id(plan),
+            _ => None,
+        }
+    }
 }
 
 /// Receives the trace events of a runtime whose fact sets have `W` words. Implementations

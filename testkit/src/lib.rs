@@ -51,7 +51,8 @@ pub use sim::{Completed, SimError, simulate, simulate_split};
 #[cfg(feature = "std")]
 mod record {
     use embassy_time::{Duration, Instant};
-    use psmpa_core::{Failure, PlanId, TraceEvent, TraceSink};
+    use psmpa_core::platform::FromId;
+    use psmpa_core::{ActionId, Failure, PlanId, SensorId, TraceEvent, TraceSink};
 
     /// A trace sink that keeps every event with its instant (of a runtime whose fact sets have
     /// `W` words).
@@ -82,23 +83,45 @@ mod record {
             self.0.iter().find(|(_, e)| matching(e)).map(|(t, _)| *t)
         }
 
-        /// The plans selected, in order ([`PlanId::GENERATED`] for a planner's).
-        pub fn plans_selected(&self) -> Vec<PlanId> {
+        /// The plans selected, in order, as `P` names them: a compiled mission's `Plan`
+        /// (`plans_selected::<dock::Plan>()`), or [`PlanId`], which also names a plan the
+        /// planner generated ([`PlanId::GENERATED`]; the mission's `Plan` has none, so it is
+        /// left out of a list of those).
+        pub fn plans_selected<P: FromId<PlanId>>(&self) -> Vec<P> {
             self.0
                 .iter()
-                .filter_map(|(_, e)| match e {
-                    TraceEvent::PlanSelected { plan, .. } => Some(*plan),
+                .filter(|(_, e)| matches!(e, TraceEvent::PlanSelected { .. }))
+                .filter_map(|(_, e)| e.plan())
+                .collect()
+        }
+
+        /// Every plan that failed, when, and why (its plan as [`Recorder::plans_selected`]
+        /// names it).
+        pub fn plan_failures<P: FromId<PlanId>>(&self) -> Vec<(Instant, P, Failure<W>)> {
+            self.0
+                .iter()
+                .filter_map(|(t, e)| match e {
+                    TraceEvent::PlanFailed { plan, reason } => {
+                        Some((*t, P::from_id(*plan)?, *reason))
+                    }
                     _ => None,
                 })
                 .collect()
         }
 
-        /// Every plan that failed, when, and why.
-        pub fn plan_failures(&self) -> Vec<(Instant, PlanId, Failure<W>)> {
+        /// Every state entered, in order: its action and the sensors running beside it, as a
+        /// compiled mission's `Action` and `Sensor` name them (or [`psmpa_core::ActionId`]
+        /// and [`psmpa_core::SensorId`]).
+        pub fn states_entered<A: FromId<ActionId>, S: FromId<SensorId>>(&self) -> Vec<(A, Vec<S>)> {
             self.0
                 .iter()
-                .filter_map(|(t, e)| match e {
-                    TraceEvent::PlanFailed { plan, reason } => Some((*t, *plan, *reason)),
+                .filter_map(|(_, e)| match e {
+                    TraceEvent::StateEntered {
+                        action, sensors, ..
+                    } => Some((
+                        A::from_id(*action)?,
+                        sensors.iter().filter_map(S::from_id).collect(),
+                    )),
                     _ => None,
                 })
                 .collect()
@@ -129,8 +152,8 @@ mod record {
                 },
             );
             r.record(at(5), &selected(second));
-            assert_eq!(r.plans_selected(), [first, second]);
-            assert_eq!(r.plan_failures(), [(at(5), first, failed)]);
+            assert_eq!(r.plans_selected::<PlanId>(), [first, second]);
+            assert_eq!(r.plan_failures::<PlanId>(), [(at(5), first, failed)]);
         }
     }
 

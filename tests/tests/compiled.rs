@@ -147,7 +147,10 @@ fn a_compiled_runtime_is_named_by_its_module_and_built_by_inference() {
     // Every sensor says all it perceives holds: "drive in" runs to the goal.
     let report = done.output.unwrap();
     assert!(report.beliefs.contains(dock::Fact::Docked.id()));
-    assert_eq!(rt.into_sink().plans_selected(), [dock::Plan::DriveIn.id()]);
+    assert_eq!(
+        rt.into_sink().plans_selected::<dock::Plan>(),
+        [dock::Plan::DriveIn]
+    );
 }
 
 psmpa_core::include_mission!(mod blind = "missions/no-sensors.json");

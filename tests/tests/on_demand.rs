@@ -82,7 +82,7 @@ fn run(tolerance_ms: u32) -> (Result<Report, ControlError>, Vec<(Instant, Failur
         .expect("the run ends");
     let failures = rt
         .into_sink()
-        .plan_failures()
+        .plan_failures::<psmpa_core::PlanId>()
         .into_iter()
         .map(|(t, _, reason)| (t, reason))
         .collect();

@@ -17,17 +17,13 @@ fn run(yard: &Yard) -> (Result<Report, ControlError>, Recorder) {
     (done.output, rt.into_sink())
 }
 
-fn sensors(sensors: &[Sensor]) -> SensorSet {
-    sensors.iter().map(|s| s.id()).collect()
-}
-
 #[test]
 fn docks_driving_with_a_good_battery_and_creeping_with_a_low_one() {
     for (battery, plan, mm_s) in [(90, Plan::DriveIn, 300), (20, Plan::CreepIn, 100)] {
         let yard = Yard::new().with_battery(battery);
         let (result, trace) = run(&yard);
         assert!(result.is_ok(), "{result:?}");
-        assert_eq!(trace.plans_selected(), [plan.id()]);
+        assert_eq!(trace.plans_selected::<Plan>(), [plan]);
         // The approach takes its distance at its speed; aligning 0.5 s, connecting 0.3 s.
         let goal = trace.first(|e| matches!(e, TraceEvent::GoalReached { .. }));
         let approach_ms = ((DOCK_MM - NEAR_MM) as u64 * 1_000).div_ceil(mm_s);
@@ -47,7 +43,10 @@ fn a_box_stops_the_drive_within_one_ranger_period_and_the_robot_docks_after_it()
     let (result, trace) = run(&yard);
     assert!(result.is_ok(), "{result:?}");
     let violated = trace
-        .first(|e| matches!(e, TraceEvent::PreconditionViolated { action: a, .. } if *a == Action::Drive.id()))
+        .first(|e| {
+            matches!(e, TraceEvent::PreconditionViolated { .. })
+                && e.action() == Some(Action::Drive)
+        })
         .unwrap()
         .as_millis();
     let restored = trace
@@ -97,22 +96,12 @@ fn a_cliff_stops_the_robot_at_the_edge_and_ends_the_mission_with_an_error() {
 fn each_state_runs_exactly_the_sensors_its_precondition_needs() {
     let (result, trace) = run(&Yard::new());
     assert!(result.is_ok());
-    let states: Vec<(psmpa_core::ActionId, SensorSet)> = trace
-        .0
-        .iter()
-        .filter_map(|(_, e)| match *e {
-            TraceEvent::StateEntered {
-                action, sensors, ..
-            } => Some((action, sensors)),
-            _ => None,
-        })
-        .collect();
     assert_eq!(
-        states,
+        trace.states_entered::<Action, Sensor>(),
         [
-            (Action::Drive.id(), sensors(&[Sensor::Tof, Sensor::Cliff])),
-            (Action::Align.id(), sensors(&[Sensor::Camera])),
-            (Action::Connect.id(), SensorSet::EMPTY),
+            (Action::Drive, vec![Sensor::Tof, Sensor::Cliff]),
+            (Action::Align, vec![Sensor::Camera]),
+            (Action::Connect, vec![]),
         ]
     );
     // After the initial model, a sensor is on only inside a state that needs it.
