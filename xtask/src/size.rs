@@ -20,7 +20,7 @@ struct Budget {
 }
 
 /// The simulator-carrying firmware, a QEMU harness (its board has 4 MiB): a small real part's
-/// share for the mission and the simulated world. 64 KiB until the API issue: per-action
+/// share for the mission and the simulated world. 64 KiB until the 0.2 API rework: per-action
 /// tolerances, negative contexts and the one-lock sensing side took 0.8 KB, the world's event
 /// index (which halves a host simulation's instructions) 1 KB. RAM and stack 20 KiB since
 /// the image records every run: the flight recorder's queue (64 frames, 1.5 KB), its send
@@ -325,6 +325,68 @@ fn report_board(
     failures
 }
 
+/// What the pages say of `snapshot`: `(file, marker, text)`, written by `cargo xtask size`
+/// and checked by a test against the committed snapshot (a figure edited by hand fails it).
+pub fn pages(s: &Snapshot) -> Vec<(&'static str, &'static str, String)> {
+    let b = |n: u64| format!("{} B", crate::hil::thousands(n));
+    let kib = |n: u64| format!("{} KiB", n / 1024);
+    let (fw, pr) = (s.firmware, s.product);
+    let table = format!(
+        "
+| | firmware (simulator) | budget | product | target | Pico 2 board (`opt-level = \"s\"`) | Pico board | budget |
+|---|---|---|---|---|---|---|---|
+| flash | {} | {} | {} | {} | {} | {} | {} |
+| static RAM (`.data` + `.bss` + `.uninit`) | {} | | {} | | {} | {} | {} |
+| stack high-water (`paint-stack`) | {} (QEMU) | | {} (QEMU) | | (`cargo xtask stack`) | (`cargo xtask stack`) | |
+| static RAM + stack | {} | {} | {} | {} | | | |
+",
+        b(fw.flash),
+        b(FIRMWARE.flash),
+        b(pr.flash),
+        b(PRODUCT.flash),
+        b(s.pico2.flash),
+        b(s.pico.flash),
+        b(BOARD_FLASH),
+        b(fw.static_ram),
+        b(pr.static_ram),
+        b(s.pico2.static_ram),
+        b(s.pico.static_ram),
+        b(BOARD_STATIC_RAM),
+        b(fw.stack),
+        b(pr.stack),
+        b(fw.static_ram + fw.stack),
+        b(FIRMWARE.ram_with_stack),
+        b(pr.static_ram + pr.stack),
+        b(PRODUCT.ram_with_stack),
+    );
+    let cell = format!(
+        "product image {} of {} flash, {} of {} RAM + stack",
+        b(pr.flash),
+        kib(PRODUCT.flash),
+        b(pr.static_ram + pr.stack),
+        kib(PRODUCT.ram_with_stack)
+    );
+    let boards = format!(
+        "Pico 2: {} and {}; Pico: {} and {}",
+        b(s.pico2.flash),
+        b(s.pico2.static_ram),
+        b(s.pico.flash),
+        b(s.pico.static_ram)
+    );
+    vec![
+        ("README.md", "size", cell),
+        ("docs/firmware.md", "size-table", table),
+        ("docs/firmware.md", "board-sizes", boards),
+    ]
+}
+
+/// The committed snapshot.
+pub fn snapshot() -> Result<Snapshot, String> {
+    let path = firmware::root().join("firmware/size.json");
+    let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))
+}
+
 /// Measures the three images, compares, and with `bless` writes the snapshot.
 pub fn run(bless: bool) -> Result<(), String> {
     let elf = firmware::build(&[])?;
@@ -412,6 +474,12 @@ pub fn run(bless: bool) -> Result<(), String> {
             path.display()
         ));
     }
+    // The pages show the snapshot (the committed figures), blessed or not.
+    if let Ok(shown) = self::snapshot() {
+        for (page, marker, text) in pages(&shown) {
+            crate::hil::write_between(&firmware::root().join(page), marker, &text)?;
+        }
+    }
     if failures.is_empty() {
         Ok(())
     } else {
@@ -422,6 +490,27 @@ pub fn run(bless: bool) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::crate_of;
+
+    /// The text between a page's markers.
+    fn between(page: &str, marker: &str) -> Option<String> {
+        let (_, after) = page.split_once(&format!("<!-- {marker}:start -->"))?;
+        let (inside, _) = after.split_once(&format!("<!-- {marker}:end -->"))?;
+        Some(inside.to_owned())
+    }
+
+    #[test]
+    fn the_pages_show_the_committed_size_snapshot() {
+        let snapshot = super::snapshot().unwrap();
+        for (page, marker, text) in super::pages(&snapshot) {
+            let path = crate::firmware::root().join(page);
+            let shown = std::fs::read_to_string(&path).unwrap();
+            assert_eq!(
+                between(&shown, marker).as_deref(),
+                Some(text.as_str()),
+                "{page}: the {marker} figures are not firmware/size.json's: run cargo xtask size"
+            );
+        }
+    }
 
     #[test]
     fn symbols_are_attributed_to_the_crate_of_their_path() {
