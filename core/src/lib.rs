@@ -99,23 +99,22 @@ pub use defmt as __defmt;
 /// the compiler does not build).
 ///
 /// ```
-/// # use psmpa_core::{ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, SensorId};
+/// # use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault};
+/// psmpa_core::include_mission!(mod hello = "../testkit/tests/hello.json");
 /// # struct Robot;
 /// # impl Sensor for Robot {
-/// #     type Id = SensorId;
-/// #     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> { Ok(()) }
-/// #     async fn switch_off(&self, _: SensorId) {}
-/// #     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> { Ok(None) }
+/// #     type Id = hello::Sensor;
+/// #     async fn switch_on(&self, _: hello::Sensor) -> Result<(), SensorFault> { Ok(()) }
+/// #     async fn switch_off(&self, _: hello::Sensor) {}
+/// #     async fn sample(&self, _: hello::Sensor) -> Result<Option<Reading>, SensorFault> { Ok(None) }
 /// # }
 /// # impl Actuator for Robot {
-/// #     type Id = ActionId;
-/// #     fn halt(&self, _: ActionId) {} // nothing to stop
-/// #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
+/// #     type Id = hello::Action;
+/// #     fn halt(&self, _: hello::Action) {} // nothing to stop
+/// #     async fn run(&self, _: hello::Action, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
 /// # }
 /// # impl Platform for Robot { type Mutex = psmpa_core::embassy_sync::blocking_mutex::raw::NoopRawMutex; }
-/// use psmpa_core::{Actions, Body, Caps, Keys, Plans, Sensors};
-/// type RobotRuntime<'r> =
-///     psmpa_core::Runtime<'r, Robot, Caps<Sensors<2>, Actions<3>, Plans<1>, Body<3>, Keys<4>>>;
+/// type RobotRuntime<'r> = hello::Runtime<'r, Robot>;
 ///
 /// psmpa_core::compile_runtime!(RobotRuntime<'_>);
 /// # fn main() {}

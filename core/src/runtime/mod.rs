@@ -1,30 +1,34 @@
-//! Naming a runtime in one line: the platform and one type for every capacity.
+//! The runtime: the engine, its two sides, the state they share, the FSM, the control loop.
+//!
+//! A compiled mission names its runtime and every capacity: `include_mission!` generates
+//! `Runtime<'r, P, T>` and `Caps` in the mission's module, so a robot writes none by hand.
 //!
 //! ```
 //! use embassy_sync::blocking_mutex::raw::NoopRawMutex;
-//! use psmpa_core::{ActionId, ActionIo, Actuator, Actions, Body, Caps, Keys, Outcome, Plans,
-//!     Platform, Reading, Runtime, Sensor, SensorFault, SensorId, Sensors};
+//! use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault};
 //!
-//! struct Dock;
-//! # impl Sensor for Dock {
-//! #     type Id = SensorId;
-//! #     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> { Ok(()) }
-//! #     async fn switch_off(&self, _: SensorId) {}
-//! #     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> { Ok(None) }
+//! psmpa_core::include_mission!(mod hello = "../testkit/tests/hello.json");
+//!
+//! struct Robot;
+//! # impl Sensor for Robot {
+//! #     type Id = hello::Sensor;
+//! #     async fn switch_on(&self, _: hello::Sensor) -> Result<(), SensorFault> { Ok(()) }
+//! #     async fn switch_off(&self, _: hello::Sensor) {}
+//! #     async fn sample(&self, _: hello::Sensor) -> Result<Option<Reading>, SensorFault> { Ok(None) }
 //! # }
-//! # impl Actuator for Dock {
-//! #     type Id = ActionId;
-//! #     fn halt(&self, _: ActionId) {} // nothing to stop
-//! #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
+//! # impl Actuator for Robot {
+//! #     type Id = hello::Action;
+//! #     fn halt(&self, _: hello::Action) {} // nothing to stop
+//! #     async fn run(&self, _: hello::Action, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
 //! # }
-//! impl Platform for Dock {
+//! impl Platform for Robot {
 //!     type Mutex = NoopRawMutex; // both sides on one executor
 //! }
 //!
-//! /// 4 sensors, 6 actions, 2 plans of at most 4 actions, 8 keys per data store.
-//! type DockCaps = Caps<Sensors<4>, Actions<6>, Plans<2>, Body<4>, Keys<8>>;
-//! type DockRuntime = Runtime<'static, Dock, DockCaps>;
+//! type RobotRuntime<'r> = hello::Runtime<'r, Robot>;
 //! ```
+//!
+//! A mission loaded at run time names its capacities with [`Caps`] instead.
 
 pub mod control;
 pub mod engine;

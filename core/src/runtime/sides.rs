@@ -3,22 +3,22 @@
 //! running at once, or a second split while the first is in use does not compile.
 //!
 //! ```
-//! # use psmpa_core::{ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, SensorId};
-//! # use psmpa_core::{Actions, Body, Caps, Config, Keys, Plans, Runtime, Sensors};
+//! # use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault};
+//! # psmpa_core::include_mission!(mod hello = "../testkit/tests/hello.json");
 //! # struct Robot;
 //! # impl Sensor for Robot {
-//! #     type Id = SensorId;
-//! #     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> { Ok(()) }
-//! #     async fn switch_off(&self, _: SensorId) {}
-//! #     async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> { Ok(None) }
+//! #     type Id = hello::Sensor;
+//! #     async fn switch_on(&self, _: hello::Sensor) -> Result<(), SensorFault> { Ok(()) }
+//! #     async fn switch_off(&self, _: hello::Sensor) {}
+//! #     async fn sample(&self, _: hello::Sensor) -> Result<Option<Reading>, SensorFault> { Ok(None) }
 //! # }
 //! # impl Actuator for Robot {
-//! #     type Id = ActionId;
-//! #     async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
-//! #     fn halt(&self, _: ActionId) {}
+//! #     type Id = hello::Action;
+//! #     async fn run(&self, _: hello::Action, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
+//! #     fn halt(&self, _: hello::Action) {}
 //! # }
 //! # impl Platform for Robot { type Mutex = psmpa_core::embassy_sync::blocking_mutex::raw::NoopRawMutex; }
-//! # type RobotRuntime<'r> = Runtime<'r, Robot, Caps<Sensors<1>, Actions<1>, Plans<1>, Body<1>, Keys<4>>>;
+//! # type RobotRuntime<'r> = hello::Runtime<'r, Robot>;
 //! async fn fly(rt: &mut RobotRuntime<'_>) {
 //!     let (mut sensing, mut deciding) = rt.split();
 //!     // On a microcontroller: sensing in a task on an interrupt executor, deciding below it.
