@@ -83,6 +83,13 @@ sed -n '/<!-- own-robot:start -->/,/<!-- own-robot:end -->/p' docs/guide.md | se
 outside_target="$PWD/target/outside"
 (cd "$own" && CARGO_TARGET_DIR="$outside_target" bash -eu -o pipefail steps.sh)
 
+# The measuring commands below write their figures into these pages (size from its snapshot,
+# the QEMU timing, the bench, the stack and the static timing): they must come out as
+# committed (deterministic emulators and analyses: a figure that moved was not measured by
+# this tree).
+figures=$(mktemp -d)
+cp --parents README.md docs/firmware.md boards/README.md "$figures/"
+
 step "firmware: clippy for both targets (mps2-an386's Cortex-M4F, mps2-an505's Cortex-M33)"
 for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
   cargo clippy -p psmpa-firmware --target "$target" --profile firmware -- -D warnings
@@ -96,12 +103,6 @@ cargo xtask qemu --inject-fault --expect-failure
 
 step "firmware size: flash, static RAM, stack high-water against budget and snapshot (the QEMU images and both boards)"
 cargo xtask size
-
-# The bench and the static timing write their figures into these pages: they must come out
-# as committed (a deterministic emulator, a deterministic analysis: a figure that moved was
-# not measured by this tree).
-figures=$(mktemp -d)
-cp --parents README.md docs/firmware.md boards/README.md "$figures/"
 
 step "the bench: the Pico's firmware on an emulated RP2040 (rp2040js) against the project's world, every scenario and fault, judged from its pins and its flight recording against psmpa-sim and the committed cost budget, and every annotated loop's back edges counted"
 cargo xtask hil
@@ -121,17 +122,17 @@ cargo xtask wcet --emulated
 step "the static timing can fail: a busy loop planted in the switches' driver raises the sensing bound, a busy wait planted in the safety stop is refused, a cheap load planted in its table fails --emulated"
 cargo xtask wcet --mutants
 
-step "the bench's and the static timing's figures on the pages are the ones they measured"
-for page in README.md docs/firmware.md boards/README.md; do
-  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask hil, stack and wcet wrote" >&2; exit 1; }
-done
-rm -rf "$figures"
-
 step "timing: response-time analysis from QEMU step costs on both cores; every measured reaction within its bound"
 cargo xtask timing
 
 step "the analysis can fail: at 250 kHz the same jobs need more than the processor"
 cargo xtask timing --clock-hz 250000 --expect-failure
+
+step "the figures on the pages are the ones the commands measured (size, timing, bench, stack, static timing)"
+for page in README.md docs/firmware.md boards/README.md; do
+  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask size, timing, hil, stack and wcet wrote" >&2; exit 1; }
+done
+rm -rf "$figures"
 
 step "psmpa-core and psmpa-model use no allocator"
 # `extern crate std/alloc` is allowed only right under `#[cfg(test)]`, or under psmpa-model's

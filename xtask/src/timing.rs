@@ -84,7 +84,11 @@ const HOST_STEPS: &[(&str, &str)] = &[
         "store read, a sample",
         "as psmpa_core::store::SensorStores>::get",
     ),
-    ("trace event (hash)", "psmpa_core::trace::TraceHash::add"),
+    // The hash's mixing is inlined into the runtime; its encoding of the event is not.
+    (
+        "trace event's words (its encoding)",
+        "psmpa_core::trace::TraceHash::words",
+    ),
     (
         "Algorithm 2: compile a plan",
         "psmpa_core::runtime::fsm::Fsm<_>::compile",
@@ -129,6 +133,15 @@ fn host_costs(scenarios: &[&str]) -> Result<Vec<HostCost>, String> {
                 }
             }
         }
+    }
+    // A step no call reached was inlined away or renamed: its figure would be missing, not 0.
+    if let Some((step, function)) = HOST_STEPS
+        .iter()
+        .find(|(_, f)| totals.get(f).is_none_or(|(calls, _)| *calls == 0))
+    {
+        return Err(format!(
+            "the host's {step}: no call of a function ending in {function} (inlined, or renamed?)"
+        ));
     }
     Ok(HOST_STEPS
         .iter()
@@ -577,6 +590,187 @@ fn print_comparison(analyses: &[(Machine, Analysis)]) {
     }
 }
 
+/// Nanoseconds as milliseconds to a tenth, thousands grouped: `1,003.0`.
+fn tenths(ns: u64) -> String {
+    let tenths = ns.div_ceil(100_000);
+    format!("{}.{}", crate::hil::thousands(tenths / 10), tenths % 10)
+}
+
+/// The figures of a run at the machines' own clocks, for the pages: the step costs side by
+/// side, each machine's reaction bounds (one row for the scenarios that share them), the
+/// utilisation, the host's callgrind counts, and the README's cell.
+fn pages(
+    analyses: &[(Machine, Analysis)],
+    host: &[HostCost],
+) -> Vec<(&'static str, &'static str, String)> {
+    let group = crate::hil::thousands;
+    let mut steps = String::from("\n| step |");
+    for (m, _) in analyses {
+        steps += &format!(" {} cycles |", m.core);
+    }
+    steps += " time |";
+    for (m, _) in analyses {
+        steps += &format!(" {} instructions |", m.core);
+    }
+    steps += "\n|---|";
+    for _ in 0..analyses.len() * 2 + 1 {
+        steps += "---|";
+    }
+    steps += "\n";
+    let Some((_, first)) = analyses.first() else {
+        return Vec::new();
+    };
+    for (name, _) in &first.rows {
+        let found: Vec<(Machine, u64)> = analyses
+            .iter()
+            .filter_map(|(m, a)| {
+                a.rows
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .map(|(_, c)| (*m, *c))
+            })
+            .collect();
+        steps += &format!("| {name} |");
+        for (_, c) in &found {
+            steps += &format!(" {} |", group(*c));
+        }
+        let times: Vec<String> = found
+            .iter()
+            .map(|(m, c)| format!("{:.3}", *c as f64 * 1e3 / m.clock_hz as f64))
+            .collect();
+        steps += &format!(" {} ms |", times.join(" / "));
+        for (m, c) in &found {
+            steps += &format!(" {} |", group(m.instructions(*c)));
+        }
+        steps += "\n";
+    }
+    let ms = |ns: u64| format!("{:.3} ms", ns as f64 / 1e6);
+    let mut tasks = String::new();
+    let mut utilisation = Vec::new();
+    for (m, a) in analyses {
+        tasks += &format!(
+            "\nOn `{}` (cycles of {} MHz):\n\n| task | scenarios | period | job cost | read `L` | sample `S` | response `R` | worst measured reaction | latency bound |\n|---|---|---|---|---|---|---|---|---|\n",
+            m.name,
+            m.clock_hz / 1_000_000
+        );
+        // One row for the scenarios whose figures agree.
+        // The scenarios, their figures, the worst reaction measured in them and where.
+        type Row<'t> = (Vec<String>, &'t Task, Option<(u64, String)>);
+        let mut rows: Vec<Row<'_>> = Vec::new();
+        for sc in &a.report.scenarios {
+            for t in &sc.tasks {
+                let key = |x: &Task| {
+                    (
+                        x.task.clone(),
+                        x.period_ns,
+                        x.cost_ns,
+                        x.read_latency_ns,
+                        x.sample_ns,
+                        x.response_ns,
+                        x.latency_bound_ns,
+                    )
+                };
+                let measured = t.measured_reaction_cycles.map(|c| (c, sc.scenario.clone()));
+                match rows.iter_mut().find(|(_, r, _)| key(r) == key(t)) {
+                    Some((names, _, worst)) => {
+                        names.push(sc.scenario.clone());
+                        if measured.as_ref().map(|(c, _)| *c) > worst.as_ref().map(|(c, _)| *c) {
+                            *worst = measured;
+                        }
+                    }
+                    None => rows.push((vec![sc.scenario.clone()], t, measured)),
+                }
+            }
+        }
+        rows.sort_by(|x, y| {
+            (x.1.task.as_str(), x.1.latency_bound_ns)
+                .cmp(&(y.1.task.as_str(), y.1.latency_bound_ns))
+        });
+        for (names, t, worst) in rows {
+            let scenarios = if names.len() > 3 {
+                format!("{} scenarios", names.len())
+            } else {
+                names
+                    .iter()
+                    .map(|n| format!("`{n}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let measured = worst.map_or("-".to_owned(), |(c, sc)| {
+                format!(
+                    "{} cycles ({:.3} ms, `{sc}`)",
+                    group(c),
+                    c as f64 * 1e3 / m.clock_hz as f64
+                )
+            });
+            tasks += &format!(
+                "| {} | {scenarios} | {} ms | {} | {} | {} | {} | {measured} | {} ms |\n",
+                t.task,
+                t.period_ns / 1_000_000,
+                ms(t.cost_ns),
+                ms(t.read_latency_ns),
+                ms(t.sample_ns),
+                ms(t.response_ns),
+                tenths(t.latency_bound_ns)
+            );
+        }
+        let most = a
+            .report
+            .scenarios
+            .iter()
+            .map(|s| s.utilisation_ppm)
+            .max()
+            .unwrap_or(0);
+        utilisation.push(format!("{:.2} % on the {}", most as f64 / 1e4, m.core));
+    }
+    let host_text = host
+        .iter()
+        .map(|h| {
+            format!(
+                "{} {}",
+                h.step,
+                h.instructions
+                    .checked_div(h.calls)
+                    .map_or("-".to_owned(), group)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    // The README: each measured sensor's largest bound, and the utilisation.
+    let bounds: Vec<String> = MEASURED
+        .iter()
+        .filter_map(|sensor| {
+            analyses
+                .iter()
+                .flat_map(|(_, a)| a.report.scenarios.iter())
+                .flat_map(|sc| {
+                    sc.tasks
+                        .iter()
+                        .filter(|t| t.task == *sensor)
+                        .map(move |t| (t.latency_bound_ns, sc.scenario.as_str()))
+                })
+                .max()
+                .map(|(b, sc)| format!("{sensor} {} ms (`{sc}`)", tenths(b)))
+        })
+        .collect();
+    let cell = format!(
+        "latency bounds at most: {}; utilisation at most {}",
+        bounds.join(", "),
+        utilisation.join(", ")
+    );
+    vec![
+        ("README.md", "timing", cell),
+        ("docs/firmware.md", "timing-steps", steps),
+        ("docs/firmware.md", "timing-tasks", tasks),
+        (
+            "docs/firmware.md",
+            "timing-utilisation",
+            utilisation.join(", "),
+        ),
+        ("docs/firmware.md", "timing-host", host_text),
+    ]
+}
+
 /// Runs the firmware on every machine, analyses, checks, prints; writes the JSON report to
 /// `json`. `clock_hz` converts every machine's cycles at that clock instead of its own.
 pub fn run(clock_hz: Option<u64>, json: Option<PathBuf>) -> Result<(), String> {
@@ -623,6 +817,12 @@ pub fn run(clock_hz: Option<u64>, json: Option<PathBuf>) -> Result<(), String> {
         .iter()
         .flat_map(|(_, a)| a.failures.iter().cloned())
         .collect();
+    // The pages carry the figures at the machines' own clocks only.
+    if clock_hz.is_none() && failures.is_empty() {
+        for (page, marker, text) in pages(&analyses, &host) {
+            crate::hil::write_between(&firmware::root().join(page), marker, &text)?;
+        }
+    }
     let report = Report {
         machines: analyses.into_iter().map(|(_, a)| a.report).collect(),
         host_instructions: host,
