@@ -1581,7 +1581,15 @@ fn show(w: Option<u64>) -> String {
 /// Builds an image twice (shipped, analysed), checks they are the same code, and prints its
 /// bound per level, deepest paths, indirect calls and rules. Returns the analysed ELF and the
 /// bound (`None`: unbounded).
+/// Each level's label and worst stack, bytes (`None`: unbounded), of the last [`analyse`].
+type Levels = Vec<(&'static str, Option<u64>)>;
+
+thread_local! {
+    static LAST_LEVELS: std::cell::RefCell<Levels> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
+    LAST_LEVELS.with(|l| l.borrow_mut().clear());
     let shipped = (image.shipped)()?;
     let elf = (image.analysed)()?;
     if code(&elf, image.sections)? != code(&shipped, image.sections)? {
@@ -1614,6 +1622,7 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
         }
         let w = addr.and_then(|addr| a.worst(addr).0);
         println!("{:<46} {:>10}", level.label, show(w));
+        LAST_LEVELS.with(|l| l.borrow_mut().push((level.label, w)));
         // A preempting level adds its hardware frame.
         let frame = if i == 0 { 0 } else { image.exception_frame };
         total = total.zip(w).map(|(t, w)| t + w + frame);
@@ -1838,13 +1847,17 @@ impl CallGraph {
 
 /// Analyses the firmware (and runs it in QEMU), then the boards; prints, compares.
 pub fn run() -> Result<(), String> {
+    let taken = || LAST_LEVELS.with(|l| l.borrow().clone());
     let (elf, total) = analyse(&FIRMWARE)?;
+    let qemu_levels = taken();
     let mut failures = Vec::new();
+    let mut board_levels: Vec<Levels> = Vec::new();
     let qemu = check_firmware(&elf, total)
         .map_err(|e| failures.push(e))
         .ok();
     println!("\npsmpa-pico2 (the Fetch Tea robot on a Raspberry Pi Pico 2, embassy-rp):");
     let pico2 = analyse(&PICO2)
+        .inspect(|_| board_levels.push(taken()))
         .and_then(|(_, total)| {
             check_board(firmware::PICO2, 512 * 1024, total, None)?;
             Ok(total)
@@ -1854,6 +1867,7 @@ pub fn run() -> Result<(), String> {
         .flatten();
     println!("\npsmpa-pico (the same robot on a Raspberry Pi Pico, RP2040, Cortex-M0+):");
     let pico = analyse(&PICO)
+        .inspect(|_| board_levels.push(taken()))
         .and_then(|(_, total)| {
             let measured = pico_measured()?;
             check_board(firmware::PICO, 256 * 1024, total, Some(measured))?;
@@ -1880,11 +1894,46 @@ pub fn run() -> Result<(), String> {
         b(pico.map(|p| p.1)),
         b(pico.and_then(|p| p.0))
     );
-    crate::hil::write_between(
-        &firmware::root().join("docs/firmware.md"),
-        "pico-stack",
-        &pico_cell,
-    )
+    let doc = firmware::root().join("docs/firmware.md");
+    crate::hil::write_between(&doc, "pico-stack", &pico_cell)?;
+    let mut qemu_table = String::from("\n| level | worst stack |\n|---|---|\n");
+    for (label, w) in &qemu_levels {
+        qemu_table += &format!("| {label} | {} B |\n", b(*w));
+    }
+    qemu_table += &format!(
+        "| **bound**: every level nested, with its frame | **{} B** |\n| high-water mark measured in QEMU over all runs | {} B (bound {}) |\n",
+        b(total),
+        b(qemu),
+        match (total, qemu) {
+            (Some(t), Some(q)) if q > 0 => format!("{:.2}x", t as f64 / q as f64),
+            _ => "?".to_owned(),
+        }
+    );
+    crate::hil::write_between(&doc, "stack-qemu", &qemu_table)?;
+    let mut boards = String::from("\n| level | Pico 2 (RP2350) | Pico (RP2040) |\n|---|---|---|\n");
+    if let [p2, p] = board_levels.as_slice() {
+        for ((label, a), (other, c)) in p2.iter().zip(p) {
+            let label = if label == other {
+                (*label).to_owned()
+            } else {
+                format!("{label} / {other}")
+            };
+            boards += &format!("| {label} | {} B | {} B |\n", b(*a), b(*c));
+        }
+    }
+    let share = |bound: Option<u64>, ram: u64| {
+        bound.map_or("?".to_owned(), |v| {
+            format!("{:.1} %", v as f64 * 100.0 / ram as f64)
+        })
+    };
+    boards += &format!(
+        "| **bound**: every level nested, with its frame | **{} B** ({} of the RP2350's 512 KiB) | **{} B** ({} of the RP2040's 256 KiB) |\n",
+        b(pico2),
+        share(pico2, 512 * 1024),
+        b(pico.and_then(|p| p.0)),
+        share(pico.and_then(|p| p.0), 256 * 1024)
+    );
+    crate::hil::write_between(&doc, "stack-boards", &boards)
 }
 
 /// The Pico image's code (its flash sections, from the ELF's bytes), hashed: which image a
