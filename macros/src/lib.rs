@@ -130,8 +130,10 @@ fn expand(input: &Input) -> syn::Result<Tokens> {
     };
     // Computed here: a `const fn` over a large file's bytes exceeds the compiler's budget.
     let hash = psmpa_model::mission::mission_hash(&bytes);
+    let descriptions =
+        Descriptions::of(&bytes).map_err(|e| syn::Error::new(span, format!("{given}: {e}")))?;
     check::check::<_, MAX_WORDS, MAX_FACTS>(Path::new(&given), &bytes, |m| {
-        generate(input, m, &file, &keys, hash, &Descriptions::of(&bytes))
+        generate(input, m, &file, &keys, hash, &descriptions)
     })
     .map_err(|e| syn::Error::new(span, e))?
 }
@@ -211,15 +213,32 @@ fn millis(d: embassy_time::Duration) -> u64 {
 /// The `description` strings of a mission's sensors, actions and plans, by index (`None`: no
 /// description, or one that is not a string), for the variants' doc comments.
 struct Descriptions {
+    facts: Vec<Option<String>>,
     sensors: Vec<Option<String>>,
     actions: Vec<Option<String>>,
     plans: Vec<Option<String>>,
 }
 
 impl Descriptions {
-    /// From the mission file's bytes (already checked: anything unreadable has none).
-    fn of(bytes: &[u8]) -> Self {
+    /// From the mission file's bytes (already checked: anything unreadable has none); an
+    /// entry of `fact_descriptions` that names no fact is an error (a typo would lose it).
+    fn of(bytes: &[u8]) -> Result<Self, String> {
         let v: serde_json::Value = serde_json::from_slice(bytes).unwrap_or_default();
+        if let Some(described) = v.get("fact_descriptions") {
+            let facts: Vec<&str> = v["facts"]
+                .as_array()
+                .map_or_else(Vec::new, |f| f.iter().filter_map(|n| n.as_str()).collect());
+            let Some(map) = described.as_object() else {
+                return Err(
+                    "fact_descriptions: an object from a fact's name to its description".to_owned(),
+                );
+            };
+            if let Some(name) = map.keys().find(|k| !facts.contains(&k.as_str())) {
+                return Err(format!(
+                    "fact_descriptions: `{name}` is not a fact of the mission (not in `facts`)"
+                ));
+            }
+        }
         let of = |section: &str| -> Vec<Option<String>> {
             v[section].as_array().map_or_else(Vec::new, |items| {
                 items
@@ -228,11 +247,22 @@ impl Descriptions {
                     .collect()
             })
         };
-        Self {
+        // Facts are names in a list: theirs are an object by name.
+        let facts = v["facts"].as_array().map_or_else(Vec::new, |names| {
+            names
+                .iter()
+                .map(|n| {
+                    let name = n.as_str()?;
+                    v["fact_descriptions"][name].as_str().map(str::to_owned)
+                })
+                .collect()
+        });
+        Ok(Self {
+            facts,
             sensors: of("sensors"),
             actions: of("actions"),
             plans: of("plans"),
-        }
+        })
     }
 }
 
@@ -368,7 +398,7 @@ fn generate(
             quote!(u16),
             &fact_v,
             fact_names,
-            &[],
+            &descriptions.facts,
         ),
         names_enum(
             "event",

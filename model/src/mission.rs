@@ -30,8 +30,9 @@
 //! ([`ActuatorAction::max_violation`]; absent: the runtime's `Config::max_violation`), a
 //! plan `context_not`, facts that must not hold ([`Plan::context_not`]), and the file a
 //! top-level `description` (any JSON value, skipped). A sensor, an action and a plan may
-//! have a `description` too: skipped by the loader; a string one becomes the doc comment of
-//! its variant in `include_mission!`'s enums. The `_ms` values are whole numbers of
+//! have a `description` too, and the facts a top-level `fact_descriptions` (an object from a
+//! fact's name to its description): skipped by the loader; a string one becomes the doc
+//! comment of its variant in `include_mission!`'s enums. The `_ms` values are whole numbers of
 //! milliseconds: the loader parses integers only, so a microcontroller needs no float
 //! parser (`50.0` or `5e1` is an error). `pre`, `add`, `del`, `context`, `context_not` and
 //! `init` default to `[]`.
@@ -597,9 +598,9 @@ enum Pass {
     Plans,
 }
 
-/// The top-level keys; all but `sensors` and `description` are required.
+/// The top-level keys; all but `sensors`, `description` and `fact_descriptions` are required.
 #[cfg(feature = "loader")]
-const TOP_KEYS: [&str; 8] = [
+const TOP_KEYS: [&str; 9] = [
     "name",
     "facts",
     "events",
@@ -608,9 +609,10 @@ const TOP_KEYS: [&str; 8] = [
     "plans",
     "task",
     "description",
+    "fact_descriptions",
 ];
 #[cfg(feature = "loader")]
-const OPTIONAL_TOP: u16 = 1 << 3 | 1 << 7;
+const OPTIONAL_TOP: u16 = 1 << 3 | 1 << 7 | 1 << 8;
 
 /// A JSON string borrowed from the file.
 #[cfg(feature = "loader")]

@@ -245,6 +245,11 @@ fn a_description_reaches_its_variant_and_loads_at_run_time() {
         described::Plan::GoThere.description(),
         Some("Straight ahead.")
     );
+    assert_eq!(
+        described::Fact::Clear.description(),
+        Some("Nothing touches the bumper.")
+    );
+    assert_eq!(described::Fact::There.description(), None);
     // The loader reads the same file.
     let json = include_bytes!("../missions/described.json");
     let loaded: psmpa_core::LoadedOf<'_, psmpa_core::mission::AnyBehaviour, described::Caps> =
