@@ -88,7 +88,7 @@ outside_target="$PWD/target/outside"
 # committed (deterministic emulators and analyses: a figure that moved was not measured by
 # this tree).
 figures=$(mktemp -d)
-cp --parents README.md docs/firmware.md boards/README.md "$figures/"
+cp --parents README.md docs/firmware.md docs/experiment.md boards/README.md "$figures/"
 
 step "firmware: clippy for both targets (mps2-an386's Cortex-M4F, mps2-an505's Cortex-M33)"
 for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
@@ -128,9 +128,12 @@ cargo xtask timing
 step "the analysis can fail: at 250 kHz the same jobs need more than the processor"
 cargo xtask timing --clock-hz 250000 --expect-failure
 
-step "the figures on the pages are the ones the commands measured (size, timing, bench, stack, static timing)"
-for page in README.md docs/firmware.md boards/README.md; do
-  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask size, timing, hil, stack and wcet wrote" >&2; exit 1; }
+step "the sensitivity study (psmpa-sim sensitivity, seeded): its figures on the pages"
+cargo xtask experiment
+
+step "the figures on the pages are the ones the commands measured (size, timing, bench, stack, static timing, the study)"
+for page in README.md docs/firmware.md docs/experiment.md boards/README.md; do
+  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask size, timing, hil, stack, wcet and experiment wrote" >&2; exit 1; }
 done
 rm -rf "$figures"
 

@@ -18,6 +18,7 @@
 
 mod bench;
 mod callgrind;
+mod experiment;
 mod firmware;
 mod hil;
 mod planning;
@@ -118,6 +119,9 @@ enum Task {
         #[arg(long, conflicts_with_all = ["json", "mutants"])]
         emulated: bool,
     },
+    /// The sensitivity study (`psmpa-sim sensitivity`, its seeded defaults) and its figures
+    /// written into README.md and docs/experiment.md.
+    Experiment,
     /// Response-time analysis from step costs measured in QEMU on both machines: a latency
     /// bound per sensor, checked against every measured reaction; the tables also go to a
     /// JSON file.
@@ -196,6 +200,7 @@ fn main() -> ExitCode {
         } => firmware::qemu_check(inject_fault).then_expect(expect_failure),
         Task::Size { bless } => size::run(bless),
         Task::Stack => stack::run(),
+        Task::Experiment => experiment::run(),
         Task::Bench {
             instructions: true, ..
         } => bench::instructions(),
