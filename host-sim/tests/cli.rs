@@ -394,3 +394,27 @@ fn a_plot_stays_well_formed_xml_whatever_the_scenario_name() {
     );
     assert!(text.contains("&lt;a&amp;b&gt;"), "the name, escaped");
 }
+
+/// docs/simulator.md shows what `sweep` prints with its defaults, byte for byte: the page's
+/// sample is the command's output, not a copy that can drift.
+#[test]
+fn the_sweep_sample_on_the_page_is_what_the_sweep_prints() {
+    let out = bin()
+        .args(["sweep", "--runs", "1000", "--seed", "1"])
+        .output()
+        .unwrap();
+    assert_success(&out);
+    let page = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs/simulator.md"),
+    )
+    .unwrap();
+    let start = "```text\nsweep: 1000 random scenarios, seed 1\n";
+    let (_, after) = page.split_once(start).expect("the page's sweep sample");
+    let (rest, _) = after.split_once("```").unwrap();
+    let shown = format!("sweep: 1000 random scenarios, seed 1\n{rest}");
+    assert_eq!(
+        String::from_utf8(out.stdout).unwrap(),
+        shown,
+        "docs/simulator.md's sweep sample: paste what psmpa-sim sweep prints"
+    );
+}
