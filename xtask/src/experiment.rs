@@ -22,6 +22,8 @@ struct Figures {
     detection_rate: Interval,
     met_detection_rate: Interval,
     collisions: Interval,
+    /// Runs that did not reach the door in time.
+    not_reached: u64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -54,6 +56,7 @@ struct Harder {
 
 #[derive(Debug, Deserialize)]
 struct Study {
+    runs: u64,
     clean: Pass,
     faults: Pass,
     harder: Harder,
@@ -181,7 +184,15 @@ fn pages(study: &Study) -> Result<Vec<(&'static str, &'static str, String)>, Str
         range(|r| r.smpa.detection_rate.mean, pct),
         range(|r| r.smpa.collisions.mean, two)
     );
+    let late = |pass: &Pass| pass.cells.iter().map(|c| c.smpa.not_reached).sum::<u64>();
+    let not_reached = format!(
+        "{} of {} in the clean pass, {} in the faults pass",
+        crate::hil::thousands(late(&study.clean)),
+        crate::hil::thousands(study.runs * study.clean.cells.len() as u64),
+        crate::hil::thousands(late(&study.faults))
+    );
     Ok(vec![
+        ("docs/experiment.md", "not-reached", not_reached),
         ("README.md", "experiment", readme),
         ("README.md", "experiment-harder", summary),
         ("docs/experiment.md", "sensitivity-table", table),
