@@ -74,7 +74,7 @@ step "a mission whose period a slow tick rate cannot represent fails the build, 
 # Its trybuild cases resolve their mission beside the target directory: an absolute one.
 CARGO_TARGET_DIR="$PWD/target/outside" cargo test --locked --manifest-path tests/slow-tick/Cargo.toml
 
-step "the dock example, copied out of the checkout as docs/guide.md says (\"Your own robot\"), passes its tests there"
+step "the dock example, copied out of the checkout as docs/guide.md says (\"Start from the dock example\"), passes its tests there"
 own=$(mktemp -d)
 trap 'rm -rf "$own"' EXIT
 ln -s "$PWD" "$own/psmpa"

@@ -12,7 +12,7 @@
 //! | planning domain `Δ` | [`domain`] |
 //! | `p = <t(p), c(p), bd(p)>`, library `P`, BDI selection | [`plan`] |
 //! | world model `M = <ω, φ, Π>`, task `Π = <Δ, τ0, τG>` | [`model`], [`mission`] |
-//! | Algorithm 2: plan → FSM `f(Λ, T)` with parallel states | [`runtime::fsm`], run by [`runtime::engine`] (deciding) and [`runtime::sensing`] |
+//! | Algorithm 2: plan → FSM `f(Λ, T)` with parallel states | [`runtime::fsm`], run by [`runtime::engine`] (deciding) and [`runtime::sensing`], on the two sides [`runtime::sides`] hands out |
 //! | Algorithm 3: data stores `D`, mutual store | [`store`] |
 //! | Algorithm 1: the control loop | [`runtime::control`] |
 //! | the SMPA baseline | [`Policy::Smpa`] |

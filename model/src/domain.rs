@@ -269,8 +269,8 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
 
     /// A domain from its tables, built at compile time: what `include_mission!` generates for
     /// a mission it has loaded and checked. Nothing is checked here (unique names, ids within
-    /// the tables): use [`new`](Self::new) and the `add_` methods, or [`mission::load`](crate::mission::load),
-    /// for a domain built at run time. More entries than a capacity does not compile.
+    /// the tables): use [`new`](Self::new) and the `add_` methods, or `mission::load` (feature
+    /// `loader`), for a domain built at run time. More entries than a capacity does not compile.
     pub const fn from_tables<const F: usize, const E: usize, const S: usize, const A: usize>(
         facts: [&'a str; F],
         events: [&'a str; E],

@@ -1,7 +1,7 @@
 //! A mission: everything the runtime needs to know about a robot's job, `<S, A, P>` and the
 //! task `Π`, held in fixed-capacity structures, and its JSON file format.
 //!
-//! [`load`] reads a mission file with `serde-json-core` in three streaming passes over the same
+//! `load` (feature `loader`) reads a mission file with `serde-json-core` in three streaming passes over the same
 //! bytes (facts and events; sensors and actions; plans and the task), so that names are
 //! resolved to ids as they are read, in any key order, with no intermediate copies: the only
 //! memory used is the [`Mission`] itself. Names borrow from the file's bytes. Behaviour names
@@ -27,8 +27,9 @@
 //!
 //! Sensor `mode` is `cyclic` (with `period_ms`), `one-shot` or `on-demand`; `timeout_ms`
 //! (default 500) bounds a sample. An action may have `max_violation_ms`
-//! ([`ActuatorAction::max_violation`]; absent: the runtime's `Config::max_violation`), a
-//! plan `context_not`, facts that must not hold ([`Plan::context_not`]), and the file a
+//! ([`ActuatorAction::max_violation`](crate::action::ActuatorAction::max_violation); absent:
+//! the runtime's `Config::max_violation`), a plan `context_not`, facts that must not hold
+//! ([`Plan::context_not`](crate::plan::Plan::context_not)), and the file a
 //! top-level `description` (any JSON value, skipped). A sensor, an action and a plan may
 //! have a `description` too, and the facts a top-level `fact_descriptions` (an object from a
 //! fact's name to its description): skipped by the loader; a string one becomes the doc
@@ -153,8 +154,8 @@ impl<S: Copy, A: Copy, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> 
 }
 
 impl<S: Copy, A: Copy, const NS: usize, const NA: usize> Bindings<S, A, NS, NA> {
-    /// The behaviours of a domain built in Rust, from `registry`: what [`load`] binds for a
-    /// mission file. `Err` names the first sensor or action the registry has no behaviour for.
+    /// The behaviours of a domain built in Rust, from `registry`: what `load` (feature
+    /// `loader`) binds for a mission file. `Err` names the first sensor or action the registry has no behaviour for.
     /// O(NS + NA) registry lookups.
     pub fn resolve<'a, R, const W: usize, const NF: usize>(
         domain: &Domain<'a, NS, NA, W, NF>,

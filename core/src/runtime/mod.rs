@@ -131,5 +131,7 @@ pub type BindingsOf<R, C> = <C as Capacity>::Bindings<
 ///
 /// Everything lives inside this value; put it in a `static` (with a `StaticCell`) or on the
 /// stack of the task that runs it. With `P::Mutex = CriticalSectionRawMutex` and a `Sync`
-/// platform it is `Sync`: a `&'static Runtime` can be shared by tasks at two priorities.
+/// platform it is `Sync`, and its sensing side `Send`: [`split`](Engine::split) the
+/// `&'static mut` a `StaticCell` gives and hand a `SensingSide<'static, R>` and a
+/// `DecidingSide<'static, R>` to tasks at two priorities.
 pub type Runtime<'r, P, C, T = ()> = <C as Capacity>::Engine<'r, P, T>;
