@@ -19,12 +19,17 @@
 //! # }
 //! # impl Platform for Robot { type Mutex = psmpa_core::embassy_sync::blocking_mutex::raw::NoopRawMutex; }
 //! # type RobotRuntime<'r> = hello::Runtime<'r, Robot>;
-//! async fn fly(rt: &mut RobotRuntime<'_>) {
+//! use psmpa_core::embassy_futures::select::{Either, select};
+//!
+//! /// Both sides on one executor, sensing polled first: what `rt.run_with_sensing()` does.
+//! /// On a microcontroller, each side goes to a task instead: sensing on an interrupt
+//! /// executor, deciding below it in thread mode.
+//! async fn fly(rt: &mut RobotRuntime<'_>) -> bool {
 //!     let (mut sensing, mut deciding) = rt.split();
-//!     // On a microcontroller: sensing in a task on an interrupt executor, deciding below it.
-//!     let sensing = sensing.run();
-//!     let report = deciding.run();
-//! #   let _ = (sensing, report);
+//!     match select(sensing.run(), deciding.run()).await {
+//!         Either::First(never) => match never {},
+//!         Either::Second(report) => report.is_ok(),
+//!     }
 //! }
 //! ```
 
