@@ -222,6 +222,7 @@ impl FromId<PlanId> for PlanId {
     }
 }
 
+// Here, not beside `Failure`: `failure` is a layer above `platform`, which names `FromId`.
 impl<const W: usize> crate::failure::Failure<W> {
     /// The action the failure is about, in the type the platform names actions by (a compiled
     /// mission's `Action`, or [`ActionId`]); `None` if it is about none.

@@ -210,8 +210,9 @@ fn millis(d: embassy_time::Duration) -> u64 {
     d.as_millis()
 }
 
-/// The `description` strings of a mission's sensors, actions and plans, by index (`None`: no
-/// description, or one that is not a string), for the variants' doc comments.
+/// The description strings of a mission's facts (`fact_descriptions`), sensors, actions and
+/// plans (`description`), by index (`None`: none, or one that is not a string), for the
+/// variants' doc comments and `description()`.
 struct Descriptions {
     facts: Vec<Option<String>>,
     sensors: Vec<Option<String>>,

@@ -24,6 +24,7 @@ mod hil;
 mod planning;
 mod recording;
 mod size;
+mod splitmix;
 mod stack;
 mod timing;
 mod trace;

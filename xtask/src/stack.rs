@@ -1578,18 +1578,14 @@ fn show(w: Option<u64>) -> String {
     w.map_or("unbounded".to_owned(), |w| format!("{w} B"))
 }
 
-/// Builds an image twice (shipped, analysed), checks they are the same code, and prints its
-/// bound per level, deepest paths, indirect calls and rules. Returns the analysed ELF and the
-/// bound (`None`: unbounded).
-/// Each level's label and worst stack, bytes (`None`: unbounded), of the last [`analyse`].
+/// Each level's label and worst stack, bytes (`None`: unbounded).
 type Levels = Vec<(&'static str, Option<u64>)>;
 
-thread_local! {
-    static LAST_LEVELS: std::cell::RefCell<Levels> = const { std::cell::RefCell::new(Vec::new()) };
-}
-
-fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
-    LAST_LEVELS.with(|l| l.borrow_mut().clear());
+/// Builds an image twice (shipped, analysed), checks they are the same code, and prints its
+/// bound per level, deepest paths, indirect calls and rules. Returns the analysed ELF, the
+/// bound (`None`: unbounded) and each level's worst stack.
+fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>, Levels), String> {
+    let mut levels = Levels::new();
     let shipped = (image.shipped)()?;
     let elf = (image.analysed)()?;
     if code(&elf, image.sections)? != code(&shipped, image.sections)? {
@@ -1622,7 +1618,7 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
         }
         let w = addr.and_then(|addr| a.worst(addr).0);
         println!("{:<46} {:>10}", level.label, show(w));
-        LAST_LEVELS.with(|l| l.borrow_mut().push((level.label, w)));
+        levels.push((level.label, w));
         // A preempting level adds its hardware frame.
         let frame = if i == 0 { 0 } else { image.exception_frame };
         total = total.zip(w).map(|(t, w)| t + w + frame);
@@ -1701,7 +1697,7 @@ fn analyse(image: &'static Image) -> Result<(PathBuf, Option<u64>), String> {
     report("unbounded recursion", &recursion);
     report("reachable functions without a known frame", &unknown_frame);
     report("entry symbols not in the image", &missing);
-    Ok((elf, total))
+    Ok((elf, total, levels))
 }
 
 /// The firmware's bound against the high-water mark it measures in QEMU.
@@ -1847,9 +1843,7 @@ impl CallGraph {
 
 /// Analyses the firmware (and runs it in QEMU), then the boards; prints, compares.
 pub fn run() -> Result<(), String> {
-    let taken = || LAST_LEVELS.with(|l| l.borrow().clone());
-    let (elf, total) = analyse(&FIRMWARE)?;
-    let qemu_levels = taken();
+    let (elf, total, qemu_levels) = analyse(&FIRMWARE)?;
     let mut failures = Vec::new();
     let mut board_levels: Vec<Levels> = Vec::new();
     let qemu = check_firmware(&elf, total)
@@ -1857,8 +1851,8 @@ pub fn run() -> Result<(), String> {
         .ok();
     println!("\npsmpa-pico2 (the Fetch Tea robot on a Raspberry Pi Pico 2, embassy-rp):");
     let pico2 = analyse(&PICO2)
-        .inspect(|_| board_levels.push(taken()))
-        .and_then(|(_, total)| {
+        .and_then(|(_, total, levels)| {
+            board_levels.push(levels);
             check_board(firmware::PICO2, 512 * 1024, total, None)?;
             Ok(total)
         })
@@ -1867,8 +1861,8 @@ pub fn run() -> Result<(), String> {
         .flatten();
     println!("\npsmpa-pico (the same robot on a Raspberry Pi Pico, RP2040, Cortex-M0+):");
     let pico = analyse(&PICO)
-        .inspect(|_| board_levels.push(taken()))
-        .and_then(|(_, total)| {
+        .and_then(|(_, total, levels)| {
+            board_levels.push(levels);
             let measured = pico_measured()?;
             check_board(firmware::PICO, 256 * 1024, total, Some(measured))?;
             Ok((total, measured))

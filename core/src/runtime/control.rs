@@ -41,7 +41,7 @@ pub struct Report<const W: usize = 1> {
 }
 
 /// `run` with `sensing` beside it, sensing polled first; ends when `run` does.
-async fn beside_sensing<R>(
+pub(crate) async fn beside_sensing<R>(
     sensing: impl Future<Output = Infallible>,
     run: impl Future<Output = R>,
 ) -> R {
@@ -207,11 +207,6 @@ impl<
         space: &mut Search<N, W>,
     ) -> Result<Report<W>, ControlError<W>> {
         self.control((planner, space)).await
-    }
-
-    /// `run` with the sensing side beside it, sensing polled first; ends when `run` does.
-    pub(crate) async fn beside_sensing<R>(&self, run: impl Future<Output = R>) -> R {
-        beside_sensing(self.sensing(), run).await
     }
 
     /// The actions with the preconditions the planner must satisfy from the beliefs: facts

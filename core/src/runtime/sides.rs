@@ -38,7 +38,7 @@ use core::ops::Deref;
 
 use crate::planner::{Planner, Search};
 use crate::platform::{Actuator, Platform, Sensor};
-use crate::runtime::control::{ControlError, Report};
+use crate::runtime::control::{ControlError, Report, beside_sensing};
 use crate::runtime::engine::Engine;
 use crate::runtime::sensing::Sensing;
 use crate::trace::TraceSink;
@@ -109,7 +109,7 @@ impl<
     ///
     /// [`split`]: Engine::split
     pub async fn run_with_sensing(&mut self) -> Result<Report<W>, ControlError<W>> {
-        self.beside_sensing(self.run()).await
+        beside_sensing(self.sensing(), self.run()).await
     }
 
     /// [`DecidingSide::run_planning`] beside the sensing side, as [`Engine::run_with_sensing`]
@@ -119,7 +119,7 @@ impl<
         planner: &Planner<N, W>,
         space: &mut Search<N, W>,
     ) -> Result<Report<W>, ControlError<W>> {
-        self.beside_sensing(self.run_planning(planner, space)).await
+        beside_sensing(self.sensing(), self.run_planning(planner, space)).await
     }
 }
 

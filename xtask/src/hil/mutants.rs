@@ -44,13 +44,7 @@ const UNSHIPPED: [u64; 2] = [11, 29];
 /// its first ten seconds, each held 1 to 6 s.
 pub fn unshipped(seed: u64) -> String {
     let mut state = seed;
-    let mut draw = |below: u64| {
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (z ^ (z >> 31)) % below
-    };
+    let mut draw = |below: u64| crate::splitmix::next(&mut state) % below;
     let door = 1.6 + draw(10) as f64 / 10.0;
     let speed = 0.10 + draw(6) as f64 / 100.0;
     let mut at = 1.0;

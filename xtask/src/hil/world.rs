@@ -349,11 +349,7 @@ impl<'s> BenchWorld<'s> {
 
     /// A random draw from SplitMix64: the bounces.
     fn draw(&mut self, below: u64) -> u64 {
-        self.rng = self.rng.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.rng;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (z ^ (z >> 31)) % below.max(1)
+        crate::splitmix::next(&mut self.rng) % below.max(1)
     }
 
     fn set(&mut self, out: &mut Vec<Set>, pin: u8, level: Option<bool>, at: u64) {

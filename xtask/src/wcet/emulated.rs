@@ -81,16 +81,12 @@ const CASES: &[Case] = &[
     },
 ];
 
-/// SplitMix64: the seeded arguments, the same on every machine.
+/// The seeded arguments, the same on every machine.
 struct Seed(u64);
 
 impl Seed {
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
+        crate::splitmix::next(&mut self.0)
     }
 
     /// Four words; a divisor (r1, or r2:r3) of any length and never zero.
