@@ -38,6 +38,7 @@
 //! store or table is an `Err`; nothing allocates, nothing panics.
 #![no_std]
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 #![cfg_attr(
     not(test),
     deny(

@@ -21,6 +21,7 @@
 //! run on an interrupt executor above deciding.
 #![no_std]
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 #![cfg_attr(
     not(test),
     deny(

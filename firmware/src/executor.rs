@@ -14,16 +14,13 @@
 //! sensing priority are timed too: they are the one way the deciding side can delay a sample.
 //! Neither counts the firmware's trace log ([`uncounted`]): a product would not carry it.
 
-use core::cell::{Cell, RefCell};
-use core::future::poll_fn;
+use core::cell::Cell;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
-use core::task::{Poll, Waker};
 
 use cortex_m::interrupt::InterruptNumber;
 use critical_section::Mutex;
 use embassy_executor::{InterruptExecutor, SendSpawner, Spawner, raw};
-use psmpa_sim::run::{Erased, HighSlot, PreemptingSlot};
 
 use crate::time_driver::counter;
 
@@ -339,72 +336,4 @@ unsafe impl critical_section::Impl for Timed {
             unsafe { cortex_m::interrupt::enable() };
         }
     }
-}
-
-/// The installed sensing side, with its type and lifetime erased ([`HighSlot`]).
-struct Installed(Erased);
-
-// SAFETY: thread mode installs it and the sensing interrupt polls it, so the future crosses
-// contexts. The one installer is `Preempting::beside` in src/main.rs, through `Beside::new`,
-// which does not ask `S: Send` (the generic `Sides::beside` cannot name
-// `Beside::preempting`, which does). What makes the crossing sound: the sensing future owns
-// plain data only (no_std, no `Rc` or thread-bound handles) and reaches thread mode's data
-// only through the world, the robot and the runtime, which src/main.rs checks are `Sync` at
-// compile time (its `const _` block); the slot itself is read and written only inside
-// critical sections. Firmware that can keep its runtime `'static` needs none of this: see
-// the boards and src/bin/product.rs, a task on each executor.
-unsafe impl Send for Installed {}
-
-static INSTALLED: Mutex<Cell<Option<Installed>>> = Mutex::new(Cell::new(None));
-static TRAMPOLINE: Mutex<RefCell<Option<Waker>>> = Mutex::new(RefCell::new(None));
-
-/// The sensing executor's slot: a run's sensing side is installed here while it runs.
-pub struct SensingSlot;
-
-// SAFETY: `trampoline` takes the pointer out for the duration of its poll, at interrupt 14's
-// priority, never re-entered. Install and uninstall run below it (thread mode), so never in
-// the middle of that poll: while interrupt 14's handler runs, thread mode does not.
-unsafe impl HighSlot for SensingSlot {
-    fn install(&self, future: Erased) -> bool {
-        critical_section::with(|cs| {
-            let slot = INSTALLED.borrow(cs);
-            let current = slot.take();
-            if current.is_some() {
-                slot.set(current);
-                return false;
-            }
-            slot.set(Some(Installed(future)));
-            if let Some(w) = TRAMPOLINE.borrow_ref(cs).as_ref() {
-                w.wake_by_ref();
-            }
-            true
-        })
-    }
-
-    fn uninstall(&self) {
-        critical_section::with(|cs| INSTALLED.borrow(cs).set(None));
-    }
-}
-
-// SAFETY: its poller, interrupt 14, preempts thread mode, which installs.
-unsafe impl PreemptingSlot for SensingSlot {}
-
-/// The one task of the sensing executor: polls the installed sensing side, forever.
-#[embassy_executor::task]
-pub async fn trampoline() {
-    poll_fn(|cx| {
-        let installed = critical_section::with(|cs| {
-            TRAMPOLINE.borrow_ref_mut(cs).replace(cx.waker().clone());
-            INSTALLED.borrow(cs).take()
-        });
-        if let Some(Installed(future)) = installed {
-            // SAFETY: installed by a live `Beside`, which uninstalls before the future ends;
-            // taken out while polled, so nothing else uses it.
-            if unsafe { future.poll(cx) }.is_pending() {
-                critical_section::with(|cs| INSTALLED.borrow(cs).set(Some(Installed(future))));
-            }
-        }
-        Poll::<()>::Pending
-    })
-    .await;
 }

@@ -21,13 +21,14 @@ mod firmware {
 
     use cortex_m_rt::entry;
     use defmt::{error, info};
+    use embassy_futures::select::select;
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use embassy_sync::signal::Signal;
     use psmpa_core::record::{Frame, RecordOut, Recorder};
-    use psmpa_core::{TraceEvent, TraceSink};
-    use psmpa_sim::robot::{Arch, PlannerSpace, Robot};
-    use psmpa_sim::run::{Beside, Sides};
+    use psmpa_core::{DecidingSide, SensingSide, TraceEvent, TraceSink};
+    use psmpa_sim::robot::{Arch, Nao, NaoRuntime, PlannerSpace, Robot};
     use psmpa_sim::scenario::Scenario;
-    use psmpa_sim::world::{Device, Fate, WorldEvent, WorldLog};
+    use psmpa_sim::world::{Device, Fate, World, WorldEvent, WorldLog};
 
     use psmpa_firmware::board::{self, fail, stack_high_water};
     use psmpa_firmware::{executor, time_driver, world_trace};
@@ -47,8 +48,10 @@ mod firmware {
 
     /// The run this boot performs: 0 after power-on.
     fn this_run() -> u32 {
-        // SAFETY: read at boot, before anything else runs; any bit pattern is a valid
-        // `[u32; 2]` (what power-on leaves is told apart by the magic).
+        // SAFETY: a volatile read through `NEXT_RUN`'s own pointer (no reference is made), at
+        // boot, before any interrupt or task could write it; `MaybeUninit<[u32; 2]>` has the
+        // layout of `[u32; 2]`, for which any bit pattern is a value (what power-on leaves is
+        // told apart by the magic).
         let [magic, run] = unsafe { (&raw const NEXT_RUN).cast::<[u32; 2]>().read_volatile() };
         if magic == MAGIC { run } else { 0 }
     }
@@ -56,7 +59,9 @@ mod firmware {
     /// Boots again for run `run`, or, with `None`, forgets the runs and exits.
     fn next(run: Option<u32>) -> ! {
         let word = run.map_or([0, 0], |r| [MAGIC, r]);
-        // SAFETY: only this boot's one task writes it, right before resetting or exiting.
+        // SAFETY: a volatile write through `NEXT_RUN`'s own pointer (no reference is made) by
+        // the one task that ends the run, right before resetting or exiting: nothing reads or
+        // writes it meanwhile.
         unsafe { (&raw mut NEXT_RUN).cast::<[u32; 2]>().write_volatile(word) };
         if run.is_some() {
             cortex_m::peripheral::SCB::sys_reset();
@@ -72,6 +77,9 @@ mod firmware {
         static mut ROBOT: MaybeUninit<Robot<'static>> = MaybeUninit::uninit();
         static mut SCENARIO: MaybeUninit<Scenario> = MaybeUninit::uninit();
         static mut SPACE: PlannerSpace = PlannerSpace::new();
+        static mut WORLD: MaybeUninit<RunWorld> = MaybeUninit::uninit();
+        static mut NAO: MaybeUninit<RunNao> = MaybeUninit::uninit();
+        static mut RUNTIME: MaybeUninit<RunRuntime> = MaybeUninit::uninit();
         board::guard_stack();
         let run = this_run();
         let runs = (SCENARIOS.len() * Arch::ALL.len()) as u32;
@@ -105,16 +113,18 @@ mod firmware {
             fail("the scenario's sensor periods do not apply");
         }
         let (robot, scenario) = (&*robot, &*scenario);
+        let (world, runtime) = build(WORLD, NAO, RUNTIME, robot, scenario, arch);
+        let (sensing, deciding) = runtime.split();
         // Everything is prepared: the clock starts, and the run with it, at tick 0.
         time_driver::start();
         executor::run_idle(
             DECIDING,
-            |deciding, sensing| {
-                let task = one_run(robot, scenario, SPACE, arch, run, runs);
-                match (task, executor::trampoline()) {
-                    (Ok(task), Ok(trampoline)) => {
-                        deciding.spawn(task);
-                        sensing.spawn(trampoline);
+            |thread, interrupt| {
+                let task = one_run(deciding, world, scenario, SPACE, arch, run, runs);
+                match (task, sense(sensing)) {
+                    (Ok(task), Ok(sense)) => {
+                        thread.spawn(task);
+                        interrupt.spawn(sense);
                     }
                     _ => fail("a task is already running"),
                 }
@@ -123,45 +133,50 @@ mod firmware {
         )
     }
 
-    /// The sensing side on the interrupt executor, preempting the deciding side; what they
-    /// share behind critical sections.
-    struct Preempting;
+    /// A run's world, robot and runtime, each in a `static` of its own: their two sides run
+    /// as two tasks, sensing on the interrupt executor, which preempts deciding. What they
+    /// share is behind critical sections (`CriticalSectionRawMutex`).
+    type RunWorld = World<'static, Reactions, CriticalSectionRawMutex>;
+    type RunNao = Nao<'static, 'static, Reactions, CriticalSectionRawMutex>;
+    type RunRuntime =
+        NaoRuntime<'static, 'static, 'static, Reactions, Sink, CriticalSectionRawMutex>;
 
-    impl Sides for Preempting {
-        type Mutex = CriticalSectionRawMutex;
-
-        async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
-            &self,
-            sensing: core::pin::Pin<&mut S>,
-            deciding: core::pin::Pin<&mut D>,
-        ) -> D::Output {
-            // SAFETY: the caller's contract, the same as `Beside::new`'s; `sensing` is safe to
-            // poll from the interrupt: everything it shares is `Sync` (checked below).
-            unsafe { Beside::new(&executor::SensingSlot, sensing, deciding) }.await
-        }
-
-        fn compute(us: u32) {
-            executor::compute(us.saturating_mul(time_driver::CORE_HZ / 1_000_000));
-        }
+    /// Builds the run's world, robot and runtime in their statics, out of line.
+    #[inline(never)]
+    fn build(
+        world: &'static mut MaybeUninit<RunWorld>,
+        nao: &'static mut MaybeUninit<RunNao>,
+        runtime: &'static mut MaybeUninit<RunRuntime>,
+        robot: &'static Robot<'static>,
+        scenario: &'static Scenario,
+        arch: Arch,
+    ) -> (&'static RunWorld, &'static mut RunRuntime) {
+        let world: &'static RunWorld = world.write(World::new(scenario, Reactions::default()));
+        let nao: &'static RunNao = nao.write(Nao::new(world, robot).with_compute(compute));
+        let runtime = runtime.write(NaoRuntime::new(
+            &robot.mission,
+            nao,
+            Sink,
+            psmpa_sim::robot::config(scenario, arch),
+        ));
+        (world, runtime)
     }
 
-    /// What the interrupt executor polls shares only these with thread mode: each is `Sync`
-    /// with the firmware's log, sink and mutex, or this does not compile.
-    const _: () = {
-        const fn sync<T: Sync>() {}
-        sync::<psmpa_sim::world::World<'static, Reactions, CriticalSectionRawMutex>>();
-        sync::<psmpa_sim::robot::Nao<'static, 'static, Reactions, CriticalSectionRawMutex>>();
-        sync::<
-            psmpa_sim::robot::NaoRuntime<
-                'static,
-                'static,
-                'static,
-                Reactions,
-                Sink,
-                CriticalSectionRawMutex,
-            >,
-        >();
-    };
+    /// A behaviour's computation: busy cycles of the deciding side's own.
+    fn compute(us: u32) {
+        executor::compute(us.saturating_mul(time_driver::CORE_HZ / 1_000_000));
+    }
+
+    /// Ends the sensing side when the deciding side has ended, as the host's loop polls it no
+    /// more then: signalled from thread mode, it preempts at once, before the summary.
+    static STOP: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+
+    /// The sensing side, on the interrupt executor.
+    #[embassy_executor::task]
+    async fn sense(mut side: SensingSide<'static, RunRuntime>) {
+        // The stop first: once it is signalled, not one more sample.
+        let _ = select(STOP.wait(), side.run()).await;
+    }
 
     /// Reads a scenario's canonical form in place, out of line: no copy of it on the stack.
     #[inline(never)]
@@ -466,26 +481,18 @@ mod firmware {
 
     #[embassy_executor::task]
     async fn one_run(
-        robot: &'static Robot<'static>,
+        mut deciding: DecidingSide<'static, RunRuntime>,
+        world: &'static RunWorld,
         scenario: &'static Scenario,
         space: &'static mut PlannerSpace,
         arch: Arch,
         run: u32,
         runs: u32,
     ) {
-        // SAFETY: the task awaits the run to its end; nothing leaks or moves it.
-        let go = unsafe {
-            psmpa_sim::run::run_robot(
-                &Preempting,
-                robot,
-                scenario,
-                arch,
-                space,
-                Reactions::default(),
-                Sink,
-            )
-        };
-        let (s, reactions, _) = go.await;
+        let ended = psmpa_sim::run::decide(&mut deciding, world, scenario, space).await;
+        STOP.signal(());
+        let s = psmpa_sim::run::summary(arch, world, deciding.engine(), ended);
+        let worst = world.with_log(|reactions| reactions.worst);
         finish_recording();
         let (ticks, reference) = (
             embassy_time::Instant::now().as_ticks(),
@@ -522,8 +529,8 @@ mod firmware {
             arch.name(),
             ticks,
             reference,
-            reactions.worst[0],
-            reactions.worst[1],
+            worst[0],
+            worst[1],
             LOGGED.load(Ordering::Relaxed)
         );
         let t = s.tally;

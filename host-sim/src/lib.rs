@@ -5,6 +5,7 @@
 //!   (sensing above deciding), deterministically and on any number of threads.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 #[cfg(feature = "std")]
 pub use psmpa_testkit::sim as backend;

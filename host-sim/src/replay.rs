@@ -10,7 +10,6 @@
 
 use core::cell::{Cell, RefCell};
 use core::future::{pending, poll_fn};
-use core::pin::pin;
 use core::task::{Poll, Waker};
 use std::path::Path;
 
@@ -27,13 +26,11 @@ use serde::Serialize;
 
 use psmpa_drivers::robot::{RECORD_WORDS, Settings, fetch_tea};
 
-use crate::backend::simulate;
+use crate::backend::simulate_split;
 use crate::cli::files::Output;
 use crate::cli::foxglove::McapLog;
 use crate::robot::{self, Arch, Caps};
-use crate::run::Sides as _;
 use crate::scenario::Scenario;
-use crate::sim::Prioritized;
 
 /// The largest recording `replay` reads: 256 MiB (a day of 1 ms samples is about 10 GB; a
 /// shipped scenario's, tens of kB).
@@ -741,17 +738,14 @@ fn drive<S: core::future::Future, F: core::future::Future>(
     start: Instant,
     end: Instant,
 ) -> Result<Instant, String> {
-    let run = async {
+    let deciding = async {
         // The runtime started at the first recorded instant: a board boots first.
         crate::backend::advance_to(start);
-        let sensing = pin!(sensing);
-        let deciding = pin!(select(deciding, Timer::at(end)));
-        // SAFETY: run to completion inside `simulate`, on this thread.
-        let _ = unsafe { Prioritized.beside(sensing, deciding) }.await;
+        let _ = select(deciding, Timer::at(end)).await;
         Instant::now()
     };
     let limit = Duration::from_ticks(end.as_ticks()) + Duration::from_secs(1);
-    simulate(run, limit)
+    simulate_split(sensing, deciding, limit)
         .map(|done| done.output)
         .map_err(|e| format!("the replay failed: {e}"))
 }

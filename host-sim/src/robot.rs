@@ -498,7 +498,7 @@ pub struct Nao<'w, 's, L: WorldLog, M: RawMutex = NoopRawMutex> {
     bumper: Option<SensorId>,
     /// Their sample timeouts: a read at least this long never answers.
     timeouts: [Duration; 2],
-    /// Spends processor time ([`Sides::compute`](crate::run::Sides::compute)).
+    /// Spends processor time: nothing on the host, busy cycles on a microcontroller.
     compute: fn(u32),
 }
 

@@ -1,23 +1,19 @@
 //! One run of a scenario under one architecture: the Fetch Tea mission on the simulated world
 //! until the goal holds, the control loop gives up, or `max_s` passes.
 //!
-//! `no_std`: the firmware awaits [`run_robot`] inside an embassy task, the host inside
-//! [`backend::simulate`](crate::backend::simulate) (through `sim`, with the mission loaded once
-//! per thread). Each places the runtime's sensing side
-//! through [`Sides`]: the host at its poll loop's higher priority, the firmware on its own
-//! interrupt executor.
-
-use core::future::Future;
-use core::pin::{Pin, pin};
+//! `no_std`: the pieces of a run, which the host and the firmware put together each in its own
+//! way. The world, the robot and the runtime are built where they stay ([`World::new`],
+//! [`Nao::new`](robot::Nao::new), [`NaoRuntime::new`](robot::NaoRuntime)); the runtime is
+//! split; the sensing side runs at a higher priority (the host's poll loop, through
+//! `simulate_split`; a task on the firmware's interrupt executor) beside [`decide`]; and
+//! [`summary`] reads the outcome.
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, Timer};
-use psmpa_core::{ControlError, Report, TraceSink};
+use psmpa_core::{ControlError, DecidingSide, Report, TraceSink};
 
-pub use psmpa_testkit::beside::{Beside, Erased, HighSlot, PreemptingSlot};
-
-use crate::robot::{self, Arch, Nao, Robot};
+use crate::robot::{self, Arch};
 use crate::scenario::Scenario;
 use crate::world::{ObstacleReport, Tally, World, WorldLog};
 
@@ -51,88 +47,43 @@ pub struct Summary {
     pub trace_events: u32,
 }
 
-/// Where the two sides of a runtime run: the platform's choice.
-#[allow(async_fn_in_trait)] // Single-threaded executors: no `Send` bound wanted.
-pub trait Sides {
-    /// The mutex through which the two sides share state: a `NoopRawMutex` where they take
-    /// turns on one thread, a `CriticalSectionRawMutex` where sensing preempts deciding.
-    type Mutex: RawMutex;
-
-    /// Runs `sensing` at a higher priority than `deciding` for as long as `deciding` runs, and
-    /// returns what `deciding` returns; `sensing` is not polled afterwards. Both are pinned
-    /// where the caller built them: nothing moves them (a run's futures are large, and every
-    /// move is a copy on the stack of the task that makes it).
-    ///
-    /// # Safety
-    ///
-    /// An implementation may hand `sensing` to a task that polls it from elsewhere, so the
-    /// returned future must not be leaked (`mem::forget`) while `sensing` is alive, and must be
-    /// dropped on the thread that polled it: run it to completion, or drop it. Where that task
-    /// preempts this one, `sensing` must be safe to poll from there: `Send`, its shared state
-    /// behind [`Mutex`](Self::Mutex).
-    async unsafe fn beside<S: Future, D: Future>(
-        &self,
-        sensing: Pin<&mut S>,
-        deciding: Pin<&mut D>,
-    ) -> D::Output;
-
-    /// Spends `us` microseconds of processor time (a behaviour's computation): nothing in
-    /// virtual time, where computing takes none; busy cycles on a microcontroller.
-    fn compute(us: u32) {
-        let _ = us;
-    }
-}
-
-/// Runs a mission already loaded for `scenario` ([`robot::fetch_tea`]), planning in `space`
-/// when it must. The run starts at the current instant; the host and the firmware start it at
-/// tick 0 so their traces agree.
-///
-/// # Safety
-///
-/// As [`Sides::beside`]: the future must not be leaked, and must be dropped where it was
-/// polled.
-pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
-    sides: &P,
-    robot: &Robot<'_>,
+/// The deciding side of a run of `scenario`: Algorithm 1, planning in `space` when it must,
+/// until the goal holds, the control loop gives up, or `max_ms` passes (the robot then halts).
+/// Returns how it ended and when, ms. The sensing side runs beside it at a higher priority:
+/// the host's poll loop (`simulate_split`), or a task on the firmware's interrupt executor.
+/// The run starts at the current instant; the host and the firmware start it at tick 0 so
+/// their traces agree.
+pub async fn decide<L: WorldLog, T: TraceSink, M: RawMutex>(
+    deciding: &mut DecidingSide<'_, robot::NaoRuntime<'_, '_, '_, L, T, M>>,
+    world: &World<'_, L, M>,
     scenario: &Scenario,
-    arch: Arch,
     space: &mut robot::PlannerSpace,
-    log: L,
-    sink: T,
-) -> (Summary, L, T) {
-    let world: World<'_, L, P::Mutex> = World::new(scenario, log);
-    let nao = Nao::new(&world, robot).with_compute(P::compute);
-    let mut runtime = robot::NaoRuntime::<'_, '_, '_, L, T, P::Mutex>::new(
-        &robot.mission,
-        &nao,
-        sink,
-        robot::config(scenario, arch),
-    );
-    let ending = {
-        let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
-        let (mut sensing, mut deciding) = runtime.split();
-        // Built where they stay: neither side is ever copied.
-        let sensing = pin!(sensing.run());
-        let deciding = pin!(select(
-            deciding.run_planning(&robot::PLANNER, space),
-            deadline
-        ));
-        // SAFETY: this future is not leaked and stays where it is polled: the caller's
-        // contract.
-        match unsafe { sides.beside(sensing, deciding) }.await {
-            Either::First(Ok(report)) => Ending::Goal(report),
-            Either::First(Err(error)) => Ending::Error(error),
-            Either::Second(()) => {
-                world.halt();
-                Ending::TimeLimit
-            }
+) -> (Ending, u64) {
+    let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
+    let ending = match select(deciding.run_planning(&robot::PLANNER, space), deadline).await {
+        Either::First(Ok(report)) => Ending::Goal(report),
+        Either::First(Err(error)) => Ending::Error(error),
+        Either::Second(()) => {
+            world.halt();
+            Ending::TimeLimit
         }
     };
-    let summary = Summary {
+    (ending, Instant::now().as_millis())
+}
+
+/// The summary of a run under `arch` that ended with `ending` at `time_cost_ms`
+/// ([`decide`]), from its world and its runtime.
+pub fn summary<L: WorldLog, T: TraceSink, M: RawMutex>(
+    arch: Arch,
+    world: &World<'_, L, M>,
+    runtime: &robot::NaoRuntime<'_, '_, '_, L, T, M>,
+    (ending, time_cost_ms): (Ending, u64),
+) -> Summary {
+    Summary {
         arch,
         tally: world.tally(),
         obstacles: world.obstacles(),
-        time_cost_ms: Instant::now().as_millis(),
+        time_cost_ms,
         ending,
         trace_hash: {
             let mut h = runtime.trace_hash();
@@ -140,7 +91,5 @@ pub async unsafe fn run_robot<P: Sides, L: WorldLog, T: TraceSink>(
             h.value()
         },
         trace_events: runtime.trace_events(),
-    };
-    let sink = runtime.into_sink();
-    (summary, world.into_log(), sink)
+    }
 }

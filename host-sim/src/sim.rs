@@ -5,11 +5,11 @@ use psmpa_core::{TraceEvent, TraceSink};
 
 use std::cell::OnceCell;
 
-use crate::backend::{SimError, beside, simulate};
+use crate::backend::{SimError, simulate_split};
 use crate::robot::{self, Arch, MissionError, Robot};
-use crate::run::{Sides, Summary, run_robot};
+use crate::run::{Summary, decide, summary};
 use crate::scenario::Scenario;
-use crate::world::{WorldEvent, WorldLog};
+use crate::world::{World, WorldEvent, WorldLog};
 
 /// Every world event with its time (ms) and the robot's position (µm).
 #[derive(Debug, Default, Clone)]
@@ -65,25 +65,6 @@ pub struct Recorded {
     pub trace: TraceRecord,
 }
 
-/// The host's placement of a runtime's two sides: sensing at the backend's higher
-/// priority ([`beside`]).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Prioritized;
-
-impl Sides for Prioritized {
-    // The host polls the two sides in turns on one thread.
-    type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
-
-    async unsafe fn beside<S: core::future::Future, D: core::future::Future>(
-        &self,
-        sensing: core::pin::Pin<&mut S>,
-        deciding: core::pin::Pin<&mut D>,
-    ) -> D::Output {
-        // SAFETY: the caller's contract, the same as `beside`'s.
-        unsafe { beside(sensing, deciding) }.await
-    }
-}
-
 /// Virtual time allowed beyond `max_s`: the run stops itself at `max_s`.
 const SLACK: Duration = Duration::from_secs(1);
 
@@ -116,10 +97,14 @@ pub fn run_logged_until<L: WorldLog, T: TraceSink>(
     let limit = Duration::from_millis(scenario.max_ms) + SLACK;
     let robot = fetch_tea(scenario).map_err(RunError::Mission)?;
     let mut space = robot::PlannerSpace::new();
-    // SAFETY: `simulate` pins the run on its own stack and drops it before it returns.
-    let run = unsafe { run_robot(&Prioritized, &robot, scenario, arch, &mut space, log, sink) };
-    let watched = async move {
-        let mut run = core::pin::pin!(run);
+    // Built where they stay, before the run's tick 0: none of them reads the clock.
+    let world: World<'_, L> = World::new(scenario, log);
+    let nao = robot::Nao::new(&world, &robot);
+    let mut runtime =
+        robot::NaoRuntime::new(&robot.mission, &nao, sink, robot::config(scenario, arch));
+    let (mut sensing, mut deciding) = runtime.split();
+    let decided = async {
+        let mut run = core::pin::pin!(decide(&mut deciding, &world, scenario, &mut space));
         core::future::poll_fn(|cx| {
             if stop() {
                 return core::task::Poll::Ready(None);
@@ -128,8 +113,11 @@ pub fn run_logged_until<L: WorldLog, T: TraceSink>(
         })
         .await
     };
-    let done = simulate(watched, limit).map_err(RunError::Sim)?;
-    done.output.ok_or(RunError::Stopped)
+    let done = simulate_split(sensing.run(), decided, limit).map_err(RunError::Sim)?;
+    let ended = done.output.ok_or(RunError::Stopped)?;
+    let summary = summary(arch, &world, &runtime, ended);
+    let sink = runtime.into_sink();
+    Ok((summary, world.into_log(), sink))
 }
 
 thread_local! {

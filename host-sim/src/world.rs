@@ -1511,6 +1511,11 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         self.state.lock(|cell| cell.borrow().hash)
     }
 
+    /// Reads the log (a world kept in a `static`, which cannot be given up).
+    pub fn with_log<R>(&self, f: impl FnOnce(&L) -> R) -> R {
+        self.state.lock(|cell| f(&cell.borrow().log))
+    }
+
     /// Gives the world up and returns its log.
     pub fn into_log(self) -> L {
         self.state.into_inner().into_inner().log

@@ -7,6 +7,7 @@
 //! file is a compile error. Use it through `psmpa_core::include_mission!`, which re-exports it.
 
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 use std::path::{Path, PathBuf};
 

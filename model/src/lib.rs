@@ -19,6 +19,7 @@
 //! Capacities are const generics; a full table is an `Err`; nothing allocates, nothing panics.
 #![no_std]
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 #![cfg_attr(
     not(test),
     deny(

@@ -9,9 +9,6 @@
 //!   reads at each instant.
 //! * [`pins`] has `embedded-hal` pins for driver tests: an input whose level follows a script
 //!   of edges in virtual time, an output and a PWM channel that record what was written when.
-//! * [`beside`] (`no_std`, also without the `std` feature) is the placement itself: a
-//!   microcontroller's interrupt executor polls the sensing side through the same
-//!   [`beside::HighSlot`] the host loop does.
 //!
 //! The crate defines the `embassy-time` driver (there can be one per program) and chooses no
 //! tick rate: the rate is whatever the program's `embassy-time-driver` features say (1 MHz by
@@ -36,19 +33,14 @@
 //! .unwrap();
 //! assert_eq!(done.output.as_millis(), 2_000);
 //! ```
-#![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
-pub mod beside;
-#[cfg(feature = "std")]
 pub mod pins;
-#[cfg(feature = "std")]
 pub mod sim;
 
-#[cfg(feature = "std")]
 pub use sim::{Completed, SimError, simulate, simulate_split};
 
-#[cfg(feature = "std")]
 mod record {
     use embassy_time::{Duration, Instant};
     use psmpa_core::platform::FromId;
@@ -189,5 +181,4 @@ mod record {
     }
 }
 
-#[cfg(feature = "std")]
 pub use record::{Recorder, Script};

@@ -5,12 +5,12 @@
 //! everything waits, so a minute of robot time takes milliseconds, and the same future gives
 //! the same result every time.
 //!
-//! Inside a simulation, [`beside`] runs a second future (a runtime's sensing side) at a
-//! *higher priority*: whenever it has work, it is polled before the next poll of the simulated
-//! future, so at every instant ready sensing work comes before deciding work, as on a
-//! microcontroller where sensing runs on an interrupt executor (there it can even preempt a
-//! poll; here polls take no time, so preempting at poll boundaries is the same).
-//! [`simulate_split`] is the two together.
+//! [`simulate_split`] runs a second future (a runtime's sensing side) at a *higher priority*
+//! beside the simulated one (its deciding side): whenever it has work, it is polled before the
+//! next poll of the deciding future, so at every instant ready sensing work comes before
+//! deciding work, as on a microcontroller where sensing runs on an interrupt executor (there it
+//! can even preempt a poll; here polls take no time, so preempting at poll boundaries is the
+//! same).
 //!
 //! No executor: the core spawns no tasks, so the loop polls its two futures itself, each with
 //! its priority's waker, whose wake only sets that priority's "pending" flag. Timers sit in one
@@ -27,11 +27,10 @@ use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::future::Future;
 use std::pin::{Pin, pin};
-use std::task::{Context, Poll, RawWaker, RawWakerVTable, Waker};
+use std::sync::Arc;
+use std::task::{Context, Poll, Wake, Waker};
 
 use embassy_time::{Duration, Instant};
-
-use crate::beside::{Beside, Erased, HighSlot};
 
 /// Why a simulation did not complete.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -83,7 +82,7 @@ pub struct Completed<T> {
 
 /// The simulated future's priority: the index of its flag and alarm slot.
 const LOW: usize = 0;
-/// The sensing side's priority ([`beside`]).
+/// The sensing side's priority ([`simulate_split`]).
 const HIGH: usize = 1;
 
 /// A priority waker's timer: wake at tick `at`; `seq` orders equal deadlines by arrival.
@@ -138,8 +137,9 @@ struct State {
     foreign_next: Cell<u64>,
     /// Whether `FOREIGN` may hold alarms: most simulations never touch it.
     foreign_used: Cell<bool>,
-    /// The sensing side placed by [`beside`], if any.
-    high: Cell<Option<Erased>>,
+    /// Per priority: the data pointer of its waker in the running simulation (null outside
+    /// one), which tells a priority waker from any other by one comparison.
+    wakers: [Cell<*const ()>; 2],
     running: Cell<bool>,
 }
 
@@ -152,10 +152,14 @@ thread_local! {
             alarms: [Cell::new(EMPTY), Cell::new(EMPTY)],
             foreign_next: Cell::new(NEVER),
             foreign_used: Cell::new(false),
-            high: Cell::new(None),
+            wakers: [Cell::new(std::ptr::null()), Cell::new(std::ptr::null())],
             running: Cell::new(false),
         }
     };
+    /// The two priorities' wakers, made once per thread. Clones of the wakers made, so that
+    /// every waker in use has the vtable of a clone: `Waker::will_wake` compares vtables, and
+    /// a registration (embassy's `WakerRegistration`) then keeps the waker it has.
+    static WAKERS: [Waker; 2] = [LOW, HIGH].map(|p| Waker::from(Arc::new(Priority(p))).clone());
     /// Alarms of other wakers, one per waker; rare, so a list. Kept with its capacity.
     static FOREIGN: RefCell<Vec<Alarm>> = const { RefCell::new(Vec::new()) };
     /// Alarms due at a jump that involves `FOREIGN`, being sorted; kept with its capacity.
@@ -189,7 +193,7 @@ impl State {
     fn clear(&self) {
         self.pending.iter().for_each(|p| p.set(false));
         self.alarms.iter().for_each(|a| a.set(EMPTY));
-        self.high.set(None);
+        self.wakers.iter().for_each(|w| w.set(std::ptr::null()));
         self.foreign_next.set(NEVER);
         if self.foreign_used.replace(false) {
             // Taken out first: dropping a waker may run arbitrary code.
@@ -200,37 +204,29 @@ impl State {
     }
 }
 
-/// The priority of a waker made by [`priority_waker`]: its data pointer's address.
-fn priority_of_data(data: *const ()) -> usize {
-    usize::from(data.addr() == HIGH)
+/// A priority's waker: its wake only sets the priority's flag on the thread that wakes it, so
+/// it belongs to its simulation's thread.
+struct Priority(usize);
+
+impl Wake for Priority {
+    fn wake(self: Arc<Self>) {
+        self.wake_by_ref();
+    }
+
+    fn wake_by_ref(self: &Arc<Self>) {
+        STATE.with(|s| {
+            if let Some(p) = s.pending.get(self.0) {
+                p.set(true);
+            }
+        });
+    }
 }
 
-/// A priority waker's priority, `None` for any other waker: a pointer comparison.
-fn priority_of(waker: &Waker) -> Option<usize> {
-    std::ptr::eq(waker.vtable(), &VTABLE).then(|| priority_of_data(waker.data()))
-}
-
-// No reference count: the waker only names a priority; it sets the flag of the thread that wakes
-// it, so it belongs to its simulation's thread.
-static VTABLE: RawWakerVTable =
-    RawWakerVTable::new(waker_clone, waker_wake, waker_wake, waker_drop);
-
-fn waker_clone(data: *const ()) -> RawWaker {
-    RawWaker::new(data, &VTABLE)
-}
-
-fn waker_wake(data: *const ()) {
-    STATE.with(|s| s.pending[priority_of_data(data)].set(true));
-}
-
-fn waker_drop(_: *const ()) {}
-
-/// The waker of `priority` on this thread.
-fn priority_waker(priority: usize) -> Waker {
-    let data = std::ptr::without_provenance(priority);
-    // SAFETY: the vtable's functions neither dereference `data` nor own anything, so every
-    // contract of `RawWakerVTable` holds trivially, on any thread.
-    unsafe { Waker::from_raw(RawWaker::new(data, &VTABLE)) }
+/// A priority waker's priority, `None` for any other waker: a pointer comparison. (Data
+/// pointers only: `Waker::will_wake` compares vtables too, which the compiler may duplicate.)
+fn priority_of(s: &State, waker: &Waker) -> Option<usize> {
+    let data = waker.data();
+    s.wakers.iter().position(|w| std::ptr::eq(w.get(), data))
 }
 
 struct VirtualClock;
@@ -248,7 +244,7 @@ impl embassy_time_driver::Driver for VirtualClock {
                 waker.wake_by_ref();
                 return;
             }
-            match priority_of(waker) {
+            match priority_of(s, waker) {
                 Some(p) => s.arm(p, at),
                 None => schedule_foreign(s, at, waker),
             }
@@ -353,59 +349,16 @@ fn wake_with_foreign(s: &State, now: u64) {
     DUE.with(|d| d.replace(due));
 }
 
-/// The higher-priority slot on this thread, polled by [`simulate`]'s loop.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct ThreadSlot;
-
-// SAFETY: the slot is polled only by `simulate`'s loop, on this thread, which takes the
-// pointer out for the duration of its poll and is never re-entered (`SimError::Nested`); a
-// `Beside` runs on the same thread, inside the lower-priority poll, so it never uninstalls in
-// the middle of a poll of the slot.
-unsafe impl HighSlot for ThreadSlot {
-    fn install(&self, future: Erased) -> bool {
-        STATE.with(|s| {
-            if s.high.get().is_some() {
-                return false;
-            }
-            s.high.set(Some(future));
-            s.pending[HIGH].set(true);
-            true
-        })
-    }
-
-    fn uninstall(&self) {
-        STATE.with(|s| s.high.set(None));
-    }
-}
-
-/// Runs `sensing` at the higher priority for as long as `deciding` runs, inside a
-/// [`simulate`]d future, and returns what `deciding` returns: whenever `sensing` has work it
-/// is polled before `deciding` (see the module doc). `sensing` is dropped with the returned
-/// future. One at a time: while another `beside` runs, `sensing` is not run (see [`Beside`]).
-/// [`simulate_split`] is the safe way to use it.
-///
-/// # Safety
-///
-/// As [`Beside::new`]: the returned future must not be leaked while anything `sensing` borrows
-/// is alive.
-pub unsafe fn beside<'p, S: Future, D: Future>(
-    sensing: Pin<&'p mut S>,
-    deciding: Pin<&'p mut D>,
-) -> Beside<'static, 'p, ThreadSlot, S, D> {
-    // SAFETY: the caller's contract.
-    unsafe { Beside::new(&ThreadSlot, sensing, deciding) }
-}
-
-/// [`simulate`] with `sensing` at the higher priority beside `deciding` ([`beside`]).
+/// Runs `deciding` as [`simulate`] does, with `sensing` at the higher priority beside it:
+/// whenever `sensing` has work it is polled before `deciding` (see the module doc), from the
+/// first poll of `deciding` on. Returns what `deciding` returns; `sensing` is not polled after
+/// that (nor after it ends), and both are dropped before this returns.
 pub fn simulate_split<S: Future, D: Future>(
     sensing: S,
     deciding: D,
     limit: Duration,
 ) -> Result<Completed<D::Output>, SimError> {
-    let (sensing, deciding) = (pin!(sensing), pin!(deciding));
-    // SAFETY: `simulate` pins the future on its own stack and drops it, on this thread, before
-    // it returns (and on unwind): it cannot be leaked.
-    simulate(unsafe { beside(sensing, deciding) }, limit)
+    run(pin!(deciding), Some(pin!(sensing)), limit)
 }
 
 /// Ends the thread's simulation, on return and on unwind: nothing outlives it.
@@ -428,35 +381,61 @@ pub fn advance_to(at: Instant) {
 /// Runs `future` to completion in virtual time starting at 0, on this thread. Fails when the
 /// future deadlocks or is still running at `limit`.
 pub fn simulate<F: Future>(future: F, limit: Duration) -> Result<Completed<F::Output>, SimError> {
-    // Pinned here and polled in place below: never moved, never type-erased. Dropped after the
-    // simulation has ended, so its drop may start another.
-    let mut future = pin!(future);
+    run(
+        pin!(future),
+        None::<Pin<&mut std::future::Pending<()>>>,
+        limit,
+    )
+}
+
+/// One poll of the sensing side; whether it ended. Out of line, so that a profile of the host
+/// shows a sensing step as one function (`cargo xtask timing`).
+#[inline(never)]
+fn poll_sensing<S: Future>(sensing: Pin<&mut S>, cx: &mut Context<'_>) -> bool {
+    sensing.poll(cx).is_ready()
+}
+
+/// The poll loop: `future` at the lower priority, `high` (if any) at the higher. Both are
+/// pinned by the caller and polled in place: never moved, never type-erased.
+fn run<F: Future, S: Future>(
+    mut future: Pin<&mut F>,
+    mut high: Option<Pin<&mut S>>,
+    limit: Duration,
+) -> Result<Completed<F::Output>, SimError> {
     STATE.with(|s| {
         if s.running.replace(true) {
             return Err(SimError::Nested);
         }
         let _running = Running(s);
-        // Whatever a `Beside` outside any simulation left here is not this simulation's.
+        // Whatever a waker outside any simulation left here is not this simulation's.
         s.clear();
         s.now.set(0);
         s.seq.set(0);
-        s.pending[LOW].set(true);
-        let (low, high) = (priority_waker(LOW), priority_waker(HIGH));
-        let (mut low_cx, mut high_cx) = (Context::from_waker(&low), Context::from_waker(&high));
+        let [low, high_waker] = WAKERS.with(Clone::clone);
+        for (slot, waker) in s.wakers.iter().zip([&low, &high_waker]) {
+            slot.set(waker.data());
+        }
+        let (mut low_cx, mut high_cx) =
+            (Context::from_waker(&low), Context::from_waker(&high_waker));
         let limit = limit.as_ticks();
         let mut clock_jumps = 0u64;
+        s.pending[LOW].set(true);
+        // The deciding side is polled first; the sensing side has work from then on. (One
+        // call site for each poll, so that the compiler may inline them into the loop.)
+        let mut starting = high.is_some();
         let output = loop {
             if s.pending[HIGH].replace(false) {
-                // Taken out while polled, so that nothing else uses it meanwhile. One that
-                // ends is polled no more; its `Beside` keeps it until dropped.
-                if let Some(sensing) = s.high.take() {
-                    // SAFETY: installed by a live `Beside`, which uninstalls before `sensing`
-                    // ends; this loop is its only poller and is not re-entered.
-                    if unsafe { sensing.poll(&mut high_cx) }.is_pending() {
-                        s.high.set(Some(sensing));
-                    }
+                // One that ends is polled no more.
+                if let Some(sensing) = high.as_mut()
+                    && poll_sensing(sensing.as_mut(), &mut high_cx)
+                {
+                    high = None;
                 }
             } else if s.pending[LOW].replace(false) {
+                if starting {
+                    starting = false;
+                    s.pending[HIGH].set(true);
+                }
                 if let Poll::Ready(output) = future.as_mut().poll(&mut low_cx) {
                     break output;
                 }

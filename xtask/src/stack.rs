@@ -104,16 +104,11 @@ const ONLY_FROM: &[OnlyFrom] = &[
         "embassy's poll loop is the only caller of a task's poll function",
     ),
     (
-        "as psmpa_sim::run::Sides>::compute",
+        "psmpa_firmware::firmware::compute",
         &["psmpa_sim::robot::Nao<"],
-        "the robot's walk is the only user of the platform's computation hook",
+        "the robot's walk is the only user of the firmware's computation hook",
     ),
     FORMATTING,
-    (
-        "psmpa_testkit::beside::poll_erased",
-        &["TaskStorage<psmpa_firmware::executor::__trampoline_task"],
-        "a run's sensing side is installed for the sensing executor's trampoline task only",
-    ),
 ];
 
 /// A task's poll function: its name contains `name` and, if `calls` is not empty, it calls a
@@ -151,10 +146,10 @@ const LEVELS: &[Level] = &[
         label: "thread mode (main, deciding executor)",
         entry: "Reset",
         excluded: Task {
-            name: "TaskStorage<psmpa_firmware::executor::__trampoline_task",
+            name: "TaskStorage<psmpa_firmware::firmware::__sense_task",
             calls: &[],
         },
-        why: "the trampoline is spawned on the sensing executor, which interrupt 14 polls",
+        why: "the sensing task is spawned on the sensing executor, which interrupt 14 polls",
         show_path: true,
     },
     Level {

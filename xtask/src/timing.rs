@@ -63,13 +63,13 @@ struct HostCost {
 }
 
 /// The core's steps as they appear in the host binary. The sensing side (reads, store writes,
-/// fusion) is inlined into the poll of the installed sensing future; plan selection into the
+/// fusion) is inlined into the test kit's poll of the sensing future; plan selection into the
 /// control loop; only `locked-door` needs the planner (its cost per expansion is in
 /// `psmpa_core::planner`'s docs).
 const HOST_STEPS: &[(&str, &str)] = &[
     (
         "sensing side: one poll (samples)",
-        "psmpa_testkit::beside::poll_erased",
+        "psmpa_testkit::sim::poll_sensing",
     ),
     // The common case (holds, held) is decided inline in the sensing poll; this is a change.
     (

@@ -94,8 +94,14 @@ fn ring() -> Option<&'static mut Ring<RING_BYTES>> {
     if TAKEN.swap(true, Ordering::AcqRel) {
         return None;
     }
-    // SAFETY: taken once (above), so this is the only reference; every bit pattern is a
-    // valid `Ring` (integers only), so what a reset or power-on left is one.
+    // SAFETY: the question is the `&mut` made here. It is the only reference to `RING` for
+    // the rest of the program: `TAKEN` lets this line run once, and no other code names `RING`
+    // (its exported name is for a debugger, which reads the halted chip). The pointer is
+    // `RING`'s own, cast from `MaybeUninit<Ring>` to `Ring`, which has the same layout: aligned
+    // and in bounds. And the `Ring` it points at is initialised, as a reference requires,
+    // although nothing wrote it this boot: its fields are integers, for which every bit
+    // pattern a reset or power-on leaves is a value (`Ring` checks its magic and bounds before
+    // it trusts one).
     Some(unsafe { &mut *(&raw mut RING).cast::<Ring<RING_BYTES>>() })
 }
 
