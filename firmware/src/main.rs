@@ -141,8 +141,8 @@ mod firmware {
     type RunRuntime =
         NaoRuntime<'static, 'static, 'static, Reactions, Sink, CriticalSectionRawMutex>;
 
-    /// Builds the run's world, robot and runtime in their statics, out of line.
-    #[inline(never)]
+    /// Builds the run's world, robot and runtime in their statics, each out of line: the
+    /// frames that build them (each holds its value before it is moved in) never nest.
     fn build(
         world: &'static mut MaybeUninit<RunWorld>,
         nao: &'static mut MaybeUninit<RunNao>,
@@ -151,15 +151,42 @@ mod firmware {
         scenario: &'static Scenario,
         arch: Arch,
     ) -> (&'static RunWorld, &'static mut RunRuntime) {
-        let world: &'static RunWorld = world.write(World::new(scenario, Reactions::default()));
-        let nao: &'static RunNao = nao.write(Nao::new(world, robot).with_compute(compute));
-        let runtime = runtime.write(NaoRuntime::new(
+        let world = build_world(world, scenario);
+        let nao = build_nao(nao, world, robot);
+        (world, build_runtime(runtime, nao, robot, scenario, arch))
+    }
+
+    #[inline(never)]
+    fn build_world(
+        slot: &'static mut MaybeUninit<RunWorld>,
+        scenario: &'static Scenario,
+    ) -> &'static RunWorld {
+        slot.write(World::new(scenario, Reactions::default()))
+    }
+
+    #[inline(never)]
+    fn build_nao(
+        slot: &'static mut MaybeUninit<RunNao>,
+        world: &'static RunWorld,
+        robot: &'static Robot<'static>,
+    ) -> &'static RunNao {
+        slot.write(Nao::new(world, robot).with_compute(compute))
+    }
+
+    #[inline(never)]
+    fn build_runtime(
+        slot: &'static mut MaybeUninit<RunRuntime>,
+        nao: &'static RunNao,
+        robot: &'static Robot<'static>,
+        scenario: &'static Scenario,
+        arch: Arch,
+    ) -> &'static mut RunRuntime {
+        slot.write(NaoRuntime::new(
             &robot.mission,
             nao,
             Sink,
             psmpa_sim::robot::config(scenario, arch),
-        ));
-        (world, runtime)
+        ))
     }
 
     /// A behaviour's computation: busy cycles of the deciding side's own.
