@@ -283,6 +283,8 @@ pub mod kind {
     pub const USER: u8 = 16;
     /// `SampleLost`.
     pub const SAMPLE_LOST: u8 = 17;
+    /// `PlanGenerated`.
+    pub const PLAN_GENERATED: u8 = 18;
 }
 
 /// What a replay feeds the runtime, read back from a frame: the platform's side of the trace
@@ -351,6 +353,13 @@ impl<const W: usize> Frame<W> {
             (kind::PHASE_STARTED, 1) => Some(Phase::Act),
             _ => None,
         }
+    }
+
+    /// The nodes a `PlanGenerated` frame's search expanded, `None` for any other frame.
+    pub fn expanded(&self) -> Option<u32> {
+        (self.kind() == kind::PLAN_GENERATED)
+            .then(|| self.payload.words().first().map(|w| *w as u32))
+            .flatten()
     }
 
     /// The sensor a `SensorOn` (`true`) or `SensorOff` (`false`) frame switches, `None` for
@@ -774,6 +783,20 @@ mod tests {
             TraceSink::<1>::record(&mut rec, Instant::from_ticks(t), &e);
         }
         rec.into_inner()
+    }
+
+    #[test]
+    fn a_plan_generated_frame_says_how_many_nodes_its_search_expanded() {
+        let generated = TraceEvent::<1>::PlanGenerated {
+            length: 3,
+            expanded: 70_000,
+        };
+        let at = Instant::from_ticks(5);
+        assert_eq!(Frame::of(at, &generated).expanded(), Some(70_000));
+        let other = TraceEvent::<1>::SensorOn {
+            sensor: SensorId::new(0).unwrap(),
+        };
+        assert_eq!(Frame::of(at, &other).expanded(), None);
     }
 
     #[test]

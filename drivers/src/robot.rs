@@ -16,7 +16,8 @@
 //! * "go to door", "go to back door" (walk): dead reckoning, as the robot has no wheel
 //!   encoders: it drives at [`Settings::walk_permille`], which moves it at
 //!   [`Settings::walk_mm_s`] (measure it on your robot), for as long as
-//!   [`Settings::walk_mm`] takes at that speed. It brakes as soon as its precondition is false
+//!   [`Settings::walk_mm`] (to the kitchen door) or [`Settings::back_door_mm`] (from there on
+//!   to the back door) takes at that speed. It brakes as soon as its precondition is false
 //!   (the sonar sees something, the bumper is pressed). With [`Settings::avoid`] of 0 it
 //!   waits and drives on when the precondition holds again; otherwise it steps around the
 //!   obstacle ([`Settings::avoid`] long: it turns away, passes it, turns back to its heading)
@@ -24,8 +25,9 @@
 //!   [`STEP_SETTLE`] after it) as the obstacle it passed. Braked and stepping time does not
 //!   count, nor the time from a bumper read that found a contact to the brake (the obstacle
 //!   held the wheels). Accurate to the speed's calibration and the braking distance.
-//! * "open door", "open back door": asks for a `handle` reading, stops if the door is locked,
-//!   then pushes the door open: a timed drive.
+//! * "open door": asks for a `handle` reading, stops if the door is locked, then pushes the
+//!   door open: a timed drive. "open back door": the push alone (the mission runs no handle
+//!   beside it).
 //! * "enter kitchen", "enter by back door": a timed drive through the door.
 //!
 //! Each device sits behind its own mutex ([`CriticalSectionRawMutex`]): sensing runs on an
@@ -72,6 +74,7 @@ use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant, Timer};
 use embedded_hal::digital::{InputPin, OutputPin};
 use embedded_hal_async::digital::Wait;
+use psmpa_core::planner::{Planner, Search, Strategy};
 use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, Value};
 
 use crate::PinError;
@@ -91,6 +94,15 @@ psmpa_core::include_mission!(
 
 /// The runtime of robot `P` (a [`FetchTea`]), tracing into `T`.
 pub type FetchTeaRuntime<'r, P, T = ()> = fetch_tea::Runtime<'r, P, T>;
+
+/// The planner the robot's control loop falls back on when no library plan applies (a locked
+/// kitchen door: `run_planning(&PLANNER, space)`): shortest plans, 32 nodes. The Fetch Tea
+/// actions add and delete five facts, so at most 2⁵ = 32 states are reachable and a
+/// breadth-first search, which stores each state once, cannot run out.
+pub const PLANNER: Planner<32> = Planner::new(Strategy::BreadthFirst);
+
+/// The space [`PLANNER`] searches in (about 1 KiB): a `static` on a microcontroller.
+pub type PlannerSpace = Search<32>;
 
 /// After a side step, switch readings taken this soon still show the obstacle it went around
 /// (a bump switch reads open within two debounce times; its bounces end within one): the walk
@@ -138,15 +150,18 @@ pub struct Settings {
     /// than its driver's [`RISE_TIMEOUT`](crate::hcsr04::RISE_TIMEOUT) (a module that answers
     /// later); 0: that.
     pub sonar_rise: Duration,
+    /// The walk from the kitchen door on to the back door, mm: "go to back door", past a
+    /// locked kitchen door.
+    pub back_door_mm: u32,
 }
 
-/// Words in a calibration record: [`RECORD_MAGIC`], [`RECORD_VERSION`], the 13 settings, a
+/// Words in a calibration record: [`RECORD_MAGIC`], [`RECORD_VERSION`], the 14 settings, a
 /// CRC-32 of the rest.
-pub const RECORD_WORDS: usize = 16;
+pub const RECORD_WORDS: usize = 17;
 /// A calibration record's first word: `PSMC` in little-endian bytes.
 pub const RECORD_MAGIC: u32 = u32::from_le_bytes(*b"PSMC");
 /// The layout of the calibration record this crate reads and writes.
-pub const RECORD_VERSION: u32 = 2;
+pub const RECORD_VERSION: u32 = 3;
 
 /// Why a calibration record was not taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -215,7 +230,7 @@ pub fn crc32(words: &[u32]) -> u32 {
 impl Settings {
     /// 300 mm clearance; a 2 m walk at 600 ‰, 250 mm/s (8 s); pushing at 300 ‰ for 1.5 s;
     /// entering at 500 ‰ for 3 s; no planning time; the mission's periods; no side step; the
-    /// sonar driver's own rise timeout.
+    /// sonar driver's own rise timeout; the back door 2 m past the kitchen door.
     pub const DEFAULT: Self = Self {
         clearance_mm: 300,
         walk_mm: 2_000,
@@ -230,12 +245,24 @@ impl Settings {
         bumper_period: None,
         avoid: Duration::from_ticks(0),
         sonar_rise: Duration::from_ticks(0),
+        back_door_mm: 2_000,
     };
 
-    /// How long the walk drives: `walk_mm / walk_mm_s`, rounded up to the millisecond; `None`
-    /// for a speed of 0.
+    /// How long the walk to the kitchen door drives: `walk_mm / walk_mm_s`, rounded up to the
+    /// millisecond; `None` for a speed of 0.
     pub fn walk_time(&self) -> Option<Duration> {
-        let ms = u64::from(self.walk_mm)
+        self.drive_time(self.walk_mm)
+    }
+
+    /// How long the walk from the kitchen door to the back door drives: `back_door_mm /
+    /// walk_mm_s`, as [`walk_time`](Self::walk_time).
+    pub fn back_door_time(&self) -> Option<Duration> {
+        self.drive_time(self.back_door_mm)
+    }
+
+    /// How long driving `mm` at the walking speed takes, rounded up to the millisecond.
+    fn drive_time(&self, mm: u32) -> Option<Duration> {
+        let ms = u64::from(mm)
             .saturating_mul(1_000)
             .checked_next_multiple_of(u64::from(self.walk_mm_s))?
             .checked_div(u64::from(self.walk_mm_s))?;
@@ -264,6 +291,7 @@ impl Settings {
             period(self.bumper_period),
             ms(self.avoid),
             ms(self.sonar_rise),
+            self.back_door_mm,
             0,
         ];
         let (body, sum) = r.split_at_mut(RECORD_WORDS - 1);
@@ -296,6 +324,7 @@ impl Settings {
             bumper_ms,
             avoid_ms,
             rise_ms,
+            back_door_mm,
             sum,
         ] = *r;
         if magic != RECORD_MAGIC {
@@ -328,6 +357,7 @@ impl Settings {
             bumper_period: period(bumper_ms),
             avoid: Duration::from_millis(u64::from(avoid_ms)),
             sonar_rise: Duration::from_millis(u64::from(rise_ms)),
+            back_door_mm,
         };
         if walk_mm_s == 0 {
             return Err(RecordError::Invalid);
@@ -556,12 +586,12 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         self.wheels(Drive::brake)
     }
 
-    /// Drives for the walk's time, braking while the precondition is false, or stepping
-    /// around what made it false ([`Settings::avoid`]); each time it starts or resumes
-    /// driving it first plans its way ([`Settings::plan`]). The wheels are written only when
-    /// the robot starts or stops, not on every sample.
-    async fn walk(&self, io: &ActionIo<'_>) -> Outcome {
-        let Some(mut left) = self.settings.walk_time() else {
+    /// Drives for `time` (a walk's, `None` for a speed of 0), braking while the precondition
+    /// is false, or stepping around what made it false ([`Settings::avoid`]); each time it
+    /// starts or resumes driving it first plans its way ([`Settings::plan`]). The wheels are
+    /// written only when the robot starts or stops, not on every sample.
+    async fn walk(&self, time: Option<Duration>, io: &ActionIo<'_>) -> Outcome {
+        let Some(mut left) = time else {
             return Outcome::Failure;
         };
         let duty = self.settings.walk_permille;
@@ -658,8 +688,14 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator
             EnterByBackDoor, EnterKitchen, GoToBackDoor, GoToDoor, OpenBackDoor, OpenDoor,
         };
         match action {
-            GoToDoor | GoToBackDoor => self.walk(io).await,
-            OpenDoor | OpenBackDoor => self.open_door(io).await,
+            GoToDoor => self.walk(self.settings.walk_time(), io).await,
+            GoToBackDoor => self.walk(self.settings.back_door_time(), io).await,
+            OpenDoor => self.open_door(io).await,
+            // No handle runs beside it (the mission's back door is never locked): a push.
+            OpenBackDoor => {
+                let s = &self.settings;
+                self.timed(s.push_permille, s.push).await
+            }
             EnterKitchen | EnterByBackDoor => {
                 let s = &self.settings;
                 self.timed(s.enter_permille, s.enter).await

@@ -35,6 +35,7 @@ fn settings_survive_their_record() {
         bumper_period: Some(Duration::from_millis(10)),
         avoid: Duration::from_millis(1_500),
         sonar_rise: Duration::from_millis(45),
+        back_door_mm: 2_500,
         ..Settings::DEFAULT
     };
     let record = bench.to_record();
@@ -59,14 +60,14 @@ fn a_record_that_is_not_one_is_refused_with_its_reason() {
         Settings::from_record(&with(good, 0, 0x1234_5678)),
         Err(RecordError::Magic)
     );
-    // Version 1 had no side step: its record is one word shorter.
+    // Version 2 had no back door (version 1 no side step either): each is shorter.
     assert_eq!(
-        Settings::from_record(&with(good, 1, 1)),
-        Err(RecordError::Version(1))
+        Settings::from_record(&with(good, 1, 2)),
+        Err(RecordError::Version(2))
     );
     assert_eq!(
-        RecordError::Version(1).to_string(),
-        "a calibration record of version 1, this firmware reads version 2"
+        RecordError::Version(2).to_string(),
+        "a calibration record of version 2, this firmware reads version 3"
     );
     // One bit flipped anywhere, the checksum included, is caught.
     for i in 0..RECORD_WORDS {

@@ -715,8 +715,11 @@ pub fn replay(
             // A second past the last frame: what the board traced at its last instant too.
             let end =
                 Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);
+            // The board's control loop: the same planner, where no library plan applies.
+            let mut space = psmpa_drivers::robot::PlannerSpace::new();
             let (mut sensing, mut deciding) = runtime.split();
-            let ran_to = drive(sensing.run(), deciding.run(), start, end)?;
+            let decided = deciding.run_planning(&psmpa_drivers::robot::PLANNER, &mut space);
+            let ran_to = drive(sensing.run(), decided, start, end)?;
             finish(runtime.into_sink(), ran_to)
         }
     }

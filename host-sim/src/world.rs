@@ -99,6 +99,14 @@ impl Place {
             Self::BackDoor => sc.door_um.saturating_add(sc.back_door_um),
         }
     }
+
+    /// Its index in per-door state.
+    fn slot(self) -> usize {
+        match self {
+            Self::KitchenDoor => 0,
+            Self::BackDoor => 1,
+        }
+    }
 }
 
 /// Something that happened in the world.
@@ -410,7 +418,10 @@ struct State<L> {
     looked_how: u8,
     rng: Pcg32,
     at_door_ms: Option<u64>,
-    door_open: bool,
+    /// Per door ([`Place::slot`]): the robot arrived there once.
+    arrived: [bool; 2],
+    /// Per door: open.
+    door_open: [bool; 2],
     in_kitchen: bool,
     /// The reading a stuck sonar keeps reporting.
     stuck_mm: Option<u32>,
@@ -488,9 +499,21 @@ fn div_ceil(a: i64, b: i64) -> u64 {
 }
 
 impl<L: WorldLog> State<L> {
-    /// Whether the kitchen door's handle gives: the robot stands there, and it is not locked.
+    /// The door the robot stands at, having arrived there.
+    fn door_here(&self, sc: &Scenario) -> Option<Place> {
+        [Place::KitchenDoor, Place::BackDoor].into_iter().find(|p| {
+            self.pos_um == p.at_um(sc) && self.arrived.get(p.slot()).copied().unwrap_or(false)
+        })
+    }
+
+    /// Whether the handle of the door the robot stands at gives: the back door's always, the
+    /// kitchen door's when it is not locked.
     fn door_gives(&self, sc: &Scenario) -> bool {
-        self.pos_um == sc.door_um && !sc.door_locked
+        match self.door_here(sc) {
+            Some(Place::KitchenDoor) => !sc.door_locked,
+            Some(Place::BackDoor) => true,
+            None => false,
+        }
     }
 
     /// The sonar's fault now, if it has one.
@@ -1011,7 +1034,8 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
                 looked_how: 0,
                 rng: Pcg32::seed_from_u64(scenario.seed),
                 at_door_ms: None,
-                door_open: false,
+                arrived: [false; 2],
+                door_open: [false; 2],
                 in_kitchen: false,
                 stuck_mm: None,
                 flags: DIRTY,
@@ -1167,6 +1191,9 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
             if place == Place::KitchenDoor && s.at_door_ms.is_none() {
                 s.at_door_ms = Some(s.now);
             }
+            if let Some(a) = s.arrived.get_mut(place.slot()) {
+                *a = true;
+            }
             s.emit(WorldEvent::Arrived(place));
         });
     }
@@ -1193,7 +1220,7 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// ([`dock`](Self::dock)) and has arrived ([`arrived`](Self::arrived), once). Whether it
     /// has arrived at `place`.
     pub fn stopped_near(&self, place: Place) -> bool {
-        let arrived = self.view(|s, sc| s.pos_um == place.at_um(sc) && s.at_door_ms.is_some());
+        let arrived = self.view(|s, sc| s.door_here(sc) == Some(place));
         if arrived || !self.dock(place, ARRIVAL_UM) {
             return arrived;
         }
@@ -1201,29 +1228,54 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         true
     }
 
-    /// Whether the robot stands at the kitchen door, having arrived there: its door's marker
-    /// is in view, and its handle gives when the door is not locked.
+    /// Whether the robot stands at the kitchen door, having arrived there.
     pub fn at_kitchen_door(&self) -> bool {
-        self.view(|s, sc| s.pos_um == sc.door_um && s.at_door_ms.is_some())
+        self.door_here() == Some(Place::KitchenDoor)
     }
 
-    /// Whether the kitchen door's handle gives under the robot's hand now: it stands at the
-    /// door and the door is not locked (what [`handle`](Self::handle) reads, with no sample).
+    /// The door the robot stands at, having arrived there: its marker is in view, and its
+    /// handle gives when the door is not locked (the back door never is).
+    pub fn door_here(&self) -> Option<Place> {
+        self.view(|s, sc| s.door_here(sc))
+    }
+
+    /// Whether the handle of the door the robot stands at gives under its hand now (what
+    /// [`handle`](Self::handle) reads, with no sample).
     pub fn door_gives(&self) -> bool {
         self.view(|s, sc| s.door_gives(sc))
     }
 
-    /// A body that pushes (the bench's wheeled robot) drove for `ms` at the kitchen door: a
-    /// drive of at least [`DOOR_PUSH_MS`] pushes the closed door open when its handle gives
-    /// (not locked), and goes through the open door into the kitchen. A shorter one, or one
-    /// anywhere else, does nothing.
+    /// Where a body that drives forward from where it stands (the bench's wheeled robot)
+    /// goes: the kitchen door before it, the back door after it (a locked kitchen door is
+    /// passed by, the back door being further along); `None` at a door it may push.
+    pub fn drive_target(&self) -> Option<Place> {
+        self.view(|s, sc| match s.door_here(sc) {
+            Some(Place::KitchenDoor) if sc.door_locked => Some(Place::BackDoor),
+            Some(_) => None,
+            None if s.pos_um < sc.door_um => Some(Place::KitchenDoor),
+            None => Some(Place::BackDoor),
+        })
+    }
+
+    /// A body that pushes (the bench's wheeled robot) drove for `ms` at a door: a drive of at
+    /// least [`DOOR_PUSH_MS`] pushes the closed door open when its handle gives (the kitchen
+    /// door not locked), and goes through the open door into the kitchen. A shorter one, or
+    /// one anywhere else, does nothing.
     pub fn push_door(&self, ms: u64) {
-        if ms < DOOR_PUSH_MS || !self.at_kitchen_door() {
+        let Some(place) = self.door_here() else {
+            return;
+        };
+        if ms < DOOR_PUSH_MS {
             return;
         }
-        let (open, locked) = self.view(|s, sc| (s.door_open, sc.door_locked));
-        if !open && !locked {
-            self.open_door(Place::KitchenDoor);
+        let (open, gives) = self.view(|s, sc| {
+            (
+                s.door_open.get(place.slot()).copied().unwrap_or(false),
+                s.door_gives(sc),
+            )
+        });
+        if !open && gives {
+            self.open_door(place);
         } else if open {
             self.enter_kitchen();
         }
@@ -1232,9 +1284,16 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
     /// Opens a door.
     pub fn open_door(&self, place: Place) {
         self.with(|s, _| {
-            s.door_open = true;
+            if let Some(open) = s.door_open.get_mut(place.slot()) {
+                *open = true;
+            }
             s.emit(WorldEvent::DoorOpened(place));
         });
+    }
+
+    /// Whether the robot is in the kitchen.
+    pub fn in_kitchen(&self) -> bool {
+        self.view(|s, _| s.in_kitchen)
     }
 
     /// Presses the kitchen door's handle: whether the door gives (not locked). Only at the

@@ -9,8 +9,10 @@
 // recording in it), and its sensors' health block, a diagnostic the bench judges nothing by.
 // It also counts cycles: each
 // interrupt handler's own, thread mode's busy stretches and the critical sections, for the
-// response-time analysis; and the back edges of the loops `cargo xtask wcet` takes bounds of on
-// trust (the boot command's `loops`), the most of each on one entry.
+// response-time analysis; the back edges of the loops `cargo xtask wcet` takes bounds of on
+// trust (the boot command's `loops`), the most of each on one entry; and each call of the
+// functions the boot command's `timed` lists (the control loop's decisions), from its entry
+// to its return, handlers excluded.
 //
 // Commands (xtask -> harness):
 //   {"cmd":"boot","flash":PATH,"symbols":{...},"health_words":N,"outputs":[..],"pwm":[..],
@@ -129,6 +131,7 @@ class Bench {
     this.events = [];
     this.accounts = new Accounts();
     this.watchLoops(config.loops ?? []);
+    this.watchCalls(config.timed ?? []);
     this.boot(false);
   }
 
@@ -200,7 +203,8 @@ class Bench {
     this.rtt = null;
     this.healthSeen = -1;
     this.busySince = null;
-    // A reset abandons every loop where it was.
+    // A reset abandons every loop, and the timed call, where it was.
+    this.timing = null;
     for (const l of this.loops ?? []) l.count.fill(0);
   }
 
@@ -237,6 +241,45 @@ class Bench {
         for (let a = from; a < to; a += 2) this.loopFn[(a - FLASH) >>> 1] = idx;
       }
       this.fnLoops[idx].push(l);
+    }
+  }
+
+  /**
+   * The functions whose calls are timed: `timed[i]` is an entry address (0: none). `timedAt`
+   * marks each entry's halfword of flash with i + 1; `calls` lists [i, own cycles] in order.
+   */
+  watchCalls(timed) {
+    this.calls = [];
+    this.timing = null;
+    this.timedAt = new Uint8Array(FLASH_BYTES >> 1);
+    for (const [i, at] of timed.entries()) {
+      if (at >= FLASH && at < FLASH + FLASH_BYTES) this.timedAt[((at & ~1) - FLASH) >>> 1] = i + 1;
+    }
+  }
+
+  /** After an instruction that went to `npc`: a timed call begins, or the one timed returns. */
+  callStep(npc) {
+    const core = this.core;
+    const t = this.timing;
+    if (t !== null) {
+      // Back at the caller, on its stack, at its exception level: the call is over.
+      if (npc === t.ret && core.SP === t.sp && core.IPSR === t.ctx) {
+        const own = core.cycles - t.start - (this.handlerCycles - t.handlers);
+        this.calls.push([t.i, own]);
+        this.timing = null;
+      }
+      return;
+    }
+    const i = this.timedAt[(npc - FLASH) >>> 1] | 0;
+    if (i !== 0) {
+      this.timing = {
+        i: i - 1,
+        start: core.cycles,
+        handlers: this.handlerCycles,
+        ret: core.LR & ~1,
+        sp: core.SP,
+        ctx: core.IPSR,
+      };
     }
   }
 
@@ -467,9 +510,12 @@ class Bench {
         const pc = core.PC;
         const ctx = core.IPSR;
         this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
+        const npc = core.PC;
+        if (this.timing !== null || this.timedAt[(npc - FLASH) >>> 1] > 0) {
+          this.callStep(npc);
+        }
         const loopFn = this.loopFn;
         if (loopFn !== null) {
-          const npc = core.PC;
           const a = loopFn[(pc - FLASH) >>> 1] | 0;
           const b = loopFn[(npc - FLASH) >>> 1] | 0;
           if ((a | b) !== 0 && core.IPSR === ctx) this.loopStep(pc, npc, a, b, ctx);
@@ -554,6 +600,7 @@ class Bench {
       ...this.accounts,
       instructions_per_ns: this.core.cycles / this.now,
       loops: this.loops.map((l) => l.max),
+      calls: this.calls,
     });
   }
 }

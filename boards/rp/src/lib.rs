@@ -5,8 +5,8 @@
 //!
 //! * sensing (every sensor's sampler) on an interrupt executor, `SWI_IRQ_1` at priority 2, so
 //!   that a sample falls due on time whatever the deciding side is computing;
-//! * deciding (the control loop, the plan's state machine, the behaviours) in thread mode,
-//!   in `main`.
+//! * deciding (the control loop, the plan's state machine, the behaviours, and the planner
+//!   when no library plan applies: a locked kitchen door) in thread mode.
 //!
 //! It runs the task once, logs the runtime's trace with the mission's names and the outcome
 //! over RTT (defmt, [`log`]), and then keeps the wheels braked.
@@ -50,7 +50,9 @@ use psmpa_drivers::Active;
 use psmpa_drivers::hbridge::{Channel, Drive};
 use psmpa_drivers::hcsr04::Hcsr04;
 use psmpa_drivers::marker::Marker;
-use psmpa_drivers::robot::{Compute, Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
+use psmpa_drivers::robot::{
+    Compute, Devices, FetchTea, FetchTeaRuntime, PLANNER, PlannerSpace, Settings, fetch_tea,
+};
 use psmpa_drivers::switch::{DEBOUNCE, Switch};
 use static_cell::StaticCell;
 
@@ -68,7 +70,8 @@ type Robot = FetchTea<
     Busy,
 >;
 
-/// Planning is processor time: a busy wait on the deciding side, which sensing preempts.
+/// The walk's path planning ([`Settings::plan`](psmpa_drivers::robot::Settings::plan)) is
+/// processor time: a busy wait on the deciding side, which sensing preempts.
 struct Busy;
 
 impl Compute for Busy {
@@ -340,17 +343,26 @@ async fn main(spawner: Spawner) {
         }
     }
 
-    match control(deciding_side, mission) {
+    // The search space, a `static` (about 1 KiB): searched in slices of
+    // `Config::plan_slice` nodes, between which sensing and the watchdog's task run.
+    static SPACE: StaticCell<PlannerSpace> = StaticCell::new();
+    let space = SPACE.init(PlannerSpace::new());
+    match control(deciding_side, mission, space) {
         Ok(task) => spawner.spawn(task),
         Err(_) => error!("the control task is already running"),
     }
 }
 
-/// Runs the task once (the control loop, Algorithm 1) in thread mode: a task of its own, so
-/// that each of its polls is a deciding step and no more (`cargo xtask wcet` bounds one).
+/// Runs the task once (the control loop, Algorithm 1, planning in `space` when no library
+/// plan applies) in thread mode: a task of its own, so that each of its polls is a deciding
+/// step and no more (`cargo xtask wcet` bounds one).
 #[embassy_executor::task]
-async fn control(mut side: DecidingSide<'static, Runtime>, mission: &'static fetch_tea::Mission) {
-    let outcome = side.run().await;
+async fn control(
+    mut side: DecidingSide<'static, Runtime>,
+    mission: &'static fetch_tea::Mission,
+    space: &'static mut PlannerSpace,
+) {
+    let outcome = side.run_planning(&PLANNER, space).await;
     #[cfg(feature = "recorder")]
     record::flush();
     match outcome {

@@ -468,9 +468,13 @@ impl<const W: usize> Fallback<W> for NoPlanner {
 
 impl<const N: usize, const W: usize> Fallback<W> for (&Planner<N, W>, &mut Search<N, W>) {
     const PLANS: bool = true;
+    // Out of line, both: a search's start and its slices are timed on the chip
+    // (`cargo xtask hil`'s `decision_cycles`).
+    #[inline(never)]
     fn start(&mut self, actions: &[ActuatorAction<'_, W>], init: FactSetOf<W>, goal: FactSetOf<W>) {
         self.1.start(self.0, actions, init, goal);
     }
+    #[inline(never)]
     fn step<const L: usize>(
         &mut self,
         actions: &[ActuatorAction<'_, W>],

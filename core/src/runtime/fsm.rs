@@ -104,6 +104,8 @@ pub struct Fsm<const L: usize> {
 
 impl<const L: usize> Fsm<L> {
     /// Algorithm 2 for one plan. O(L · NS).
+    // Out of line: one decision, timed on the chip (`cargo xtask hil`'s `decision_cycles`).
+    #[inline(never)]
     pub fn compile<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
         id: PlanId,
         plan: &Plan<'_, L, W>,

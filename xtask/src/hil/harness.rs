@@ -28,6 +28,9 @@ pub struct Boot {
     pub seed: String,
     /// Loops whose back edges an entry the harness counts (the most, in [`Stats::loops`]).
     pub loops: Vec<crate::wcet::BenchLoop>,
+    /// Entry addresses of functions whose calls the harness times (0: none), in
+    /// [`Stats::calls`].
+    pub timed: Vec<u32>,
 }
 
 /// Addresses in the firmware image.
@@ -78,6 +81,10 @@ pub struct Stats {
     /// Of each of [`Boot::loops`], the most back edges taken on one entry.
     #[serde(default)]
     pub loops: Vec<u64>,
+    /// Every call of a [`Boot::timed`] function, in order: its index there and its own
+    /// cycles (from its entry to its return, handlers excluded).
+    #[serde(default)]
+    pub calls: Vec<(usize, u64)>,
 }
 
 /// Something that happened on the chip.

@@ -197,7 +197,7 @@ fn json_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
     Ok(files)
 }
 
-/// The robot's settings for `sc`: the walk to its door at its speed, the sonar's threshold as
+/// The robot's settings for `sc`: the walk to its door (and on to the back door) at its speed, the sonar's threshold as
 /// the clearance (the robot stops for a reading below it, as the world registers one), its
 /// sensors' periods, the walk's planning time and its side step, and the time its sonar may
 /// take to answer. The rest as the board's defaults.
@@ -206,6 +206,7 @@ pub fn settings_for(sc: &Scenario) -> Settings {
     Settings {
         clearance_mm: u16::try_from(sc.sonar.threshold_mm() - 1).unwrap_or(u16::MAX),
         walk_mm: u32::try_from(to_mm(sc.door_um)).unwrap_or(u32::MAX),
+        back_door_mm: u32::try_from(to_mm(sc.back_door_um)).unwrap_or(u32::MAX),
         // µm a ms is mm a s.
         walk_mm_s: u32::try_from(sc.speed_um_per_ms).unwrap_or(u32::MAX).max(1),
         plan: Duration::from_micros(u64::from(sc.plan_us)),
@@ -238,6 +239,8 @@ struct Firmware {
     stack: (u32, u32),
     /// The annotated loops whose back edges the harness counts (`cargo xtask wcet`'s).
     loops: Vec<crate::wcet::BenchLoop>,
+    /// The entries of the decisions' functions ([`TIMED`]), 0 for none.
+    timed: Vec<u32>,
 }
 
 /// Builds the board's RP2040 image (`cargo build --release` in `boards/pico`).
@@ -279,6 +282,7 @@ impl Firmware {
             flash[offset..offset + data.len()].copy_from_slice(data);
         }
         let ids = [Sonar, Bumper, Camera, Handle].map(|s| s.id().index());
+        let timed = timed_entries(&file).map_err(|e| format!("{}: {e}", path.display()))?;
         Ok(Self {
             elf,
             flash,
@@ -288,6 +292,7 @@ impl Firmware {
             ids,
             stack,
             loops: Vec::new(),
+            timed,
         })
     }
 
@@ -377,6 +382,8 @@ pub struct Report {
     pub mission: Option<String>,
     /// Whether the chip's own log says its mission reached its goal.
     pub mission_succeeded: bool,
+    /// The control loop's decisions on the chip, timed by the harness ([`DecisionCycles`]).
+    pub decision_cycles: DecisionCycles,
     /// Resets by the watchdog.
     pub watchdog_resets: u32,
     /// Emulated time, s.
@@ -405,6 +412,100 @@ pub struct Report {
     /// The firmware's log.
     #[serde(skip)]
     pub log: Vec<LogLine>,
+}
+
+/// The worst own cycles of each decision of the control loop on the chip (the emulated
+/// RP2040's, from a function's entry to its return, handlers excluded; 8 ns each at
+/// 125 MHz), `None` where none was made: plan selection (BDI: the trigger, the context, the
+/// applicable plans), one FSM compilation (Algorithm 2), one planner search (its start and
+/// every slice, with `plan_expanded` the most nodes a search expanded, from the flight
+/// recording).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct DecisionCycles {
+    /// Selecting a plan.
+    pub select: Option<u64>,
+    /// Compiling a plan into its FSM.
+    pub compile: Option<u64>,
+    /// One search of the planner, all its slices.
+    pub plan: Option<u64>,
+    /// Nodes the planner expanded in a search, the most of one.
+    pub plan_expanded: Option<u32>,
+}
+
+impl DecisionCycles {
+    /// From the harness's timed calls of [`TIMED`]'s functions, in order (a search begins at
+    /// each call of its start), and the most nodes a recorded search expanded.
+    fn of(calls: &[(usize, u64)], expanded: Option<u32>) -> Self {
+        let worst = |which: usize| {
+            calls
+                .iter()
+                .filter(|(i, _)| *i == which)
+                .map(|(_, c)| *c)
+                .max()
+        };
+        let mut searches: Vec<u64> = Vec::new();
+        for &(i, cycles) in calls {
+            match i {
+                PLAN_START => searches.push(cycles),
+                PLAN_STEP => {
+                    if let Some(s) = searches.last_mut() {
+                        *s += cycles;
+                    }
+                }
+                _ => {}
+            }
+        }
+        Self {
+            select: worst(SELECT),
+            compile: worst(COMPILE),
+            plan: searches.into_iter().max(),
+            plan_expanded: expanded,
+        }
+    }
+}
+
+/// The functions the harness times, by their demangled names (without the hash): each
+/// decision is one call, or a search's start and its slices. Out of line in the core for this.
+const TIMED: [&str; 4] = [
+    "psmpa_core::runtime::control::<impl psmpa_core::runtime::engine::Engine<P,T,_,_,_,_,_,_,_>>::select",
+    "psmpa_core::runtime::fsm::Fsm<_>::compile",
+    "as psmpa_core::runtime::control::Fallback<_>>::start",
+    "as psmpa_core::runtime::control::Fallback<_>>::step",
+];
+const SELECT: usize = 0;
+const COMPILE: usize = 1;
+const PLAN_START: usize = 2;
+const PLAN_STEP: usize = 3;
+
+/// The entry of each of [`TIMED`] in `file`, 0 where the image has none (a library plan
+/// only image has no planner); more than one is an error (the timing would be ambiguous).
+fn timed_entries(file: &object::File<'_>) -> Result<Vec<u32>, String> {
+    TIMED
+        .iter()
+        .map(|pattern| {
+            let found: Vec<u32> = file
+                .symbols()
+                .filter(|s| s.kind() == object::SymbolKind::Text)
+                .filter(|s| {
+                    let name = format!("{:#}", rustc_demangle::demangle(s.name().unwrap_or("")));
+                    if pattern.starts_with("as ") {
+                        name.contains(pattern)
+                    } else {
+                        name == *pattern
+                    }
+                })
+                .map(|s| u32::try_from(s.address()).unwrap_or(0) & !1)
+                .collect();
+            match found[..] {
+                [] => Ok(0),
+                [at] => Ok(at),
+                _ => Err(format!(
+                    "the image has {} functions `{pattern}`",
+                    found.len()
+                )),
+            }
+        })
+        .collect()
 }
 
 /// A run's flight recording, as `psmpa-sim replay` found it.
@@ -508,6 +609,8 @@ pub struct HostOutcome {
     pub collisions: u32,
     /// Reached the door.
     pub reached_door: bool,
+    /// Reached its goal: the robot in the kitchen.
+    pub mission_succeeded: bool,
 }
 
 /// One run's record of pins and events, for the picture and the hash.
@@ -566,6 +669,7 @@ fn play(
         inputs,
         seed: sc.seed.to_string(),
         loops: fw.loops.clone(),
+        timed: fw.timed.clone(),
     };
     let mut harness = Harness::start(&boot)?;
     let table = defmt_decoder::Table::parse(&fw.elf)
@@ -656,6 +760,8 @@ struct Collected {
     /// After a fault struck: when the motors went off, and when the log first spoke.
     off_at: Option<u64>,
     spoke_at: Option<u64>,
+    /// The most nodes a search the chip recorded expanded.
+    expanded: Option<u32>,
 }
 
 async fn co_simulate(
@@ -737,6 +843,9 @@ async fn co_simulate(
                             }
                         };
                         for (at, frame) in frames {
+                            if let Some(n) = frame.expanded() {
+                                c.expanded = c.expanded.max(Some(n));
+                            }
                             let sets = bw.recorded(at, &frame, ns);
                             send(harness, &mut c.pins, sets)?;
                         }
@@ -1044,6 +1153,7 @@ fn report(
             .as_deref()
             .is_some_and(|e| e.contains("Fetch Tea: goal reached")),
         mission: c.ending.clone(),
+        decision_cycles: DecisionCycles::of(&stats.calls, c.expanded),
         watchdog_resets: c.resets.len() as u32,
         emulated_s: now as f64 / 1e9,
         wall_s: 0.0,
@@ -1090,10 +1200,12 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, bench: &[ObstacleReport]) {
         Ok(s) => s,
         Err(e) => return r.failures.push(format!("mission: psmpa-sim: {e}")),
     };
+    let host_succeeded = matches!(s.ending, psmpa_sim::run::Ending::Goal(_));
     r.host = Some(HostOutcome {
         detected: s.tally.detected,
         collisions: s.tally.collisions,
         reached_door: s.tally.reached_door,
+        mission_succeeded: host_succeeded,
     });
     if let Some((kind, _)) = sc.fault {
         r.differences.push(body_difference(kind));
@@ -1106,6 +1218,14 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, bench: &[ObstacleReport]) {
                 "psmpa-sim's robot reached the door: {}; the bench's: {}",
                 s.tally.reached_door, r.reached_door
             ),
+        ));
+    }
+    if host_succeeded != r.mission_succeeded {
+        // The body makes no difference here: both robots plan the same way past a locked
+        // door, so no timing explains it either.
+        r.failures.push(format!(
+            "mission: psmpa-sim's robot reached its goal: {host_succeeded}; the bench's: {}",
+            r.mission_succeeded
         ));
     }
     for (i, (host, bench)) in s.obstacles.iter().zip(bench).enumerate() {
@@ -1397,6 +1517,7 @@ pub fn chip_for_calls(elf: &Path) -> Result<Harness, String> {
         inputs: BTreeMap::new(),
         seed: "0".to_owned(),
         loops: Vec::new(),
+        timed: Vec::new(),
     })
 }
 
@@ -1591,9 +1712,11 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
     }
     if defaults && mode == Mode::Check {
         let (md, cell) = figures(&reports);
+        let decisions = decisions_table(&reports);
         let root = firmware::root();
         for (file, name, text) in [
             ("docs/firmware.md", "hil-figures", md.as_str()),
+            ("docs/firmware.md", "decisions", decisions.as_str()),
             ("README.md", "hil", cell.as_str()),
         ] {
             if let Err(e) = write_between(&root.join(file), name, text) {
@@ -1665,6 +1788,52 @@ pub fn write_between(path: &Path, name: &str, text: &str) -> Result<(), String> 
 
 /// The figures of a full bench run: a paragraph for docs/firmware.md and a table cell for the
 /// README.
+/// One decision's cycles of a run.
+type Pick = fn(&DecisionCycles) -> Option<u64>;
+
+/// The table of the control loop's decisions on the chip: each decision's worst over every
+/// run, and the run it came from.
+fn decisions_table(reports: &[(Report, PinLog)]) -> String {
+    let worst = |of: Pick| {
+        reports
+            .iter()
+            .filter_map(|(r, _)| of(&r.decision_cycles).map(|c| (c, r.scenario.as_str())))
+            .max_by_key(|(c, _)| *c)
+    };
+    let expanded = reports
+        .iter()
+        .filter_map(|(r, _)| r.decision_cycles.plan_expanded)
+        .max();
+    let mut md = String::from(
+        "\n| decision | worst own cycles | µs at 125 MHz | run |\n|---|---|---|---|\n",
+    );
+    let rows: [(&str, Pick); 3] = [
+        (
+            "plan selection (BDI: trigger, context, applicable plans)",
+            |d| d.select,
+        ),
+        ("one FSM compilation (Algorithm 2)", |d| d.compile),
+        ("one planner search, every slice", |d| d.plan),
+    ];
+    for (what, of) in rows {
+        let _ = match worst(of) {
+            Some((c, run)) => writeln!(
+                md,
+                "| {what} | {} | {:.1} | `{run}` |",
+                thousands(c),
+                c as f64 * 8.0 / 1_000.0
+            ),
+            None => writeln!(md, "| {what} | - | - | none made |"),
+        };
+    }
+    let _ = writeln!(
+        md,
+        "\nThe search expanded at most {} nodes (breadth-first, the robot's `PLANNER`).",
+        expanded.map_or("no".to_owned(), |n| n.to_string())
+    );
+    md
+}
+
 fn figures(reports: &[(Report, PinLog)]) -> (String, String) {
     let plain: Vec<&Report> = reports
         .iter()
@@ -1866,6 +2035,23 @@ fn text(r: &Report) -> String {
             .as_deref()
             .unwrap_or("the firmware never said how it ended")
     );
+    let d = r.decision_cycles;
+    if d.select.is_some() {
+        let cycles = |c: Option<u64>| {
+            c.map_or("-".to_owned(), |c| {
+                format!("{c} cycles ({:.1} µs)", c as f64 * 8.0 / 1_000.0)
+            })
+        };
+        let _ = writeln!(
+            s,
+            "  decisions on the chip (worst): select {}, compile {}, plan {}{}",
+            cycles(d.select),
+            cycles(d.compile),
+            cycles(d.plan),
+            d.plan_expanded
+                .map_or(String::new(), |n| format!(", {n} nodes expanded"))
+        );
+    }
     if let Some(g) = r.trigger_gap_max_ms {
         let _ = writeln!(s, "  sonar : longest gap between triggers {g:.3} ms");
     }

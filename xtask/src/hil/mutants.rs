@@ -171,9 +171,9 @@ const MUTANTS: &[Mutant] = &[
     },
     Mutant {
         name: "short-loop-bound",
-        what: "a loop annotation of the static timing analysis bounds the ring's copy by a frame (53 bytes), missing the recording's 64-byte prologue",
+        what: "a loop annotation of the static timing analysis bounds the ring's copy by a frame (53 bytes), missing the recording's 68-byte prologue",
         file: ANNOTATIONS,
-        find: "      \"bound\": 64,\n      \"why\": \"copies one write into the ring",
+        find: "      \"bound\": 68,\n      \"why\": \"copies one write into the ring",
         replace: "      \"bound\": 53,\n      \"why\": \"copies one write into the ring",
         plays: &["scenarios/quiet.json"],
         everywhere: false,
@@ -185,6 +185,15 @@ const MUTANTS: &[Mutant] = &[
         find: "Reading::of(Value::Bool(pressed), !pressed)",
         replace: "Reading::of(Value::Bool(pressed), true)",
         plays: &["scenarios/bumper-4.json"],
+        everywhere: false,
+    },
+    Mutant {
+        name: "no-planner",
+        what: "the board's control loop runs the library's plans only: no plan past a locked door",
+        file: "boards/rp/src/lib.rs",
+        find: "side.run_planning(&PLANNER, space).await",
+        replace: "{ let _ = (&PLANNER, space); side.run().await }",
+        plays: &["scenarios/locked-door.json"],
         everywhere: false,
     },
 ];

@@ -21,8 +21,9 @@
 //!   scenario's minimum contact), and bounces: 1 to 3 bounces of 50 to 400 µs before it
 //!   settles, from a generator seeded with the scenario's seed; the bumper's read latency
 //!   (`latency_ms`) delays its edges as a slower sensor answers later. The **marker** (GP5, an open
-//!   collector) pulls low while the robot stands at the kitchen door; the handle's switch
-//!   closes there when the door is not locked.
+//!   collector) pulls low while the robot stands at a door (the kitchen door, the back
+//!   door); the handle's switch closes there when the door is not locked (the back door
+//!   never is).
 //! * **What the robot sensed** comes from its flight recording: the world registers an
 //!   obstacle from a sample the robot recorded (a sonar reading below the threshold, a bumper
 //!   read that found the switch closed), switches the world's sensors with the robot's own
@@ -31,14 +32,14 @@
 //! * **Reactions** are timed from the rig's side: an echo that means an obstacle within the
 //!   threshold (by more than the reading's timing error), or the bump switch settling closed,
 //!   while the robot drives, must be followed by the motor pins stopping.
-//! * **Doors and side steps** are the world's rules ([`World::stopped_near`],
-//!   [`World::push_door`], [`World::begin_avoid_around`]); this module only maps the motor
-//!   pins to them: a stop on the way may be an arrival (within 20 mm, its dead reckoning's
-//!   error), a drive at the door a push, a pivot a side step.
+//! * **Doors and side steps** are the world's rules ([`World::drive_target`],
+//!   [`World::stopped_near`], [`World::push_door`], [`World::begin_avoid_around`]); this
+//!   module only maps the motor pins to them: a drive goes to the next door (past a locked
+//!   kitchen door, on to the back door), a stop on the way may be an arrival (within 20 mm,
+//!   its dead reckoning's error), a drive at a door a push, a pivot a side step.
 //!
 //! Where the body differs from the simulator's NAO is listed in one place,
-//! `super::body_difference`; it has no planner on board either (at a locked door it stops
-//! where psmpa-sim's robot takes the back door: the kitchen door is reached by both).
+//! `super::body_difference`.
 
 use std::collections::VecDeque;
 
@@ -242,6 +243,10 @@ pub struct BenchWorld<'s> {
     driving: Option<u64>,
     /// The wheels turn the robot around an obstacle (the world's side step).
     stepping: bool,
+    /// The door the robot drives to ([`World::drive_target`]), while a drive walks (not a
+    /// push at a door).
+    target: Place,
+    walking: bool,
     speed: u16,
 
     /// The last echoes sent, newest last.
@@ -304,6 +309,8 @@ impl<'s> BenchWorld<'s> {
             duties: [0; 2],
             driving: None,
             stepping: false,
+            target: Place::KitchenDoor,
+            walking: false,
             speed: 1000,
 
             sent: VecDeque::new(),
@@ -539,7 +546,7 @@ impl<'s> BenchWorld<'s> {
         self.watched(ns);
         let pivot = self.pivoting();
         if self.stepping {
-            let (legs, _, _) = self.world.legs(Place::KitchenDoor);
+            let (legs, _, _) = self.world.legs(self.target);
             if pivot || matches!(legs, Motion::Avoiding { .. }) {
                 return;
             }
@@ -550,9 +557,12 @@ impl<'s> BenchWorld<'s> {
             (None, true) => {
                 self.driving = Some(ns);
                 self.speed = speed;
-                if !self.world.at_kitchen_door() {
+                self.walking = false;
+                if let Some(target) = self.world.drive_target() {
+                    self.target = target;
+                    self.walking = true;
                     self.world.set_speed(speed);
-                    self.world.walk_to(Place::KitchenDoor);
+                    self.world.walk_to(target);
                 }
             }
             (Some(since), false) => {
@@ -568,25 +578,25 @@ impl<'s> BenchWorld<'s> {
             }
             (Some(_), true) if speed != self.speed => {
                 self.speed = speed;
-                if !self.world.at_kitchen_door() {
+                if self.walking {
                     self.world.set_speed(speed);
                 }
             }
             _ => {}
         }
-        if pivot && !self.world.at_kitchen_door() {
+        if pivot && self.world.door_here().is_none() {
             self.stepping = true;
             self.world.begin_avoid_around(self.shown);
         }
     }
 
     /// The robot stopped after driving since `since`: on its way, it may have arrived; at
-    /// the door, it pushed the door for that long (the world's rules for a body that pushes).
+    /// a door, it pushed the door for that long (the world's rules for a body that pushes).
     fn stopped(&mut self, since: u64, ns: u64) {
-        if self.world.at_kitchen_door() {
+        if !std::mem::take(&mut self.walking) {
             self.world.push_door(ns.saturating_sub(since) / 1_000_000);
         } else {
-            self.world.stopped_near(Place::KitchenDoor);
+            self.world.stopped_near(self.target);
         }
     }
 
@@ -753,7 +763,7 @@ impl<'s> BenchWorld<'s> {
                 self.reactions[1].pending = Some(settled);
             }
         }
-        let seen = self.world.at_kitchen_door();
+        let seen = self.world.door_here().is_some();
         if self.closed(pin::MARKER) != seen {
             self.set(out, pin::MARKER, seen.then_some(false), ns);
         }
@@ -920,49 +930,46 @@ mod tests {
         assert!(bw.sent.is_empty());
     }
 
-    #[test]
-    fn the_wheels_arrive_push_the_door_and_go_through_by_the_worlds_rules() {
-        let sc = psmpa_sim::load::parse(
-            std::path::Path::new("t.json"),
-            br#"{"name": "t", "door_m": 0.1, "robot": {"speed_mps": 0.1}, "interferences": []}"#,
-        )
-        .unwrap();
+    /// Drives both wheels forward at 600 ‰ from `*t` for `ms`, then brakes; `*t` moves on.
+    async fn drive(bw: &mut BenchWorld<'_>, t: &mut u64, ms: u64) {
+        for p in [pin::STBY, pin::LEFT[0], pin::RIGHT[0]] {
+            bw.output(p, true, *t);
+        }
+        bw.duty(pin::LEFT[2], 600, *t);
+        bw.duty(pin::RIGHT[2], 600, *t);
+        *t += ms * 1_000_000;
+        embassy_time::Timer::at(Instant::from_millis(*t / 1_000_000)).await;
+        bw.output(pin::LEFT[1], true, *t);
+        bw.output(pin::RIGHT[1], true, *t);
+        bw.output(pin::LEFT[1], false, *t);
+        bw.output(pin::RIGHT[1], false, *t);
+        bw.duty(pin::LEFT[2], 0, *t);
+        bw.duty(pin::RIGHT[2], 0, *t);
+    }
+
+    /// The world's door events of a scenario `json` driven by `drives` (ms each), with
+    /// `check` asked after each drive.
+    fn doors_after(
+        json: &[u8],
+        drives: &[u64],
+        check: impl Fn(usize, &BenchWorld<'_>),
+    ) -> Vec<(u64, WorldEvent)> {
+        let sc = psmpa_sim::load::parse(std::path::Path::new("t.json"), json).unwrap();
         let events = psmpa_sim::backend::simulate(
             async {
                 let mut bw = BenchWorld::new(&sc, 600, [0, 1, 2, 3], None, 20);
                 let mut t = 0;
-                // Drives for `ms`, then brakes.
-                let mut drive = async |bw: &mut BenchWorld<'_>, ms: u64| {
-                    for p in [pin::STBY, pin::LEFT[0], pin::RIGHT[0]] {
-                        bw.output(p, true, t);
-                    }
-                    bw.duty(pin::LEFT[2], 600, t);
-                    bw.duty(pin::RIGHT[2], 600, t);
-                    t += ms * 1_000_000;
-                    embassy_time::Timer::at(Instant::from_millis(t / 1_000_000)).await;
-                    bw.output(pin::LEFT[1], true, t);
-                    bw.output(pin::RIGHT[1], true, t);
-                    bw.output(pin::LEFT[1], false, t);
-                    bw.output(pin::RIGHT[1], false, t);
-                    bw.duty(pin::LEFT[2], 0, t);
-                    bw.duty(pin::RIGHT[2], 0, t);
-                };
-                // 99 of the 100 mm by dead reckoning: within 20 mm, at the door.
-                drive(&mut bw, 990).await;
-                assert!(bw.world().at_kitchen_door());
-                assert!(bw.closed(pin::MARKER) && bw.closed(pin::HANDLE));
-                // Half a second of pushing does not open it; a second does; a second more
-                // goes through.
-                drive(&mut bw, 500).await;
-                drive(&mut bw, 1_000).await;
-                drive(&mut bw, 1_000).await;
+                for (i, ms) in drives.iter().enumerate() {
+                    drive(&mut bw, &mut t, *ms).await;
+                    check(i, &bw);
+                }
                 bw.into_events()
             },
             embassy_time::Duration::from_secs(10),
         )
         .unwrap()
         .output;
-        let doors: Vec<_> = events
+        events
             .iter()
             .filter(|(_, _, e)| {
                 matches!(
@@ -971,13 +978,61 @@ mod tests {
                 )
             })
             .map(|(ms, _, e)| (*ms, *e))
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn the_wheels_arrive_push_the_door_and_go_through_by_the_worlds_rules() {
+        // 99 of the 100 mm by dead reckoning: within 20 mm, at the door. Half a second of
+        // pushing does not open it; a second does; a second more goes through.
+        let doors = doors_after(
+            br#"{"name": "t", "door_m": 0.1, "robot": {"speed_mps": 0.1}, "interferences": []}"#,
+            &[990, 500, 1_000, 1_000],
+            |i, bw| {
+                if i == 0 {
+                    assert!(bw.world().at_kitchen_door());
+                    assert!(bw.closed(pin::MARKER) && bw.closed(pin::HANDLE));
+                }
+            },
+        );
         assert_eq!(
             doors,
             [
                 (990, WorldEvent::Arrived(Place::KitchenDoor)),
                 (2_490, WorldEvent::DoorOpened(Place::KitchenDoor)),
                 (3_490, WorldEvent::InKitchen)
+            ]
+        );
+    }
+
+    #[test]
+    fn from_a_locked_door_the_wheels_go_on_to_the_back_door_and_through_it() {
+        // At the locked kitchen door the marker shows and the handle does not give; a drive
+        // from there goes on to the back door, 100 mm further, whose marker shows and whose
+        // handle gives; pushing it opens it, and a second more goes through.
+        let doors = doors_after(
+            br#"{"name": "t", "door_m": 0.1, "robot": {"speed_mps": 0.1},
+                 "doors": {"locked": true, "back_door_m": 0.1}, "interferences": []}"#,
+            &[990, 1_010, 1_000, 1_000],
+            |i, bw| match i {
+                0 => {
+                    assert_eq!(bw.world().door_here(), Some(Place::KitchenDoor));
+                    assert!(bw.closed(pin::MARKER) && !bw.closed(pin::HANDLE));
+                }
+                1 => {
+                    assert_eq!(bw.world().door_here(), Some(Place::BackDoor));
+                    assert!(bw.closed(pin::MARKER) && bw.closed(pin::HANDLE));
+                }
+                _ => {}
+            },
+        );
+        assert_eq!(
+            doors,
+            [
+                (990, WorldEvent::Arrived(Place::KitchenDoor)),
+                (2_000, WorldEvent::Arrived(Place::BackDoor)),
+                (3_000, WorldEvent::DoorOpened(Place::BackDoor)),
+                (4_000, WorldEvent::InKitchen)
             ]
         );
     }
