@@ -1,9 +1,10 @@
 //! The floor under psmpa's action step on this backend: the same work as `profile_plan`'s, with
 //! none of the runtime around it. Two futures in the host's virtual time, sensing above deciding
 //! (`simulate_split`); per action step a timer wakes the sensing future, which samples the
-//! sonar, puts the value into a store, fuses the fact, checks the precondition, hashes one trace
-//! event and signals; the deciding future wakes, checks the violation, reads the sample and
-//! writes its progress. No FSM, no control loop, no switching sensors on and off.
+//! sonar, puts the value into a store, fuses the fact, checks the precondition and signals; the
+//! deciding future wakes, checks the violation, reads the sample and writes its progress. No
+//! FSM, no control loop, no switching sensors on and off, no trace (`profile_plan` runs with
+//! no sink, which traces nothing).
 //!
 //! `valgrind --tool=callgrind target/release/examples/profile_floor 1000` (and 2000): the
 //! difference over the 30,000 action steps between the two is the floor's cost per step.
@@ -14,9 +15,7 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_bench::workload::{ACTIONS, STEPS_PER_ACTION, Sonar, path_clear};
-use psmpa_core::{
-    DataStore, FactId, FactSet, Key, SensorId, StoreAccess, TraceEvent, TraceHash, Value,
-};
+use psmpa_core::{DataStore, FactId, FactSet, Key, StoreAccess, Value};
 
 /// One run of the plan's work; returns the action steps run.
 fn run_once() -> u32 {
@@ -24,9 +23,8 @@ fn run_once() -> u32 {
     let own: DataStore<NoopRawMutex, 4> = DataStore::new();
     let beliefs = Cell::new(FactSet::EMPTY);
     let violated = Cell::new(false);
-    let hash = Cell::new(TraceHash::new());
     let signal: Signal<NoopRawMutex, ()> = Signal::new();
-    let (Some(clear), Some(sonar_id)) = (FactId::new(0), SensorId::new(0)) else {
+    let Some(clear) = FactId::new(0) else {
         return 0;
     };
     let pre = FactSet::single(clear);
@@ -42,16 +40,6 @@ fn run_once() -> u32 {
             let holds = if path_clear(mm) { pre } else { FactSet::EMPTY };
             beliefs.set(beliefs.get().difference(pre).union(holds));
             violated.set(!pre.is_subset(beliefs.get()));
-            let mut h = hash.get();
-            h.add(
-                now,
-                &TraceEvent::Sample {
-                    sensor: sonar_id,
-                    value: Value::Mm(mm),
-                    holds,
-                },
-            );
-            hash.set(h);
             signal.signal(());
         }
     };

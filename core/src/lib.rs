@@ -194,4 +194,4 @@ pub use runtime::{
 };
 pub use store::{DataStore, Entry, Key, MutualStore, StoreAccess, StoreFull, Value};
 pub use text::{Describe, Described, FactNames};
-pub use trace::{Phase, TraceEvent, TraceHash, TraceSink, Tracer};
+pub use trace::{Hashing, Phase, TraceEvent, TraceHash, TraceSink, Tracer};

@@ -195,16 +195,33 @@ impl<const W: usize> TraceEvent<W> {
 /// Receives the trace events of a runtime whose fact sets have `W` words. Implementations
 /// must not block; they run in the control path.
 pub trait TraceSink<const W: usize = 1> {
+    /// Whether the runtime traces into this sink at all. `()` says no: the runtime then
+    /// skips every event (no clock read, no lock, no hash), and its
+    /// [`trace_hash`](crate::Engine::trace_hash) and `trace_events` stay those of the empty
+    /// trace. [`Hashing`] keeps nothing but the hash and the count.
+    const TRACES: bool = true;
+
     /// Called once per event, in order.
     fn record(&mut self, at: Instant, event: &TraceEvent<W>);
 }
 
-/// Discards every event (the hash is still computed).
+/// No trace: the runtime skips every event, the hash and count included.
 impl<const W: usize> TraceSink<W> for () {
+    const TRACES: bool = false;
+    fn record(&mut self, _at: Instant, _event: &TraceEvent<W>) {}
+}
+
+/// Keeps no event, but the runtime traces into it: the trace's hash and count are kept, for a
+/// check that compares runs by their hash.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Hashing;
+
+impl<const W: usize> TraceSink<W> for Hashing {
     fn record(&mut self, _at: Instant, _event: &TraceEvent<W>) {}
 }
 
 impl<const W: usize, T: TraceSink<W> + ?Sized> TraceSink<W> for &mut T {
+    const TRACES: bool = T::TRACES;
     fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
         (**self).record(at, event);
     }

@@ -70,7 +70,7 @@ const SLACK: Duration = Duration::from_secs(1);
 
 /// Runs `scenario` under `arch` with nothing recorded (fast path for sweeps and benchmarks).
 pub fn run_summary(scenario: &Scenario, arch: Arch) -> Result<Summary, RunError> {
-    run_logged(scenario, arch, (), ()).map(|(s, (), ())| s)
+    run_logged(scenario, arch, (), psmpa_core::Hashing).map(|(s, (), _)| s)
 }
 
 /// Runs `scenario` under `arch`, logging the world into `log` and tracing the runtime into

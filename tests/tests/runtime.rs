@@ -1064,3 +1064,33 @@ fn an_action_with_a_tolerance_of_its_own_starts_on_a_blocked_path_and_waits() {
     );
     assert!(r.elapsed < Duration::from_millis(13_000), "{:?}", r.elapsed);
 }
+
+#[test]
+fn with_no_sink_nothing_is_traced_and_hashing_keeps_the_recorders_hash() {
+    use psmpa_core::{Actions, Body, Keys, Plans, Sensors};
+    use psmpa_core::{Caps, Hashing, Runtime, TraceHash};
+    type Sized4 = Caps<Sensors<2>, Actions<4>, Plans<4>, Body<4>, Keys<4>>;
+    let (mission, ids) = tiny::mission(false);
+    let recorded = run_with(Policy::PSmpa, &[], false, |_| {});
+    // Each run on a world of its own, from the same start.
+    let hash_and_count = |traced: bool| {
+        let world = TinyWorld::new(ids, &[]);
+        let config = tiny::config(Policy::PSmpa);
+        if traced {
+            let mut rt =
+                Runtime::<'_, TinyWorld, Sized4, Hashing>::new(&mission, &world, Hashing, config);
+            let (mut s, mut d) = rt.split();
+            simulate_split(s.run(), d.run(), LIMIT).unwrap();
+            (rt.trace_hash(), rt.trace_events())
+        } else {
+            let mut rt = Runtime::<'_, TinyWorld, Sized4, ()>::new(&mission, &world, (), config);
+            let (mut s, mut d) = rt.split();
+            simulate_split(s.run(), d.run(), LIMIT).unwrap();
+            (rt.trace_hash(), rt.trace_events())
+        }
+    };
+    let (hash, events) = hash_and_count(true);
+    assert_eq!(hash.value(), recorded.hash);
+    assert_eq!(events as usize, recorded.trace.len());
+    assert_eq!(hash_and_count(false), (TraceHash::new(), 0));
+}

@@ -297,6 +297,10 @@ impl<
     }
 
     pub(crate) fn trace(&self, event: TraceEvent<W>) {
+        // No sink (`()`): nothing to read, lock or hash.
+        if !T::TRACES {
+            return;
+        }
         let at = Instant::now();
         let recorded = self.tracer.lock(|t| match t.try_borrow_mut() {
             Ok(mut t) => {
