@@ -180,6 +180,9 @@ struct Extra {
     /// `profile_floor`'s count; absent from results written before it was measured.
     #[serde(default)]
     floor_per_step: Option<f64>,
+    /// Instructions per plan by implementation (the plan table's names), callgrind's.
+    #[serde(default)]
+    instructions_per_plan: BTreeMap<String, f64>,
 }
 
 /// Plans per callgrind run of a plan profile: the difference of two runs leaves out the
@@ -191,6 +194,12 @@ const PROFILE_PLAN: &str = "profile_plan";
 
 /// The same work with no runtime around it: the floor under psmpa's step on this backend.
 const PROFILE_FLOOR: &str = "profile_floor";
+
+/// The peers' plan workloads, for callgrind: `profile_peer NAME PLANS`.
+const PROFILE_PEER: &str = "profile_peer";
+
+/// The peers [`PROFILE_PEER`] runs, by their names in the plan table.
+const PEERS: [&str; 3] = ["bonsai-bt", "statig", "hand-written FSM"];
 
 /// One callgrind run of a plan profile.
 struct Count {
@@ -208,10 +217,24 @@ fn build_profile(name: &str) -> Result<PathBuf, String> {
     )
 }
 
-/// Runs `exe` (the example `name`) for `plans` plans under callgrind.
-fn callgrind(root: &Path, exe: &Path, name: &str, plans: u32) -> Result<Count, String> {
-    let out_file = root.join(format!("target/callgrind.{name}.{plans}.out"));
-    let stdout = callgrind::run(root, &out_file, &[], exe, &[&plans.to_string()])?;
+/// Runs `exe` (the example `name`, with `args` before the plan count) for `plans` plans
+/// under callgrind.
+fn callgrind(
+    root: &Path,
+    exe: &Path,
+    name: &str,
+    args: &[&str],
+    plans: u32,
+) -> Result<Count, String> {
+    let tag: String = args
+        .iter()
+        .flat_map(|a| a.chars())
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
+        .collect();
+    let out_file = root.join(format!("target/callgrind.{name}{tag}.{plans}.out"));
+    let plans_arg = plans.to_string();
+    let all: Vec<&str> = args.iter().copied().chain([plans_arg.as_str()]).collect();
+    let stdout = callgrind::run(root, &out_file, &[], exe, &all)?;
     // "N action steps in M plans"
     let (steps, ran) = stdout
         .lines()
@@ -272,15 +295,16 @@ fn instructions_line(per_step: f64, floor: Option<f64>) -> String {
     )
 }
 
-/// The example `name`'s plan workload in instructions per action step: two callgrind runs,
-/// the difference of their counts over the difference of their steps.
-fn instructions_per_step(root: &Path, name: &str) -> Result<f64, String> {
-    let exe = build_profile(name)?;
+/// The example `name`'s (with `args`) plan workload: two callgrind runs, and the difference
+/// of their counts over the difference of their action steps and of their plans.
+fn differences(root: &Path, exe: &Path, name: &str, args: &[&str]) -> Result<(f64, f64), String> {
     let mut counts = Vec::new();
     for plans in CALLGRIND_PLANS {
-        let c = callgrind(root, &exe, name, plans)?;
+        let c = callgrind(root, exe, name, args, plans)?;
         println!(
-            "{name}: {} action steps in {} plans: {} instructions",
+            "{name}{}{}: {} action steps in {} plans: {} instructions",
+            if args.is_empty() { "" } else { " " },
+            args.join(" "),
             c.steps,
             c.plans,
             fmt_count(c.instructions as f64)
@@ -288,28 +312,62 @@ fn instructions_per_step(root: &Path, name: &str) -> Result<f64, String> {
         counts.push(c);
     }
     let (a, b) = (&counts[0], &counts[1]);
-    if b.steps <= a.steps || b.instructions < a.instructions {
+    if b.steps <= a.steps || b.plans <= a.plans || b.instructions < a.instructions {
         return Err(format!(
             "{name} ran {} then {} action steps: no difference to divide by",
             a.steps, b.steps
         ));
     }
-    Ok((b.instructions - a.instructions) as f64 / (b.steps - a.steps) as f64)
+    let more = (b.instructions - a.instructions) as f64;
+    Ok((
+        more / (b.steps - a.steps) as f64,
+        more / (b.plans - a.plans) as f64,
+    ))
 }
 
-/// psmpa's count and the floor's.
-fn instruction_counts(root: &Path) -> Result<(f64, f64), String> {
+/// Every count of one run: psmpa's per action step, the floor's, and per plan psmpa's and
+/// each peer's, the same workload.
+struct Counts {
+    per_step: f64,
+    floor: f64,
+    per_plan: BTreeMap<String, f64>,
+}
+
+/// psmpa's counts, the floor's and the peers'.
+fn instruction_counts(root: &Path) -> Result<Counts, String> {
     callgrind::check()?;
-    Ok((
-        instructions_per_step(root, PROFILE_PLAN)?,
-        instructions_per_step(root, PROFILE_FLOOR)?,
-    ))
+    let (per_step, psmpa_plan) =
+        differences(root, &build_profile(PROFILE_PLAN)?, PROFILE_PLAN, &[])?;
+    let (floor, _) = differences(root, &build_profile(PROFILE_FLOOR)?, PROFILE_FLOOR, &[])?;
+    let mut per_plan = BTreeMap::from([("psmpa".to_owned(), psmpa_plan)]);
+    let peer = build_profile(PROFILE_PEER)?;
+    for name in PEERS {
+        let (_, plan) = differences(root, &peer, PROFILE_PEER, &[name])?;
+        per_plan.insert(name.to_owned(), plan);
+    }
+    Ok(Counts {
+        per_step,
+        floor,
+        per_plan,
+    })
+}
+
+/// One line per implementation, `NAME: N instructions per plan`, fewest first.
+fn per_plan_lines(per_plan: &BTreeMap<String, f64>) -> Vec<String> {
+    let mut rows: Vec<(&String, &f64)> = per_plan.iter().collect();
+    rows.sort_by(|a, b| a.1.total_cmp(b.1));
+    rows.into_iter()
+        .map(|(name, n)| format!("{name}: {} instructions per plan", fmt_count(*n)))
+        .collect()
 }
 
 /// `cargo xtask bench --instructions`: only the instruction counts, printed; writes nothing.
 pub fn instructions() -> Result<(), String> {
-    let (per_step, floor) = instruction_counts(&firmware::root())?;
-    println!("{}", instructions_line(per_step, Some(floor)));
+    let counts = instruction_counts(&firmware::root())?;
+    for line in per_plan_lines(&counts.per_plan) {
+        println!("{line}");
+    }
+    println!("{}", instructions_line(counts.per_step, Some(counts.floor)));
     Ok(())
 }
 
@@ -365,18 +423,53 @@ fn measure(root: &Path) -> Result<Extra, String> {
     )?;
     allocs.extend(allocations(&bt_text));
     let sweep_s = sweep_seconds()?;
-    let (per_step, floor) = instruction_counts(root)?;
-    println!("{}", instructions_line(per_step, Some(floor)));
+    let counts = instruction_counts(root)?;
+    for line in per_plan_lines(&counts.per_plan) {
+        println!("{line}");
+    }
+    println!("{}", instructions_line(counts.per_step, Some(counts.floor)));
     Ok(Extra {
         allocations: allocs,
         sweep_s,
-        instructions_per_step: Some(per_step),
-        floor_per_step: Some(floor),
+        instructions_per_step: Some(counts.per_step),
+        floor_per_step: Some(counts.floor),
+        instructions_per_plan: counts.per_plan,
     })
 }
 
 /// Every action step of the plan workload (asserted by every plan bench).
 const PLAN_STEPS: f64 = 30.0;
+
+/// Where psmpa stands in instructions per plan, said plainly: the times of one run move with
+/// the machine's load, the counts do not.
+fn standing(per_plan: &BTreeMap<String, f64>) -> String {
+    let Some(&psmpa) = per_plan.get("psmpa") else {
+        return String::new();
+    };
+    let mut out = String::from(
+        "\nThe times move with the machine's load from run to run; the instruction counts \
+         (callgrind, the same workload, `cargo xtask bench --instructions`) do not. In \
+         instructions per plan, psmpa executes ",
+    );
+    let peers: Vec<String> = PEERS
+        .iter()
+        .filter_map(|name| {
+            let n = per_plan.get(*name)?;
+            Some(format!(
+                "{:.2}x {}'s ({})",
+                psmpa / n,
+                name,
+                if psmpa < *n { "fewer" } else { "more" }
+            ))
+        })
+        .collect();
+    out.push_str(&peers.join(", "));
+    out.push_str(
+        ": it runs a sensor's sampler, the mutual data store, the FSM and the control loop \
+         around the same work.\n",
+    );
+    out
+}
 
 /// Writes the table from criterion's results and `extra`.
 fn report(root: &Path, extra: &Extra) -> Result<(), String> {
@@ -399,7 +492,7 @@ fn report(root: &Path, extra: &Extra) -> Result<(), String> {
         std::env::consts::ARCH
     ));
     md.push_str("**The plan workload**: 3 actions in sequence, 10 steps each, a sensor condition checked and one store read and one write per step (`bench/src/workload.rs`).\n\n");
-    md.push_str("| implementation | per plan | per action step | vs hand-written | heap allocations per plan |\n|---|---|---|---|---|\n");
+    md.push_str("| implementation | per plan | per action step | vs hand-written | instructions per plan (callgrind) | heap allocations per plan |\n|---|---|---|---|---|---|\n");
     let floor = get("plan", "hand-written FSM")?;
     let floor_step = floor.ns / PLAN_STEPS;
     let mut plan_rows: Vec<(String, Measured)> = results
@@ -411,16 +504,21 @@ fn report(root: &Path, extra: &Extra) -> Result<(), String> {
     for (name, m) in &plan_rows {
         let step = m.ns / PLAN_STEPS;
         md.push_str(&format!(
-            "| {name} | {} | {} | {:.1}x | {} |\n",
+            "| {name} | {} | {} | {:.1}x | {} | {} |\n",
             fmt_ns(m.ns),
             fmt_ns(step),
             step / floor_step,
+            extra
+                .instructions_per_plan
+                .get(name)
+                .map_or("-".to_owned(), |n| fmt_count(*n)),
             allocs.get(name).map_or("?".to_owned(), |a| a.to_string())
         ));
     }
+    md.push_str(&standing(&extra.instructions_per_plan));
     match extra.instructions_per_step {
         Some(per_step) => md.push_str(&format!(
-            "\n{}. `cargo xtask bench --instructions` counts them alone: `bench/examples/profile_plan.rs` and `profile_floor.rs` under callgrind for {} and {} plans, the difference in instructions over the difference in action steps. The floor does the step's work (a timer wakes a sensing future that samples, stores, fuses, checks and hashes one trace event, then signals a deciding future that reads and writes a store) with no FSM, control loop or sensor switching.\n",
+            "\n{}. `cargo xtask bench --instructions` counts them alone: `bench/examples/profile_plan.rs` and `profile_floor.rs` under callgrind for {} and {} plans, the difference in instructions over the difference in action steps. The floor does the step's work (a timer wakes a sensing future that samples, stores, fuses and checks, then signals a deciding future that reads and writes a store) with no FSM, control loop, sensor switching or trace (psmpa runs the workload with no sink, which traces nothing).\n",
             instructions_line(per_step, extra.floor_per_step),
             CALLGRIND_PLANS[0],
             CALLGRIND_PLANS[1]
