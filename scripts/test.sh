@@ -88,7 +88,7 @@ outside_target="$PWD/target/outside"
 # committed (deterministic emulators and analyses: a figure that moved was not measured by
 # this tree).
 figures=$(mktemp -d)
-cp --parents README.md docs/firmware.md docs/experiment.md boards/README.md "$figures/"
+cp --parents README.md docs/firmware.md docs/experiment.md docs/benchmarks.md boards/README.md "$figures/"
 
 step "firmware: clippy for both targets (mps2-an386's Cortex-M4F, mps2-an505's Cortex-M33)"
 for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
@@ -131,9 +131,12 @@ cargo xtask timing --clock-hz 250000 --expect-failure
 step "the sensitivity study (psmpa-sim sensitivity, seeded): its figures on the pages"
 cargo xtask experiment
 
-step "the figures on the pages are the ones the commands measured (size, timing, bench, stack, static timing, the study)"
-for page in README.md docs/firmware.md docs/experiment.md boards/README.md; do
-  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask size, timing, hil, stack, wcet and experiment wrote" >&2; exit 1; }
+step "instructions under callgrind (deterministic): psmpa's action step, the floor, every implementation's plan, where the step goes"
+cargo xtask bench --instructions
+
+step "the figures on the pages are the ones the commands measured (size, timing, bench, stack, static timing, the study, the instruction counts)"
+for page in README.md docs/firmware.md docs/experiment.md docs/benchmarks.md boards/README.md; do
+  diff -u "$figures/$page" "$page" || { echo "$page: the figures moved: commit what cargo xtask size, timing, hil, stack, wcet, experiment and bench --instructions wrote" >&2; exit 1; }
 done
 rm -rf "$figures"
 

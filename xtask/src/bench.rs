@@ -361,13 +361,101 @@ fn per_plan_lines(per_plan: &BTreeMap<String, f64>) -> Vec<String> {
         .collect()
 }
 
-/// `cargo xtask bench --instructions`: only the instruction counts, printed; writes nothing.
-pub fn instructions() -> Result<(), String> {
-    let counts = instruction_counts(&firmware::root())?;
-    for line in per_plan_lines(&counts.per_plan) {
-        println!("{line}");
+/// Instructions per function of a callgrind output file, its own (callees excluded), by the
+/// names callgrind gives (compressed names resolved).
+fn self_costs(path: &Path) -> Result<BTreeMap<String, u64>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut names: BTreeMap<String, String> = BTreeMap::new();
+    let mut costs: BTreeMap<String, u64> = BTreeMap::new();
+    let (mut current, mut call_cost) = (String::new(), false);
+    for line in text.lines() {
+        let named = line
+            .strip_prefix("fn=")
+            .map(|r| (true, r))
+            .or_else(|| line.strip_prefix("cfn=").map(|r| (false, r)));
+        if let Some((own, rest)) = named {
+            // `(id) name` defines an id, `(id)` refers to one.
+            let name = match rest.strip_prefix('(').and_then(|r| r.split_once(')')) {
+                Some((id, name)) if !name.trim().is_empty() => {
+                    names.insert(id.to_owned(), name.trim().to_owned());
+                    name.trim().to_owned()
+                }
+                Some((id, _)) => names.get(id).cloned().unwrap_or_default(),
+                None => rest.trim().to_owned(),
+            };
+            if own {
+                current = name;
+            }
+        } else if line.starts_with("calls=") {
+            // The next cost line is the call's inclusive cost: not this function's own.
+            call_cost = true;
+        } else if line.starts_with(|c: char| c.is_ascii_digit() || "+-*".contains(c)) {
+            if std::mem::take(&mut call_cost) {
+                continue;
+            }
+            let ir: u64 = line
+                .split_whitespace()
+                .nth(1)
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(0);
+            *costs.entry(current.clone()).or_default() += ir;
+        }
     }
-    println!("{}", instructions_line(counts.per_step, Some(counts.floor)));
+    Ok(costs)
+}
+
+/// Where psmpa's step goes: per function (everything the compiler inlined into it counted
+/// there), its own instructions per action step, the difference of [`CALLGRIND_PLANS`]' two
+/// runs over the difference of their steps; the largest first.
+fn step_breakdown(root: &Path) -> Result<Vec<(String, f64)>, String> {
+    let [a, b] = CALLGRIND_PLANS
+        .map(|plans| root.join(format!("target/callgrind.{PROFILE_PLAN}.{plans}.out")));
+    let (a, b) = (self_costs(&a)?, self_costs(&b)?);
+    let steps = f64::from(CALLGRIND_PLANS[1] - CALLGRIND_PLANS[0]) * PLAN_STEPS;
+    let mut rows: Vec<(String, f64)> = b
+        .iter()
+        .map(|(name, n)| {
+            let more = n.saturating_sub(a.get(name).copied().unwrap_or(0));
+            (name.clone(), more as f64 / steps)
+        })
+        .filter(|(_, n)| *n >= 0.5)
+        .collect();
+    rows.sort_by(|x, y| y.1.total_cmp(&x.1));
+    Ok(rows)
+}
+
+/// The counts as the page shows them, between `docs/benchmarks.md`'s `instructions` markers.
+fn instructions_md(counts: &Counts, breakdown: &[(String, f64)]) -> String {
+    let mut md = String::from("\n```text\n");
+    for line in per_plan_lines(&counts.per_plan) {
+        md.push_str(&line);
+        md.push('\n');
+    }
+    md.push_str(&instructions_line(counts.per_step, Some(counts.floor)));
+    md.push_str("\n```\n\n| function (callgrind's name; what the compiler inlined into it counts there) | instructions per action step |\n|---|---|\n");
+    let shown = 8;
+    for (name, n) in breakdown.iter().take(shown) {
+        // Generic parameters shortened: the table names places, not types.
+        let short = name
+            .replace("<P,T,_,_,_,_,_,_,_>", "")
+            .replace("<M,_,_>", "");
+        md.push_str(&format!("| `{short}` | {} |\n", fmt_count(*n)));
+    }
+    let rest: f64 = breakdown.iter().skip(shown).map(|(_, n)| n).sum();
+    md.push_str(&format!("| the rest | {} |\n", fmt_count(rest)));
+    md
+}
+
+/// `cargo xtask bench --instructions`: only the instruction counts (psmpa's, the floor's, the
+/// peers' per plan) and where psmpa's step goes, printed and written into `docs/benchmarks.md`.
+pub fn instructions() -> Result<(), String> {
+    let root = firmware::root();
+    let counts = instruction_counts(&root)?;
+    let breakdown = step_breakdown(&root)?;
+    let md = instructions_md(&counts, &breakdown);
+    println!("{md}");
+    crate::hil::write_between(&root.join("docs/benchmarks.md"), "instructions", &md)?;
+    println!("written to docs/benchmarks.md");
     Ok(())
 }
 

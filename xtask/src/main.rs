@@ -70,9 +70,9 @@ enum Task {
         /// Only rewrite the table from the last run's results.
         #[arg(long)]
         no_run: bool,
-        /// Only count psmpa's instructions per action step under callgrind, and the floor's
-        /// (the same work with no runtime around it): quick and deterministic, for optimising;
-        /// writes nothing.
+        /// Only count instructions under callgrind: psmpa's per action step, the floor's (the
+        /// same work with no runtime around it), every implementation's per plan, and where
+        /// psmpa's step goes; quick and deterministic; writes docs/benchmarks.md's figures.
         #[arg(long, conflicts_with = "no_run")]
         instructions: bool,
         /// Only the planning benchmark: psmpa's planner beside pyperplan (when installed) on
