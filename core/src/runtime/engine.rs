@@ -452,6 +452,7 @@ impl<
             action,
             max,
             alarm: None,
+            registered: false,
         }
     }
 

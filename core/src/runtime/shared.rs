@@ -157,6 +157,10 @@ pub(crate) struct Watch<'s, M: RawMutex, const NS: usize, const W: usize> {
     pub(crate) max: Duration,
     /// The timer of the current violation's deadline.
     pub(crate) alarm: Option<(Instant, Timer)>,
+    /// Whether this task's waker is registered with the deciding side's: once it is, it stays
+    /// (a `Waiter` keeps its waker until another replaces it, and every waker that could
+    /// replace it wakes this same task, which polls this watch with the rest).
+    pub(crate) registered: bool,
 }
 
 impl<M: RawMutex, const NS: usize, const W: usize> Future for Watch<'_, M, NS, W> {
@@ -166,8 +170,11 @@ impl<M: RawMutex, const NS: usize, const W: usize> Future for Watch<'_, M, NS, W
         let this = self.get_mut();
         let epoch = this.epoch;
         // Registered in the same lock as the check: a delivery in between cannot be missed.
+        let register = !core::mem::replace(&mut this.registered, true);
         let seen = this.shared.lock(|s| {
-            s.deciding.register(cx.waker());
+            if register {
+                s.deciding.register(cx.waker());
+            }
             match s.failure.get() {
                 Some((e, failure)) if e == epoch => Err(failure),
                 _ => Ok(s.violation.get()),
