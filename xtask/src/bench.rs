@@ -183,6 +183,10 @@ struct Extra {
     /// Instructions per plan by implementation (the plan table's names), callgrind's.
     #[serde(default)]
     instructions_per_plan: BTreeMap<String, f64>,
+    /// The machine's load average (1, 5 and 15 minutes) when the run began, where the system
+    /// says it (`/proc/loadavg`): the times depend on it.
+    #[serde(default)]
+    load: Option<String>,
 }
 
 /// Plans per callgrind run of a plan profile: the difference of two runs leaves out the
@@ -484,6 +488,9 @@ pub fn run(no_run: bool) -> Result<(), String> {
 fn measure(root: &Path) -> Result<Extra, String> {
     // Before minutes of benches: a missing valgrind fails at once.
     callgrind::check()?;
+    let load = std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(", "));
     let text = cargo_bench(
         &[
             "-p",
@@ -522,6 +529,7 @@ fn measure(root: &Path) -> Result<Extra, String> {
         instructions_per_step: Some(counts.per_step),
         floor_per_step: Some(counts.floor),
         instructions_per_plan: counts.per_plan,
+        load,
     })
 }
 
@@ -576,8 +584,11 @@ fn report(root: &Path, extra: &Extra) -> Result<(), String> {
     let mut md = String::new();
     md.push_str(&format!(
         "Measured by `cargo xtask bench` in one run (criterion medians, one core of this project's \
-         2-core machine, {}).\n\n",
-        std::env::consts::ARCH
+         2-core machine, {}{}).\n\n",
+        std::env::consts::ARCH,
+        extra.load.as_ref().map_or(String::new(), |l| format!(
+            "; load average {l} when the run began"
+        ))
     ));
     md.push_str("**The plan workload**: 3 actions in sequence, 10 steps each, a sensor condition checked and one store read and one write per step (`bench/src/workload.rs`).\n\n");
     md.push_str("| implementation | per plan | per action step | vs hand-written | instructions per plan (callgrind) | heap allocations per plan |\n|---|---|---|---|---|---|\n");
