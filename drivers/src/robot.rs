@@ -120,7 +120,7 @@ pub const PIN_FAULT: u8 = 1;
 pub struct Settings {
     /// The path is clear when the sonar sees nothing within this, mm.
     pub clearance_mm: u16,
-    /// The walk to a door, mm.
+    /// The walk to the kitchen door, mm.
     pub walk_mm: u32,
     /// The walking duty, thousandths.
     pub walk_permille: i16,

@@ -1296,8 +1296,9 @@ impl<'s, L: WorldLog, M: RawMutex> World<'s, L, M> {
         self.view(|s, _| s.in_kitchen)
     }
 
-    /// Presses the kitchen door's handle: whether the door gives (not locked). Only at the
-    /// kitchen door.
+    /// Presses the handle of the door the robot stands at: whether it gives (the back door's
+    /// always, the kitchen door's when it is not locked; `Locked` only at a locked kitchen
+    /// door).
     pub fn handle(&self) -> bool {
         self.with(|s, sc| {
             let at_door = s.pos_um == sc.door_um;

@@ -6,10 +6,11 @@
 //! `target/criterion`, writes `bench/RESULTS.md`, and puts the same table into `README.md`
 //! between its `bench:start` and `bench:end` markers.
 //!
-//! Beside the times, counts that do not depend on the machine's load: the instructions psmpa's
-//! plan workload takes per action step, counted by callgrind in `profile_plan`
-//! (`bench/examples`), and the floor under it: the same work with no runtime around it
-//! (`profile_floor`). `cargo xtask bench --instructions` counts only those, in seconds.
+//! Beside the times, counts that do not depend on the machine's load, by callgrind
+//! (`bench/examples`): every implementation's instructions per plan (`profile_plan`,
+//! `profile_peer`), psmpa's per action step and the floor under it, the same work with no
+//! runtime around it (`profile_floor`). `cargo xtask bench --instructions` counts only those,
+//! in a minute, and writes them, with where psmpa's step goes, into `docs/benchmarks.md`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -2,7 +2,7 @@
 //! (`SETTINGS` in the board's `memory.x`), read at boot.
 //!
 //! A robot is calibrated without building the firmware again: write the record
-//! ([`Settings::to_record`], 16 little-endian words) at the sector's start, with a probe
+//! ([`Settings::to_record`], 17 little-endian words) at the sector's start, with a probe
 //! (`probe-rs download --binary-format bin --base-address ...`) or `picotool`. Erased flash
 //! (no record), a record of another version or a damaged one is reported in the log and the
 //! firmware runs with [`Settings::DEFAULT`]. The bench in the loop (`cargo xtask hil`) writes

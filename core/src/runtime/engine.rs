@@ -273,13 +273,14 @@ impl<
         self.action_stores.get(action.index())
     }
 
-    /// The hash of the trace so far.
+    /// The hash of the trace so far (the empty trace's with the sink `()`, which is not traced
+    /// into).
     pub fn trace_hash(&self) -> TraceHash {
         self.tracer
             .lock(|t| t.try_borrow().map(|t| t.hash()).unwrap_or_default())
     }
 
-    /// Number of trace events so far.
+    /// Number of trace events so far (0 with the sink `()`).
     pub fn trace_events(&self) -> u32 {
         self.tracer
             .lock(|t| t.try_borrow().map(|t| t.events()).unwrap_or(0))

@@ -1194,7 +1194,8 @@ fn body_difference(kind: FaultKind) -> String {
 }
 
 /// psmpa-sim's outcome of the same scenario beside the bench's: reaching the door, and
-/// obstacle by obstacle its fate and the sensor that detected it, all equal.
+/// obstacle by obstacle its fate and the sensor that detected it, all equal; and reaching the
+/// goal (a difference there is never put down to timing).
 fn compare_with_host(sc: &Scenario, r: &mut Report, bench: &[ObstacleReport]) {
     let s = match run_summary(sc, Arch::PSmpa) {
         Ok(s) => s,
@@ -1786,8 +1787,6 @@ pub fn write_between(path: &Path, name: &str, text: &str) -> Result<(), String> 
     Ok(())
 }
 
-/// The figures of a full bench run: a paragraph for docs/firmware.md and a table cell for the
-/// README.
 /// One decision's cycles of a run.
 type Pick = fn(&DecisionCycles) -> Option<u64>;
 
@@ -1834,6 +1833,8 @@ fn decisions_table(reports: &[(Report, PinLog)]) -> String {
     md
 }
 
+/// The figures of a full bench run: a paragraph for docs/firmware.md and a table cell for the
+/// README.
 fn figures(reports: &[(Report, PinLog)]) -> (String, String) {
     let plain: Vec<&Report> = reports
         .iter()
