@@ -152,6 +152,12 @@ pub trait Sensor<const W: usize = 1> {
     /// a row.
     async fn sample(&self, sensor: Self::Id) -> Result<Option<Reading<W>>, SensorFault>;
 
+    /// Whether [`wake`](Self::wake) may complete. A platform whose sensors never make a sample
+    /// due early may say `false`: the runtime then neither builds nor polls the `wake` future
+    /// between samples (a few dozen instructions a sample on a host). With `false` an
+    /// overridden `wake` is not called.
+    const WAKES: bool = true;
+
     /// Completes when something makes a cyclic sensor's next sample due before its period
     /// ends: a bump switch's edge, a data-ready interrupt. The sampler then samples at once and
     /// keeps its period's grid afterwards. Awaited only between a cyclic sensor's samples, and

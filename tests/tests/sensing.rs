@@ -168,7 +168,7 @@ struct Seen {
     cliff_strength: Option<Entry>,
 }
 
-struct Robot {
+struct Robot<const WAKES: bool = true> {
     ids: Ids,
     tof_latency: Duration,
     /// The drive wakes this long after it starts, looks, and ends.
@@ -181,7 +181,7 @@ struct Robot {
     edges: Vec<u64>,
 }
 
-impl Robot {
+impl<const WAKES: bool> Robot<WAKES> {
     fn new(tof_latency_ms: u64, drive_ms: u64) -> Self {
         Self {
             ids: mission().1,
@@ -205,7 +205,8 @@ impl Robot {
     }
 }
 
-impl Sensor for Robot {
+impl<const WAKES: bool> Sensor for Robot<WAKES> {
+    const WAKES: bool = WAKES;
     type Id = SensorId;
 
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
@@ -242,7 +243,7 @@ impl Sensor for Robot {
     }
 }
 
-impl Robot {
+impl<const WAKES: bool> Robot<WAKES> {
     fn look(&self, io: &ActionIo<'_>) -> Seen {
         Seen {
             at: Instant::now(),
@@ -254,7 +255,7 @@ impl Robot {
     }
 }
 
-impl Actuator for Robot {
+impl<const WAKES: bool> Actuator for Robot<WAKES> {
     type Id = ActionId;
     fn halt(&self, _: ActionId) {} // nothing to stop
 
@@ -266,12 +267,12 @@ impl Actuator for Robot {
     }
 }
 
-impl Platform for Robot {
+impl<const WAKES: bool> Platform for Robot<WAKES> {
     type Mutex = NoopRawMutex;
 }
 
-type PairRuntime<'r> =
-    Runtime<'r, Robot, Caps<Sensors<2>, Actions<2>, Plans<1>, Body<2>, Keys<4>>, Recorder>;
+type PairCaps = Caps<Sensors<2>, Actions<2>, Plans<1>, Body<2>, Keys<4>>;
+type PairRuntime<'r> = Runtime<'r, Robot, PairCaps, Recorder>;
 
 /// Runs the mission; returns the trace and when the drive state started.
 fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
@@ -422,6 +423,29 @@ fn an_edge_the_device_signals_makes_a_sample_due_at_once_and_the_grid_stays() {
     );
     // The ranger, whose device signals nothing, keeps its own instants.
     assert_eq!(robot.starts(ids.tof, start), grid(start, 100, end));
+}
+
+#[test]
+fn a_platform_that_says_its_sensors_never_wake_early_keeps_the_grid() {
+    let (pair, ids) = mission();
+    let (_, start) = run(&Robot::new(0, 1_000));
+    let s = start.as_millis();
+    // The same edges as above, on a platform that says `WAKES = false`: not one early read.
+    let mut robot = Robot::<false>::new(0, 1_000);
+    robot.edges = vec![s + 307, s + 553, s + 600];
+    let mut rt = Runtime::<'_, Robot<false>, PairCaps, Recorder>::new(
+        &pair,
+        &robot,
+        Recorder::default(),
+        Config::default(),
+    );
+    let (mut sensing, mut deciding) = rt.split();
+    simulate_split(sensing.run(), deciding.run(), LIMIT)
+        .unwrap()
+        .output
+        .unwrap();
+    let end = start + Duration::from_millis(1_000);
+    assert_eq!(robot.starts(ids.cliff, start), grid(start, 20, end));
 }
 
 #[test]

@@ -191,20 +191,34 @@ impl<
                     // The sample's instant, if any (else the command's end); a cyclic
                     // sensor's device may make it due early (`wake`). One wait for all.
                     (mode, due) => {
-                        let early = matches!(mode, SensorMode::Cyclic { .. }) && due.is_some();
                         let mut timer = due.map(Timer::at);
-                        let mut wake = pin!(self.platform.wake(name));
-                        let wait = poll_fn(move |cx| {
-                            let timed = timer
+                        let mut timed = move |cx: &mut Context<'_>| {
+                            timer
                                 .as_mut()
-                                .is_some_and(|t| Pin::new(t).poll(cx).is_ready());
-                            if timed || (early && wake.as_mut().poll(cx).is_ready()) {
-                                Poll::Ready(())
-                            } else {
-                                Poll::Pending
-                            }
-                        });
-                        self.bounded(epoch, None, wait).await
+                                .is_some_and(|t| Pin::new(t).poll(cx).is_ready())
+                        };
+                        let early = matches!(mode, SensorMode::Cyclic { .. }) && due.is_some();
+                        if early && <P as Sensor<W>>::WAKES {
+                            let mut wake = pin!(self.platform.wake(name));
+                            let wait = poll_fn(move |cx| {
+                                if timed(cx) || wake.as_mut().poll(cx).is_ready() {
+                                    Poll::Ready(())
+                                } else {
+                                    Poll::Pending
+                                }
+                            });
+                            self.bounded(epoch, None, wait).await
+                        } else {
+                            // No `wake` future where it cannot complete (`Sensor::WAKES`).
+                            let wait = poll_fn(move |cx| {
+                                if timed(cx) {
+                                    Poll::Ready(())
+                                } else {
+                                    Poll::Pending
+                                }
+                            });
+                            self.bounded(epoch, None, wait).await
+                        }
                     }
                 };
                 if !matches!(waited, Bound::Done(())) {
