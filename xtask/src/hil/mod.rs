@@ -197,10 +197,10 @@ fn json_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
     Ok(files)
 }
 
-/// The robot's settings for `sc`: the walk to its door (and on to the back door) at its speed, the sonar's threshold as
-/// the clearance (the robot stops for a reading below it, as the world registers one), its
-/// sensors' periods, the walk's planning time and its side step, and the time its sonar may
-/// take to answer. The rest as the board's defaults.
+/// The robot's settings for `sc`: the walk to its door (and on to the back door) at its speed,
+/// the sonar's threshold as the clearance (the robot stops for a reading below it, as the world
+/// registers one), its sensors' periods, the walk's planning time and its side step, and the
+/// time its sonar may take to answer. The rest as the board's defaults.
 pub fn settings_for(sc: &Scenario) -> Settings {
     let ms = Duration::from_millis;
     Settings {
@@ -461,6 +461,32 @@ impl DecisionCycles {
             plan: searches.into_iter().max(),
             plan_expanded: expanded,
         }
+    }
+}
+
+#[cfg(test)]
+mod decision_tests {
+    use super::*;
+
+    #[test]
+    fn a_search_is_its_start_and_every_slice_up_to_the_next_start() {
+        let calls = [
+            (SELECT, 600),
+            (PLAN_START, 100),
+            (PLAN_STEP, 1_000),
+            (PLAN_STEP, 2_000),
+            (COMPILE, 900),
+            (PLAN_START, 50),
+            (PLAN_STEP, 3_000),
+            (SELECT, 700),
+        ];
+        let d = DecisionCycles::of(&calls, Some(3));
+        assert_eq!(d.select, Some(700));
+        assert_eq!(d.compile, Some(900));
+        // 100 + 1,000 + 2,000 against 50 + 3,000.
+        assert_eq!(d.plan, Some(3_100));
+        assert_eq!(d.plan_expanded, Some(3));
+        assert_eq!(DecisionCycles::of(&[], None), DecisionCycles::default());
     }
 }
 
