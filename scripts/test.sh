@@ -5,6 +5,9 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n== %s\n' "$*"; }
 
+# Every build here is a first build: incremental state would only take disk (gigabytes of it).
+export CARGO_INCREMENTAL=0
+
 step "tools: MCU targets, clippy, rustfmt, QEMU, ARM binutils, valgrind, defmt-print, flip-link, the bench's rp2040js (only what is missing)"
 bash scripts/install-tools.sh all
 

@@ -696,12 +696,10 @@ fn pages(
                     .collect::<Vec<_>>()
                     .join(", ")
             };
-            let measured = worst.map_or("-".to_owned(), |(c, sc)| {
-                format!(
-                    "{} cycles ({:.3} ms, `{sc}`)",
-                    group(c),
-                    c as f64 * 1e3 / m.clock_hz as f64
-                )
+            // To 10 µs: a run's worst reaction has moved by tens of cycles from one clean
+            // checkout to another (the worst of a group, and where, with it).
+            let measured = worst.map_or("-".to_owned(), |(c, _)| {
+                format!("{:.2} ms", c as f64 * 1e3 / m.clock_hz as f64)
             });
             tasks += &format!(
                 "| {} | {scenarios} | {} ms | {} | {} | {} | {} | {measured} | {} ms |\n",

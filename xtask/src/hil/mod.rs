@@ -382,6 +382,9 @@ pub struct Report {
     pub mission: Option<String>,
     /// Whether the chip's own log says its mission reached its goal.
     pub mission_succeeded: bool,
+    /// Whether the rig's world has the robot in the kitchen: moved there only by the motor
+    /// pins (a drive that pushed an open door), never by what the chip says.
+    pub in_kitchen: bool,
     /// The control loop's decisions on the chip, timed by the harness ([`DecisionCycles`]).
     pub decision_cycles: DecisionCycles,
     /// Resets by the watchdog.
@@ -1038,6 +1041,10 @@ pub const JUDGED_FROM: &[(&str, &str)] = &[
         "rp2040js's warnings: an access silicon would fault on",
     ),
     ("faults", "the motor pins, the watchdog's resets, the log"),
+    (
+        "mission",
+        "the chip's word that it reached its goal against the world the motor pins drove into the kitchen, and psmpa-sim's outcome",
+    ),
 ];
 
 /// The run's report and its checks.
@@ -1140,6 +1147,16 @@ fn report(
     } else if c.done.is_none() {
         failures.push("mission: the firmware never said how its task ended".to_owned());
     }
+    let claimed = c
+        .ending
+        .as_deref()
+        .is_some_and(|e| e.contains("Fetch Tea: goal reached"));
+    let in_kitchen = bw.world().in_kitchen();
+    if claimed != in_kitchen {
+        failures.push(format!(
+            "mission: the chip says it reached its goal: {claimed}; the rig's world, moved by the motor pins, has the robot in the kitchen: {in_kitchen}"
+        ));
+    }
     let delivered: u64 = bw.sampled.iter().map(|s| s.samples.len() as u64).sum();
     let sensing = stats
         .handlers
@@ -1174,10 +1191,8 @@ fn report(
         bound_cycles,
         bound_source: "budget".to_owned(),
         host: None,
-        mission_succeeded: c
-            .ending
-            .as_deref()
-            .is_some_and(|e| e.contains("Fetch Tea: goal reached")),
+        mission_succeeded: claimed,
+        in_kitchen,
         mission: c.ending.clone(),
         decision_cycles: DecisionCycles::of(&stats.calls, c.expanded),
         watchdog_resets: c.resets.len() as u32,

@@ -196,6 +196,16 @@ const MUTANTS: &[Mutant] = &[
         plays: &["scenarios/locked-door.json"],
         everywhere: false,
     },
+    Mutant {
+        name: "no-entry",
+        what: "entering the kitchen succeeds without driving: the chip says its goal is reached where its wheels never carried it through",
+        file: "drivers/src/robot.rs",
+        find: "                let s = &self.settings;
+                self.timed(s.enter_permille, s.enter).await",
+        replace: "                Outcome::Success",
+        plays: &["scenarios/quiet.json"],
+        everywhere: true,
+    },
 ];
 
 /// What became of one mutant.
