@@ -15,6 +15,10 @@
 //! * `timing`: response-time analysis from the step costs the firmware measures in QEMU, on
 //!   both machines: the reaction-latency bound of every sensor, checked against the measured
 //!   reactions.
+//! * `hil`: the Pico's image on an emulated RP2040 against the project's world, judged from
+//!   its pins and flight recording (`--mutants`: images with planted bugs must fail it).
+//! * `wcet`: static cycle bounds of the Pico's jobs from its binary.
+//! * `experiment`: the sensitivity study's figures on the pages.
 
 mod bench;
 mod callgrind;

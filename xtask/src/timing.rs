@@ -649,7 +649,7 @@ fn pages(
     let mut utilisation = Vec::new();
     for (m, a) in analyses {
         tasks += &format!(
-            "\nOn `{}` (cycles of {} MHz):\n\n| task | scenarios | period | job cost | read `L` | sample `S` | response `R` | worst measured reaction | latency bound |\n|---|---|---|---|---|---|---|---|---|\n",
+            "\nOn `{}` (at {} MHz):\n\n| task | scenarios | period | job cost | read `L` | sample `S` | response `R` | worst measured reaction | latency bound |\n|---|---|---|---|---|---|---|---|---|\n",
             m.name,
             m.clock_hz / 1_000_000
         );
