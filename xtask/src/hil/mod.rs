@@ -1152,7 +1152,9 @@ fn report(
         .as_deref()
         .is_some_and(|e| e.contains("Fetch Tea: goal reached"));
     let in_kitchen = bw.world().in_kitchen();
-    if claimed != in_kitchen {
+    // A claim the wheels did not make true always fails; a robot in the kitchen that never
+    // says so fails unless a fault was injected (a hang may come after the last push).
+    if (claimed && !in_kitchen) || (in_kitchen && !claimed && play.fault.is_none()) {
         failures.push(format!(
             "mission: the chip says it reached its goal: {claimed}; the rig's world, moved by the motor pins, has the robot in the kitchen: {in_kitchen}"
         ));
