@@ -147,6 +147,11 @@ pub fn cycles_of_us(us: u64) -> u64 {
     us.saturating_mul(1_000) / NS
 }
 
+/// Microseconds of `cycles` of the 125 MHz clock: how the decisions' cycles are shown.
+pub fn us_of_cycles(cycles: u64) -> f64 {
+    cycles.saturating_mul(NS) as f64 / 1_000.0
+}
+
 /// The committed cost budget of the Pico's image (`boards/pico/bench-budget.json`).
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]

@@ -986,7 +986,7 @@ fn decode(
                     ns,
                 };
                 let ends = [
-                    "Fetch Tea: goal reached",
+                    GOAL_REACHED,
                     "Fetch Tea failed",
                     "the watchdog reset the board",
                     "the mission does not load",
@@ -1046,6 +1046,9 @@ pub const JUDGED_FROM: &[(&str, &str)] = &[
         "the chip's word that it reached its goal against the world the motor pins drove into the kitchen, and psmpa-sim's outcome",
     ),
 ];
+
+/// How the board's log says its mission reached its goal (`boards/rp/src/lib.rs`).
+const GOAL_REACHED: &str = "Fetch Tea: goal reached";
 
 /// The run's report and its checks.
 fn report(
@@ -1150,7 +1153,7 @@ fn report(
     let claimed = c
         .ending
         .as_deref()
-        .is_some_and(|e| e.contains("Fetch Tea: goal reached"));
+        .is_some_and(|e| e.contains(GOAL_REACHED));
     let in_kitchen = bw.world().in_kitchen();
     // A claim the wheels did not make true always fails; a robot in the kitchen that never
     // says so fails unless a fault was injected (a hang may come after the last push).
@@ -1863,7 +1866,7 @@ fn decisions_table(reports: &[(Report, PinLog)]) -> String {
                 md,
                 "| {what} | {} | {:.1} | `{run}` |",
                 thousands(c),
-                c as f64 * 8.0 / 1_000.0
+                bound::us_of_cycles(c)
             ),
             None => writeln!(md, "| {what} | - | - | none made |"),
         };
@@ -2083,7 +2086,7 @@ fn text(r: &Report) -> String {
     if d.select.is_some() {
         let cycles = |c: Option<u64>| {
             c.map_or("-".to_owned(), |c| {
-                format!("{c} cycles ({:.1} µs)", c as f64 * 8.0 / 1_000.0)
+                format!("{c} cycles ({:.1} µs)", bound::us_of_cycles(c))
             })
         };
         let _ = writeln!(
