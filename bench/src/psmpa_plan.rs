@@ -1,69 +1,32 @@
 //! The workload ([`crate::workload`]) on psmpa itself: the real core (Algorithm 1's control
-//! loop, Algorithm 2's FSM, Algorithm 3's stores) on the real embassy executor, in the host's
+//! loop, Algorithm 2's states, Algorithm 3's stores) on the real embassy executor, in the host's
 //! virtual time, under the P-SMPA policy.
 //!
-//! The mission: one cyclic sensor (`sonar`, every tick) perceiving `path_clear`; three
-//! actions whose precondition needs `path_clear`, so each runs in a parallel state beside the
-//! sonar; one plan with the three in sequence. An action step is one sonar sample (the runtime
-//! stores it, updates the beliefs and checks the running action's precondition) and one step
-//! of the behaviour: it reads the sample through the mutual store and writes its progress into
-//! its own store.
+//! The mission (`bench/missions/bench.json`, compiled in): one cyclic sensor (`sonar`, every
+//! tick) perceiving `path_clear`; three actions whose precondition needs `path_clear`, so each
+//! runs in a parallel state beside the sonar; one plan with the three in sequence. An action
+//! step is one sonar sample (the runtime stores it, updates the beliefs and checks the running
+//! action's precondition) and one step of the behaviour: it reads the sample through the
+//! mutual store and writes its progress into its own store.
 
 use core::cell::{Cell, RefCell};
 
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::Duration;
 use psmpa_core::{
-    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, Domain, FactSet,
-    Key, Keys, Mission, Outcome, Plan, PlanLibrary, Plans, Reading, Runtime, Sensor, SensorAction,
-    SensorFault, SensorId, SensorMode, Sensors, Task, Value,
+    Act, Actuator, Beside, Config, Outcome, OwnKey, Plans, Reading, Sensor, SensorFault, Value,
 };
 
 use crate::workload::{STEPS_PER_ACTION, Sonar, path_clear};
 
-/// The mission's capacities: 1 sensor, 3 actions, 1 plan of 3 actions.
-pub type BenchMission = Mission<'static, 1, 3, 1, 3>;
-
-/// Where a behaviour writes its progress in its own store.
-const PROGRESS: Key = Key(1);
+psmpa_core::include_mission!(
+    /// The workload's mission.
+    pub mod bench = "missions/bench.json"
+);
 
 /// The mission of the workload.
-pub fn mission() -> BenchMission {
-    let mut d: Domain<'static, 1, 3> = Domain::new();
-    let clear = d.add_fact("path_clear").expect("room for a fact");
-    let go = d.add_event("go").expect("room for an event");
-    let every_tick = SensorMode::Cyclic {
-        period: Duration::from_ticks(1),
-    };
-    d.add_sensor(SensorAction::new(
-        "sonar",
-        FactSet::single(clear),
-        every_tick,
-    ))
-    .expect("room for a sensor");
-    let mut body: heapless::Vec<ActionId, 3> = heapless::Vec::new();
-    let mut goal = FactSet::EMPTY;
-    for (name, done) in [("a0", "done0"), ("a1", "done1"), ("a2", "done2")] {
-        let done = d.add_fact(done).expect("room for the facts");
-        let pre = FactSet::single(clear);
-        let action = ActuatorAction::new(name, pre, FactSet::single(done), FactSet::EMPTY);
-        let id = d.add_action(action).expect("room for three actions");
-        body.push(id).expect("three actions");
-        goal = goal.with(done);
-    }
-    let mut library: PlanLibrary<'static, 1, 3> = PlanLibrary::new();
-    let plan = Plan::new("three actions", go, FactSet::EMPTY, &body).expect("a plan of three");
-    library.add(plan).expect("room for a plan");
-    Mission {
-        name: "bench",
-        domain: d,
-        library,
-        task: Task {
-            event: go,
-            init: FactSet::EMPTY,
-            goal,
-        },
-    }
+pub fn mission() -> bench::Bench {
+    bench::Bench
 }
 
 /// The platform: the sonar and the three behaviours.
@@ -74,18 +37,17 @@ pub struct Platform {
     pub steps: Cell<u32>,
 }
 
-impl Sensor for Platform {
-    type Id = SensorId;
+impl Sensor<bench::Bench> for Platform {
     // The workload's sonar never makes a sample due early, as the peers' have no such hook.
     const WAKES: bool = false;
 
-    async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+    async fn switch_on(&self, _: bench::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
 
-    async fn switch_off(&self, _: SensorId) {}
+    async fn switch_off(&self, _: bench::Sensor) {}
 
-    async fn sample(&self, _: SensorId) -> Result<Option<Reading>, SensorFault> {
+    async fn sample(&self, _: bench::Sensor) -> Result<Option<Reading>, SensorFault> {
         let mm = self.sonar.borrow_mut().sample();
         // The condition, decided on this sample: `path_clear` holds or not.
         Ok(Some(Reading::of(Value::Mm(mm), path_clear(mm))))
@@ -96,14 +58,13 @@ impl psmpa_core::Platform for Platform {
     type Mutex = NoopRawMutex;
 }
 
-impl Actuator for Platform {
-    type Id = ActionId;
-    fn halt(&self, _: ActionId) {} // nothing to stop
-
-    async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
-        let Some(sonar) = SensorId::new(0) else {
-            return Outcome::Failure;
-        };
+impl Platform {
+    /// One action of the plan: ten steps, each on the sonar's next sample.
+    async fn act<A>(&self, io: &bench::Io<'_, A>) -> Outcome
+    where
+        A: Beside<bench::sensor::Sonar>,
+        bench::key::Progress: OwnKey<A>,
+    {
         let mut version = io.version();
         for step in 0..STEPS_PER_ACTION {
             if step > 0 {
@@ -113,14 +74,14 @@ impl Actuator for Platform {
             if io.violation().is_some() {
                 return Outcome::Interrupted;
             }
-            let Some(reading) = io.sample(sonar) else {
+            let Some(reading) = io.sample(bench::sensor::Sonar) else {
                 return Outcome::Failure;
             };
             let Value::Mm(mm) = reading.value else {
                 return Outcome::Failure;
             };
             let progress = Value::Int(mm.wrapping_add(step as i32));
-            if io.put(PROGRESS, progress).is_err() {
+            if io.put(bench::key::Progress, progress).is_err() {
                 return Outcome::Failure;
             }
             self.steps.set(self.steps.get() + 1);
@@ -129,15 +90,28 @@ impl Actuator for Platform {
     }
 }
 
-/// The runtime of the workload: 4 keys per store.
-pub type BenchRuntime<'r> =
-    Runtime<'r, Platform, Caps<Sensors<1>, Actions<3>, Plans<1>, Body<3>, Keys<4>>>;
+impl Actuator<bench::Bench> for Platform {
+    fn halt(&self, _: bench::Action) {} // nothing to stop
 
-/// Runs the plan once on `platform`, from `mission`; returns the action steps it ran.
-pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
+    async fn run(&self, act: Act<'_, bench::Bench>) -> Outcome {
+        match act.typed() {
+            bench::Run::A0(io) => self.act(&io).await,
+            bench::Run::A1(io) => self.act(&io).await,
+            bench::Run::A2(io) => self.act(&io).await,
+        }
+    }
+}
+
+/// The runtime of the workload.
+pub type BenchRuntime<'r> = bench::Runtime<'r, Platform>;
+
+/// Runs the plan once on `platform`, its plans as `plans` says (compiled: as code; run-time:
+/// through the run-time FSM); returns the action steps it ran.
+pub fn run_plan_with(mission: &bench::Bench, platform: &Platform, plans: Plans) -> u32 {
     let mut config = Config::default();
     config.max_violation = Duration::from_ticks(0);
-    let mut runtime = BenchRuntime::new(mission, platform, (), config);
+    config.plans = plans;
+    let mut runtime = BenchRuntime::new(*mission, platform, (), config);
     let before = platform.steps.get();
     let (mut sensing, mut deciding) = runtime.split();
     let done =
@@ -146,6 +120,12 @@ pub fn run_plan_on(mission: &BenchMission, platform: &Platform) -> u32 {
         Ok(done) if done.output.is_ok() => platform.steps.get() - before,
         _ => 0,
     }
+}
+
+/// Runs the plan once on `platform`, from `mission`, its plan as code; returns the action
+/// steps it ran.
+pub fn run_plan_on(mission: &bench::Bench, platform: &Platform) -> u32 {
+    run_plan_with(mission, platform, Plans::Compiled)
 }
 
 /// Runs the plan once, mission and platform included; returns the action steps it ran.
@@ -165,5 +145,7 @@ mod tests {
         let (m, p) = (mission(), Platform::default());
         assert_eq!(run_plan_on(&m, &p), EXPECTED_STEPS);
         assert_eq!(run_plan_on(&m, &p), EXPECTED_STEPS);
+        // Through the run-time FSM: the same steps.
+        assert_eq!(run_plan_with(&m, &p, Plans::RunTime), EXPECTED_STEPS);
     }
 }

@@ -4,9 +4,9 @@
 
 use embassy_time::Instant;
 
-use crate::action::{ActionId, SensorId};
+use crate::action::{ActionId, SensorId, SensorSet};
 use crate::facts::FactSetOf;
-use crate::store::Key;
+use crate::store::{Key, Value};
 
 /// Why a sensor could not deliver a sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,13 +19,10 @@ pub enum SensorFault {
     OutOfRange,
     /// The sensor keeps returning the same value where the world must have changed.
     Stuck,
-    /// Too many samples in a row were lost ([`Config::max_lost`](crate::runtime::engine::Config::max_lost)).
+    /// Too many samples in a row were lost ([`Config::max_lost`](crate::Config::max_lost)).
     Silent,
     /// The device reported an error (platform-specific code).
     Device(u8),
-    /// The platform has no sensor of this id: its [`Sensor::Id`](crate::platform::Sensor::Id) names another mission's
-    /// sensors (set by the runtime).
-    Unbound,
 }
 
 impl core::fmt::Display for SensorFault {
@@ -36,7 +33,6 @@ impl core::fmt::Display for SensorFault {
             Self::Stuck => f.write_str("stuck on one value"),
             Self::Silent => f.write_str("too many samples lost in a row"),
             Self::Device(code) => write!(f, "device error {code}"),
-            Self::Unbound => f.write_str("the platform has no such sensor"),
         }
     }
 }
@@ -74,7 +70,7 @@ pub enum Failure<const W: usize = 1> {
         missing: FactSetOf<W>,
     },
     /// A sensor the state needs cannot run: it failed earlier and is out of service
-    /// ([`Engine::faulty_sensors`](crate::Engine::faulty_sensors)), `pre(s)` does not hold, or the domain has no such sensor.
+    /// ([`Runtime::faulty_sensors`](crate::Runtime::faulty_sensors)), `pre(s)` does not hold, or the domain has no such sensor.
     SensorUnavailable {
         /// The sensor.
         sensor: SensorId,
@@ -101,6 +97,27 @@ pub enum Failure<const W: usize = 1> {
     SensingStalled,
 }
 
+impl<const W: usize> Failure<W> {
+    /// The action the failure is about, if any.
+    pub const fn action(&self) -> Option<ActionId> {
+        match *self {
+            Self::ActionFailed { action }
+            | Self::ActionInterrupted { action }
+            | Self::PreconditionUnmet { action, .. }
+            | Self::PreconditionViolated { action, .. } => Some(action),
+            _ => None,
+        }
+    }
+
+    /// The sensor the failure is about, if any.
+    pub const fn sensor(&self) -> Option<SensorId> {
+        match *self {
+            Self::SensorUnavailable { sensor } | Self::SensorFault { sensor, .. } => Some(sensor),
+            _ => None,
+        }
+    }
+}
+
 /// A running action's precondition is false.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -111,4 +128,31 @@ pub struct Violation<const W: usize = 1> {
     pub since: Instant,
     /// When the latest sample that showed it was taken.
     pub last_seen: Instant,
+    /// The running sensors whose latest sample shows it.
+    pub by: SensorSet,
+    /// The latest sample that showed it: `None` while only a belief from before the state
+    /// shows it (no sensor of the state has sampled a missing fact yet).
+    pub evidence: Option<Evidence>,
+}
+
+/// The sample that shows a precondition false: which sensor, when, what it read. A behaviour
+/// tells by it what it is facing (the sonar's distance, the bumper's contact) without
+/// deciding the sensor's threshold again.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Evidence {
+    /// The sensor.
+    pub sensor: SensorId,
+    /// When its sample was taken.
+    pub at: Instant,
+    /// What it read.
+    pub value: Value,
+}
+
+impl<const W: usize> Violation<W> {
+    /// Whether sensor `sensor`'s latest sample shows it (a compiled mission's `Sensor`, or a
+    /// [`SensorId`]).
+    pub fn seen_by(&self, sensor: impl Into<SensorId>) -> bool {
+        self.by.contains(sensor.into())
+    }
 }

@@ -33,6 +33,7 @@ use crate::action::{ActionId, SensorId};
 use crate::facts::FactSetOf;
 use crate::failure::SensorFault;
 use crate::platform::Outcome;
+use crate::spec::Mission;
 use crate::store::Value;
 use crate::trace::{Phase, TraceEvent, TraceHash, TraceSink};
 
@@ -404,7 +405,6 @@ impl<const W: usize> Frame<W> {
                     2 => SensorFault::Stuck,
                     3 => SensorFault::Device(self.field(3)),
                     4 => SensorFault::Silent,
-                    5 => SensorFault::Unbound,
                     _ => return None,
                 },
             },
@@ -503,7 +503,7 @@ impl<O: RecordOut> Recorder<O> {
     }
 }
 
-impl<O: RecordOut, const W: usize> TraceSink<W> for Recorder<O> {
+impl<O: RecordOut, M: Mission<Facts = FactSetOf<W>>, const W: usize> TraceSink<M> for Recorder<O> {
     fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
         self.write_frame(&Frame::of(at, event));
     }
@@ -780,7 +780,11 @@ mod tests {
             ),
             (200, TraceEvent::SampleLost { sensor: sonar }),
         ] {
-            TraceSink::<1>::record(&mut rec, Instant::from_ticks(t), &e);
+            TraceSink::<&crate::mission::Tables<'_, 1, 1, 1, 1>>::record(
+                &mut rec,
+                Instant::from_ticks(t),
+                &e,
+            );
         }
         rec.into_inner()
     }

@@ -10,94 +10,44 @@ use crate::action::{ActionId, SensorId, SensorSet};
 use crate::domain::EventId;
 use crate::facts::FactSetOf;
 use crate::failure::Failure;
-use crate::mission::Mission;
 use crate::plan::{MAX_PLANS, PlanId, PlanSet};
 use crate::runtime::control::ControlError;
+use crate::spec::{ControlErrorOf, FailureOf, Mission, TraceEventOf};
 use crate::trace::TraceEvent;
 
-/// A failure or trace event printed with a mission's names ([`Describe`]).
-pub struct Described<
-    'm,
-    'a,
-    T,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize = 1,
-    const NF: usize = 64,
-> {
-    mission: &'m Mission<'a, NS, NA, NP, L, W, NF>,
+/// A failure, control error or trace event printed with a mission's names ([`Describe`]).
+pub struct Described<'m, M, T> {
+    mission: &'m M,
     what: T,
 }
 
 /// What the runtime says, in words, with a mission's names: `use psmpa_core::Describe;` then
-/// `mission.describe(event)`.
-pub trait Describe<
-    'a,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
->
-{
+/// `mission.describe(event)` (`fetch_tea::FetchTea.describe(event)`, or `(&tables).describe(..)`
+/// for a mission loaded at run time).
+pub trait Describe: Mission + Sized {
     /// A trace event in words, with this mission's names: "state entered: go to door with
     /// [sonar bumper]", "precondition of go to door violated: {path_clear}".
-    fn describe(
-        &self,
-        event: TraceEvent<W>,
-    ) -> Described<'_, 'a, TraceEvent<W>, NS, NA, NP, L, W, NF>;
-
-    /// Why the control loop stopped, in words, with this mission's names: "no plan for
-    /// fetch_tea could start: passed over GetIn Kitchen; known false {path_clear}".
-    fn describe_error(
-        &self,
-        error: ControlError<W>,
-    ) -> Described<'_, 'a, ControlError<W>, NS, NA, NP, L, W, NF>;
-
-    /// A failure in words, with this mission's names.
-    fn describe_failure(
-        &self,
-        failure: Failure<W>,
-    ) -> Described<'_, 'a, Failure<W>, NS, NA, NP, L, W, NF>;
-}
-
-impl<
-    'a,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
-> Describe<'a, NS, NA, NP, L, W, NF> for Mission<'a, NS, NA, NP, L, W, NF>
-{
-    fn describe(
-        &self,
-        event: TraceEvent<W>,
-    ) -> Described<'_, 'a, TraceEvent<W>, NS, NA, NP, L, W, NF> {
+    fn describe(&self, event: TraceEventOf<Self>) -> Described<'_, Self, TraceEventOf<Self>> {
         Described {
             mission: self,
             what: event,
         }
     }
 
+    /// Why the control loop stopped, in words, with this mission's names: "no plan for
+    /// fetch_tea could start: passed over GetIn Kitchen; known false {path_clear}".
     fn describe_error(
         &self,
-        error: ControlError<W>,
-    ) -> Described<'_, 'a, ControlError<W>, NS, NA, NP, L, W, NF> {
+        error: ControlErrorOf<Self>,
+    ) -> Described<'_, Self, ControlErrorOf<Self>> {
         Described {
             mission: self,
             what: error,
         }
     }
 
-    fn describe_failure(
-        &self,
-        failure: Failure<W>,
-    ) -> Described<'_, 'a, Failure<W>, NS, NA, NP, L, W, NF> {
+    /// A failure in words, with this mission's names.
+    fn describe_failure(&self, failure: FailureOf<Self>) -> Described<'_, Self, FailureOf<Self>> {
         Described {
             mission: self,
             what: failure,
@@ -105,11 +55,29 @@ impl<
     }
 }
 
+impl<M: Mission> Describe for M {}
+
+/// A fact set with the names of facts `names` (by id): `{path_clear, at_door}`, an undeclared
+/// fact as `#index`.
+pub(crate) fn fact_names<const W: usize>(names: &[&str], set: FactSetOf<W>) -> impl fmt::Display {
+    fmt::from_fn(move |f| {
+        f.write_str("{")?;
+        for (i, fact) in set.iter().enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            match names.get(fact.index()) {
+                Some(name) => f.write_str(name)?,
+                None => write!(f, "#{}", fact.index())?,
+            }
+        }
+        f.write_str("}")
+    })
+}
+
 /// What names the ids an error or event holds: a mission (its names, [`Names`]) or nothing
 /// (the ids themselves, [`Ids`]: the plain `Display` of an error).
 trait Namer<const W: usize> {
-    /// Whether a name says what it names ("sensor #1"), or needs the word ("sensor sonar").
-    const KINDED: bool;
     fn action(&self, a: ActionId) -> impl fmt::Display;
     fn sensor(&self, s: SensorId) -> impl fmt::Display;
     fn plan(&self, p: PlanId) -> impl fmt::Display;
@@ -148,43 +116,24 @@ trait Namer<const W: usize> {
     }
 }
 
-/// The names the adapters print.
-struct Names<
-    'm,
-    'a,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
->(&'m Mission<'a, NS, NA, NP, L, W, NF>);
+/// The names the adapters print: a mission's.
+struct Names<'m, M>(&'m M);
 
-impl<
-    'a,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const W: usize,
-    const NF: usize,
-> Namer<W> for Names<'_, 'a, NS, NA, NP, L, W, NF>
-{
-    const KINDED: bool = false;
+impl<M: Mission<Facts = FactSetOf<W>>, const W: usize> Namer<W> for Names<'_, M> {
     fn action(&self, a: ActionId) -> impl fmt::Display {
-        self.0.domain.action(a).map_or("?", |a| a.name)
+        self.0.actions().get(a.index()).map_or("?", |a| a.name)
     }
     fn sensor(&self, s: SensorId) -> impl fmt::Display {
-        self.0.domain.sensor(s).map_or("?", |s| s.name)
+        self.0.sensors().get(s.index()).map_or("?", |s| s.name)
     }
     fn plan(&self, p: PlanId) -> impl fmt::Display {
-        self.0.library.get(p).map_or("generated plan", |p| p.name)
+        self.0.plan(p).map_or("generated plan", |p| p.name)
     }
     fn event(&self, e: EventId) -> impl fmt::Display {
-        self.0.domain.event_name(e).unwrap_or("?")
+        self.0.event_names().get(e.index()).copied().unwrap_or("?")
     }
     fn facts(&self, set: FactSetOf<W>) -> impl fmt::Display {
-        self.0.domain.names(set)
+        fact_names(self.0.fact_names(), set)
     }
 }
 
@@ -192,7 +141,6 @@ impl<
 struct Ids;
 
 impl<const W: usize> Namer<W> for Ids {
-    const KINDED: bool = true;
     fn action(&self, a: ActionId) -> impl fmt::Display {
         fmt::from_fn(move |f| write!(f, "action #{}", a.index()))
     }
@@ -306,18 +254,6 @@ fn control_error<const W: usize, N: Namer<W>>(
             "the initial model could not be established: {}",
             failure(first)
         ),
-        E::Unbound { sensor, action } => {
-            f.write_str("the platform is written for another mission: it has no")?;
-            let kind = |k| if N::KINDED { "" } else { k };
-            if let Some(sensor) = sensor {
-                write!(f, " {}{}", kind("sensor "), n.sensor(sensor))?;
-            }
-            if let Some(action) = action {
-                let and = if sensor.is_some() { " and no" } else { "" };
-                write!(f, "{and} {}{}", kind("action "), n.action(action))?;
-            }
-            Ok(())
-        }
     }
 }
 
@@ -393,14 +329,8 @@ fn trace_event<const W: usize>(
 /// Implements `Display` for an adapter with a mission's names, and for the plain value with ids.
 macro_rules! displays {
     ($ty:ident, $with:ident) => {
-        impl<
-            const NS: usize,
-            const NA: usize,
-            const NP: usize,
-            const L: usize,
-            const W: usize,
-            const NF: usize,
-        > fmt::Display for Described<'_, '_, $ty<W>, NS, NA, NP, L, W, NF>
+        impl<M: Mission<Facts = FactSetOf<W>>, const W: usize> fmt::Display
+            for Described<'_, M, $ty<W>>
         {
             fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
                 $with(&Names(self.mission), self.what, f)
@@ -438,8 +368,9 @@ mod tests {
 
     #[test]
     fn events_and_failures_read_with_the_missions_names() {
-        let m: Loaded<'_, (), (), 1, 1, 1, 1> = load(MISSION.as_bytes(), &AnyBehaviour).unwrap();
-        let m = &m.mission;
+        let loaded: Loaded<'_, (), (), 1, 1, 1, 1> =
+            load(MISSION.as_bytes(), &AnyBehaviour).unwrap();
+        let m = &&loaded.mission;
         let d = &m.domain;
         let clear = d.facts(&["clear"]).unwrap();
         let walk = d.action_id("walk").unwrap();

@@ -1,7 +1,7 @@
 //! Response-time analysis of the runtime: how late a sample can be, and how long after an
 //! obstacle appears the acting can react to it.
 //!
-//! The model is the one the runtime runs ([`crate::runtime::engine`], [`crate::runtime::sensing`]). Each cyclic
+//! The model is the one the runtime runs ([`crate::runtime`], [`crate::runtime::sensing`]). Each cyclic
 //! sensor `i` is a periodic job: released every `Tᵢ`, it costs `Cᵢ` of processor time on the
 //! sensing side (starting the read, then delivering it: store, fuse, check, wake) and waits
 //! `Lᵢ` for its read between the two (an echo, a conversion: no processor time; other work

@@ -12,7 +12,8 @@ use crate::facts::FactSetOf;
 use crate::failure::Failure;
 use crate::failure::SensorFault;
 use crate::plan::PlanId;
-use crate::platform::{FromId, Outcome};
+use crate::platform::Outcome;
+use crate::spec::{Mission, TraceEventOf};
 use crate::store::Value;
 
 /// The two phases of the SMPA baseline.
@@ -151,64 +152,68 @@ pub enum TraceEvent<const W: usize = 1> {
 }
 
 impl<const W: usize> TraceEvent<W> {
-    /// The action the event is about, in the type the platform names actions by (a compiled
-    /// mission's `Action`, or [`ActionId`]); `None` if it is about none.
-    pub fn action<A: FromId<ActionId>>(&self) -> Option<A> {
+    /// The action the event is about, if any.
+    pub const fn action(&self) -> Option<ActionId> {
         match *self {
             Self::StateEntered { action, .. }
             | Self::StateLeft { action, .. }
             | Self::PhaseStarted { action, .. }
             | Self::PreconditionViolated { action, .. }
             | Self::PreconditionRestored { action }
-            | Self::EffectsApplied { action, .. } => A::from_id(action),
+            | Self::EffectsApplied { action, .. } => Some(action),
             Self::PlanFailed { reason, .. } => reason.action(),
             _ => None,
         }
     }
 
-    /// The sensor the event is about, as [`TraceEvent::action`] names an action.
-    pub fn sensor<S: FromId<SensorId>>(&self) -> Option<S> {
+    /// The sensor the event is about, if any.
+    pub const fn sensor(&self) -> Option<SensorId> {
         match *self {
             Self::SensorOn { sensor }
             | Self::SensorOff { sensor }
             | Self::Sample { sensor, .. }
             | Self::SampleLost { sensor }
-            | Self::SensorFailed { sensor, .. } => S::from_id(sensor),
+            | Self::SensorFailed { sensor, .. } => Some(sensor),
             Self::PlanFailed { reason, .. } => reason.sensor(),
             _ => None,
         }
     }
 
-    /// The plan the event is about (a compiled mission's `Plan`, or [`PlanId`]); a plan the
-    /// planner generated has no `Plan` of the mission: `None` then, and `Some` as a
-    /// [`PlanId`] ([`PlanId::GENERATED`]).
-    pub fn plan<P: FromId<PlanId>>(&self) -> Option<P> {
+    /// The plan the event is about, if any ([`PlanId::GENERATED`] for a plan the planner
+    /// generated).
+    pub const fn plan(&self) -> Option<PlanId> {
         match *self {
             Self::PlanSelected { plan, .. }
             | Self::PlanSucceeded { plan }
-            | Self::PlanFailed { plan, .. } => P::from_id(plan),
+            | Self::PlanFailed { plan, .. } => Some(plan),
             _ => None,
         }
     }
 }
 
-/// Receives the trace events of a runtime whose fact sets have `W` words. Implementations
-/// must not block; they run in the control path.
-pub trait TraceSink<const W: usize = 1> {
+/// Receives the trace events of a runtime of mission `M` (a sink of one mission's events, or
+/// of any mission's: `impl<M: Mission> TraceSink<M> for ..`). Implementations must not block;
+/// they run in the control path.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a trace sink of the mission `{M}`",
+    label = "a sink of another mission",
+    note = "a sink that reads names (a typed recorder) belongs to one mission: make it `{M}`'s"
+)]
+pub trait TraceSink<M: Mission> {
     /// Whether the runtime traces into this sink at all. `()` says no: the runtime then
     /// skips every event (no clock read, no lock, no hash), and its
-    /// [`trace_hash`](crate::Engine::trace_hash) and `trace_events` stay those of the empty
+    /// [`trace_hash`](crate::Runtime::trace_hash) and `trace_events` stay those of the empty
     /// trace. [`Hashing`] keeps nothing but the hash and the count.
     const TRACES: bool = true;
 
     /// Called once per event, in order.
-    fn record(&mut self, at: Instant, event: &TraceEvent<W>);
+    fn record(&mut self, at: Instant, event: &TraceEventOf<M>);
 }
 
 /// No trace: the runtime skips every event, the hash and count included.
-impl<const W: usize> TraceSink<W> for () {
+impl<M: Mission> TraceSink<M> for () {
     const TRACES: bool = false;
-    fn record(&mut self, _at: Instant, _event: &TraceEvent<W>) {}
+    fn record(&mut self, _at: Instant, _event: &TraceEventOf<M>) {}
 }
 
 /// Keeps no event, but the runtime traces into it: the trace's hash and count are kept, for a
@@ -216,13 +221,13 @@ impl<const W: usize> TraceSink<W> for () {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Hashing;
 
-impl<const W: usize> TraceSink<W> for Hashing {
-    fn record(&mut self, _at: Instant, _event: &TraceEvent<W>) {}
+impl<M: Mission> TraceSink<M> for Hashing {
+    fn record(&mut self, _at: Instant, _event: &TraceEventOf<M>) {}
 }
 
-impl<const W: usize, T: TraceSink<W> + ?Sized> TraceSink<W> for &mut T {
+impl<M: Mission, T: TraceSink<M> + ?Sized> TraceSink<M> for &mut T {
     const TRACES: bool = T::TRACES;
-    fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
+    fn record(&mut self, at: Instant, event: &TraceEventOf<M>) {
         (**self).record(at, event);
     }
 }
@@ -334,7 +339,6 @@ impl TraceHash {
             SensorFault::Stuck => (2, 0),
             SensorFault::Device(code) => (3, code),
             SensorFault::Silent => (4, 0),
-            SensorFault::Unbound => (5, 0),
         }
     }
 
@@ -476,9 +480,10 @@ impl<T> Tracer<T> {
     }
 
     /// Hashes the event and hands it to the sink. O(1).
-    pub fn record<const W: usize>(&mut self, at: Instant, event: &TraceEvent<W>)
+    pub fn record<M, const W: usize>(&mut self, at: Instant, event: &TraceEvent<W>)
     where
-        T: TraceSink<W>,
+        M: Mission<Facts = FactSetOf<W>>,
+        T: TraceSink<M>,
     {
         self.hash.add(at, event);
         self.events = self.events.wrapping_add(1);
@@ -515,6 +520,9 @@ impl<T> Tracer<T> {
 mod tests {
     use super::*;
 
+    /// A mission type of one word of facts, for the sinks' type parameter.
+    type One = &'static crate::mission::Tables<'static, 1, 1, 1, 1>;
+
     #[test]
     fn hash_depends_on_order_time_and_content() {
         let s = SensorId::new(1).unwrap();
@@ -523,7 +531,7 @@ mod tests {
         let hash = |events: &[(u64, TraceEvent)]| {
             let mut t = Tracer::new(());
             for (at, e) in events {
-                t.record(Instant::from_ticks(*at), e);
+                t.record::<One, 1>(Instant::from_ticks(*at), e);
             }
             t.hash().value()
         };

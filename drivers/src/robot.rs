@@ -13,7 +13,8 @@
 //!   paper's camera; `handle_seen` when the marker is in view.
 //! * `handle` ([`Switch`], on demand): the limit switch the arm presses on the handle;
 //!   `door_unlocked` when it is pressed (the handle gave way).
-//! * "go to door", "go to back door" (walk): dead reckoning, as the robot has no wheel
+//! * "go to door", "go to back door" (walk, on the typed I/O of either: it reads the sonar and
+//!   the bumper, which run beside both): dead reckoning, as the robot has no wheel
 //!   encoders: it drives at [`Settings::walk_permille`], which moves it at
 //!   [`Settings::walk_mm_s`] (measure it on your robot), for as long as
 //!   [`Settings::walk_mm`] (to the kitchen door) or [`Settings::back_door_mm`] (from there on
@@ -59,7 +60,7 @@
 //!     },
 //!     Settings::DEFAULT,
 //! );
-//! let mut runtime = FetchTeaRuntime::new(&fetch_tea::MISSION, &robot, (), Config::default());
+//! let mut runtime = FetchTeaRuntime::new(fetch_tea::FetchTea, &robot, (), Config::default());
 //! // On the board: the sensing side's `run()` in a task on an interrupt executor, the
 //! // deciding side's in a task on the thread-mode one.
 //! let (sensing, deciding) = runtime.split();
@@ -75,7 +76,7 @@ use embassy_time::{Duration, Instant, Timer};
 use embedded_hal::digital::{InputPin, OutputPin};
 use embedded_hal_async::digital::Wait;
 use psmpa_core::planner::{Planner, Search, Strategy};
-use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, Value};
+use psmpa_core::{Act, Actuator, Beside, Outcome, Platform, Reading, Sensor, SensorFault, Value};
 
 use crate::PinError;
 use crate::hbridge::{Drive, FULL, Motor};
@@ -486,7 +487,7 @@ impl<So, Bu, Ca, Ha, Wh, Pc> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
     }
 }
 
-impl<T, E, B, C, H, Wh, Pc> Sensor
+impl<T, E, B, C, H, Wh, Pc> Sensor<fetch_tea::FetchTea>
     for FetchTea<Hcsr04<T, E>, Switch<B>, Marker<C>, Switch<H>, Wh, Pc>
 where
     T: OutputPin,
@@ -495,8 +496,6 @@ where
     C: InputPin,
     H: InputPin + Wait,
 {
-    type Id = fetch_tea::Sensor;
-
     async fn switch_on(&self, _: fetch_tea::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -589,8 +588,13 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
     /// Drives for `time` (a walk's, `None` for a speed of 0), braking while the precondition
     /// is false, or stepping around what made it false ([`Settings::avoid`]); each time it
     /// starts or resumes driving it first plans its way ([`Settings::plan`]). The wheels are
-    /// written only when the robot starts or stops, not on every sample.
-    async fn walk(&self, time: Option<Duration>, io: &ActionIo<'_>) -> Outcome {
+    /// written only when the robot starts or stops, not on every sample. Any action beside
+    /// which the sonar and the bumper run ("go to door", "go to back door").
+    async fn walk<A>(&self, time: Option<Duration>, io: &fetch_tea::Io<'_, A>) -> Outcome
+    where
+        A: Beside<fetch_tea::sensor::Sonar> + Beside<fetch_tea::sensor::Bumper>,
+    {
+        use fetch_tea::sensor::{Bumper, Sonar};
         let Some(mut left) = time else {
             return Outcome::Failure;
         };
@@ -602,15 +606,16 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         let mut passed = Instant::from_ticks(0);
         // The sonar's last reading when it ended: one after it sees what is there now.
         let mut stepped_sonar = None;
-        let sonar = fetch_tea::Sensor::Sonar.id();
         loop {
-            let seen = io.sample(sonar).is_some_and(|e| {
-                stepped_sonar.is_none_or(|at| e.at > at)
-                    && matches!(e.value, Value::Mm(mm) if mm <= i32::from(self.settings.clearance_mm))
+            // The sonar's own reading shows the obstacle (its threshold, decided by the
+            // reading), and it is one taken after the last side step.
+            let fresh = io
+                .sample(Sonar)
+                .is_some_and(|e| stepped_sonar.is_none_or(|at| e.at > at));
+            let violation = io.violation().filter(|v| {
+                (fresh && v.seen_by(fetch_tea::Sensor::Sonar))
+                    || v.last_seen >= passed.saturating_add(STEP_SETTLE)
             });
-            let violation = io
-                .violation()
-                .filter(|v| seen || v.last_seen >= passed.saturating_add(STEP_SETTLE));
             let go = violation.is_none();
             if moving != Some(go) {
                 let set = if go {
@@ -632,7 +637,7 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                     return self.stop(Outcome::Failure);
                 }
                 passed = Instant::now();
-                stepped_sonar = io.sample(sonar).map(|e| e.at);
+                stepped_sonar = io.sample(Sonar).map(|e| e.at);
                 version = io.version();
                 continue;
             }
@@ -643,7 +648,7 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                 // Wheels held by what the bumper touched do not move the robot: a contact
                 // read since this stretch began ends the driving at the read's instant.
                 let held = io
-                    .sample(fetch_tea::Sensor::Bumper.id())
+                    .sample(Bumper)
                     .filter(|e| e.value == Value::Bool(true) && e.at >= since)
                     .map(|e| e.at);
                 let until = held.unwrap_or_else(Instant::now);
@@ -661,8 +666,8 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
 
     /// Asks the handle's limit switch whether the handle gave (an on-demand `handle` reading,
     /// taken once it settles) and pushes the door open if it did.
-    async fn open_door(&self, io: &ActionIo<'_>) -> Outcome {
-        let handle = fetch_tea::Sensor::Handle.id();
+    async fn open_door(&self, io: &fetch_tea::Io<'_, fetch_tea::action::OpenDoor>) -> Outcome {
+        let handle = fetch_tea::sensor::Handle;
         let asked = Instant::now();
         io.request(handle);
         let mut version = io.version();
@@ -678,25 +683,23 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
     }
 }
 
-impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator
+impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator<fetch_tea::FetchTea>
     for FetchTea<So, Bu, Ca, Ha, Drive<L, R, S>, Pc>
 {
-    type Id = fetch_tea::Action;
-
-    async fn run(&self, action: fetch_tea::Action, io: &ActionIo<'_>) -> Outcome {
-        use fetch_tea::Action::{
+    async fn run(&self, act: Act<'_, fetch_tea::FetchTea>) -> Outcome {
+        use fetch_tea::Run::{
             EnterByBackDoor, EnterKitchen, GoToBackDoor, GoToDoor, OpenBackDoor, OpenDoor,
         };
-        match action {
-            GoToDoor => self.walk(self.settings.walk_time(), io).await,
-            GoToBackDoor => self.walk(self.settings.back_door_time(), io).await,
-            OpenDoor => self.open_door(io).await,
+        match act.typed() {
+            GoToDoor(io) => self.walk(self.settings.walk_time(), &io).await,
+            GoToBackDoor(io) => self.walk(self.settings.back_door_time(), &io).await,
+            OpenDoor(io) => self.open_door(&io).await,
             // No handle runs beside it (the mission's back door is never locked): a push.
-            OpenBackDoor => {
+            OpenBackDoor(_) => {
                 let s = &self.settings;
                 self.timed(s.push_permille, s.push).await
             }
-            EnterKitchen | EnterByBackDoor => {
+            EnterKitchen(_) | EnterByBackDoor(_) => {
                 let s = &self.settings;
                 self.timed(s.enter_permille, s.enter).await
             }

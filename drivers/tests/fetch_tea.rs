@@ -415,7 +415,7 @@ fn a_stuck_echo_line_is_the_drivers_stuck_fault_within_the_sonars_timeout() {
         .collect();
     assert_eq!(faults.first(), Some(&SensorFault::Stuck), "{faults:?}");
     // Trigger (one 1 ms tick here), the module's delay, the pulse limit: inside the timeout.
-    let timeout = psmpa_drivers::robot::fetch_tea::MISSION
+    let timeout = psmpa_drivers::robot::fetch_tea::TABLES
         .domain
         .sensor(sonar)
         .map(|s| s.timeout);

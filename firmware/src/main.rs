@@ -363,7 +363,7 @@ mod firmware {
     /// executor, for the cost of each kind of step.
     struct Sink;
 
-    impl TraceSink for Sink {
+    impl<Ms: psmpa_core::Mission<Facts = psmpa_core::FactSet>> TraceSink<Ms> for Sink {
         fn record(&mut self, at: embassy_time::Instant, event: &TraceEvent) {
             executor::note(match event {
                 TraceEvent::Sample { sensor, .. }

@@ -19,8 +19,8 @@ use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::record::{self, Frame, Header, Input, RecordOut, Recorder, kind};
 use psmpa_core::trace::Phase;
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, Outcome, Platform, Reading, Runtime, Sensor, SensorFault,
-    SensorId, SensorMode, TraceEvent, TraceSink,
+    Act, ActionOf, Actuator, Describe, FactSet, Mission, Outcome, Platform, Reading, Runtime,
+    Sensor, SensorFault, SensorId, SensorMode, SensorOf, TraceEvent, TraceSink,
 };
 use serde::Serialize;
 
@@ -29,7 +29,7 @@ use psmpa_drivers::robot::{RECORD_WORDS, Settings, fetch_tea};
 use crate::backend::simulate_split;
 use crate::cli::files::Output;
 use crate::cli::foxglove::McapLog;
-use crate::robot::{self, Arch, Caps};
+use crate::robot::{self, Arch};
 use crate::scenario::Scenario;
 
 /// The largest recording `replay` reads: 256 MiB (a day of 1 ms samples is about 10 GB; a
@@ -391,16 +391,16 @@ impl Replay<'_> {
     }
 }
 
-impl Sensor for Replay<'_> {
-    type Id = SensorId;
-
-    async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
+/// A replay reads any mission of one word of facts by id: the recording names its sensors so.
+impl<Ms: Mission<Facts = FactSet>> Sensor<Ms> for Replay<'_> {
+    async fn switch_on(&self, _: Ms::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
 
-    async fn switch_off(&self, _: SensorId) {}
+    async fn switch_off(&self, _: Ms::Sensor) {}
 
-    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
+    async fn sample(&self, sensor: Ms::Sensor) -> Result<Option<Reading>, SensorFault> {
+        let sensor = sensor.id();
         let Some((index, _, input)) = self.next_of(sensor) else {
             return pending().await;
         };
@@ -424,8 +424,8 @@ impl Sensor for Replay<'_> {
     ///
     /// A sensor reads once an instant: where a board's samples came closer than one of the
     /// host's ticks (a chattering switch at 1 MHz), the next comes a tick later.
-    async fn wake(&self, sensor: SensorId) {
-        match self.next_of(sensor) {
+    async fn wake(&self, sensor: Ms::Sensor) {
+        match self.next_of(sensor.id()) {
             Some((_, ticks, _)) if ticks > Instant::now().as_ticks() => {
                 Timer::at(Instant::from_ticks(ticks)).await;
             }
@@ -457,10 +457,10 @@ impl Replay<'_> {
     }
 }
 
-impl Actuator for Replay<'_> {
-    type Id = ActionId;
-
-    async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
+impl<Ms: Mission<Facts = FactSet>> Actuator<Ms> for Replay<'_> {
+    async fn run(&self, act: Act<'_, Ms>) -> Outcome {
+        let io = act.untyped();
+        let action = io.action().id();
         // The state this behaviour runs in: the last entered for `action` by now (SMPA first
         // polls a behaviour at its first act phase, after the state was entered).
         let now = Instant::now().as_ticks();
@@ -522,7 +522,7 @@ impl Actuator for Replay<'_> {
         pending().await
     }
 
-    fn halt(&self, _: ActionId) {
+    fn halt(&self, _: Ms::Action) {
         // Nothing moves: a replay drives no actuator.
     }
 }
@@ -547,7 +547,7 @@ struct Compare<'f> {
     skew: u64,
 }
 
-impl TraceSink for Compare<'_> {
+impl<Ms: psmpa_core::Mission<Facts = psmpa_core::FactSet>> TraceSink<Ms> for Compare<'_> {
     fn record(&mut self, at: Instant, event: &TraceEvent) {
         if let Some(log) = &mut self.mcap {
             log.runtime(at, event);
@@ -669,7 +669,7 @@ pub fn replay(
             let robot = robot::fetch_tea(scenario).map_err(|e| e.to_string())?;
             let describe = |e: &TraceEvent| crate::cli::outputs::describe(&robot.mission, e);
             let platform = platform(on_demand(robot.mission.domain.sensors()));
-            let mut runtime = Runtime::<'_, Replay<'_>, Caps, Compare<'_>>::new(
+            let mut runtime = Runtime::<'_, robot::Loaded<'_>, Replay<'_>, Compare<'_>>::new(
                 &robot.mission,
                 &platform,
                 compare(&describe, mcap(scenario)?),
@@ -691,27 +691,24 @@ pub fn replay(
         }
         Source::Board { settings } => {
             // As the board does: the compiled mission, its periods from the calibration.
-            let mut mission = fetch_tea::MISSION.clone();
-            for (sensor, period) in [
-                (fetch_tea::Sensor::Sonar, settings.sonar_period),
-                (fetch_tea::Sensor::Bumper, settings.bumper_period),
-            ] {
-                if let Some(period) = period {
-                    mission
-                        .domain
-                        .set_sensor_mode(sensor.id(), SensorMode::Cyclic { period })
-                        .map_err(|e| format!("the calibration's periods: {e:?}"))?;
-                }
-            }
-            let describe =
-                |e: &TraceEvent| psmpa_core::text::Describe::describe(&mission, *e).to_string();
-            let platform = platform(on_demand(mission.domain.sensors()));
+            let describe = |e: &TraceEvent| fetch_tea::FetchTea.describe(*e).to_string();
+            let platform = platform(on_demand(fetch_tea::TABLES.domain.sensors()));
             let mut runtime = fetch_tea::Runtime::<'_, Replay<'_>, Compare<'_>>::new(
-                &mission,
+                fetch_tea::FetchTea,
                 &platform,
                 compare(&describe, mcap(&Scenario::empty())?),
                 psmpa_core::Config::default(),
             );
+            for (sensor, period) in [
+                (fetch_tea::Sensor::Sonar, settings.sonar_period),
+                (fetch_tea::Sensor::Bumper, settings.bumper_period),
+            ] {
+                if period.is_some() && !runtime.set_period(sensor, period) {
+                    return Err(format!(
+                        "the calibration's periods: {period:?} for {sensor}"
+                    ));
+                }
+            }
             // A second past the last frame: what the board traced at its last instant too.
             let end =
                 Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);

@@ -22,9 +22,9 @@ use psmpa_core::mission::{self, Bindings, LoadError, Registry};
 use psmpa_core::planner::{Planner, Search, Strategy};
 use psmpa_core::timing::{Blocking, Job, Response, TimingError};
 use psmpa_core::{
-    ActionId, ActionIo, Actuator, Capacity, Config, DomainError, Entry, FactId, FactSet, Key,
-    MissionOf, Outcome, Platform, Policy, Reading, Runtime, Sensor, SensorAction, SensorFault,
-    SensorId, SensorMode, Value,
+    Act, ActionIo, ActionOf, Actuator, Config, DomainError, Entry, FactId, FactSet, Key, Mission,
+    Outcome, Platform, Policy, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId,
+    SensorMode, SensorOf, Tables, Value,
 };
 
 use crate::scenario::Scenario;
@@ -38,18 +38,16 @@ pub const OPEN_DOOR: Duration = Duration::from_millis(1_000);
 /// Time to walk through an open door.
 pub const ENTER_KITCHEN: Duration = Duration::from_millis(1_000);
 
-/// Capacities of the robot's missions: 4 sensors, 8 actions, 4 plans of up to 6 actions, 4
-/// keys per data store.
-pub type Caps = psmpa_core::Caps<
-    psmpa_core::Sensors<4>,
-    psmpa_core::Actions<8>,
-    psmpa_core::Plans<4>,
-    psmpa_core::Body<6>,
-    psmpa_core::Keys<4>,
->;
+/// A mission of the robot, loaded at run time: its tables, with room for 4 sensors, 8
+/// actions, 4 plans of up to 6 actions.
+pub type FetchTea<'a> = Tables<'a, 4, 8, 4, 6>;
 
-/// A mission of the robot.
-pub type FetchTea<'a> = MissionOf<'a, Caps>;
+/// A mission of the robot as the runtime's mission type: its tables (a mission loaded at run
+/// time is its tables).
+pub type Loaded<'r> = &'r FetchTea<'static>;
+
+/// The bindings of a mission's sensors and actions to the robot's behaviours.
+pub type NaoBindings = Bindings<NaoSensor, NaoAction, 4, 8>;
 
 /// The robot's sensor behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -180,7 +178,7 @@ pub struct Robot<'a> {
     /// The mission, with the scenario's sampling periods.
     pub mission: FetchTea<'a>,
     /// The behaviour of every sensor and action id.
-    pub bindings: <Caps as Capacity>::Bindings<NaoSensor, NaoAction>,
+    pub bindings: NaoBindings,
     /// Percept fact ids.
     pub percepts: Percepts,
 }
@@ -489,7 +487,7 @@ pub const STUCK_AFTER_UM: i64 = 50_000;
 /// the mutex `M`, as the world's state does.
 pub struct Nao<'w, 's, L: WorldLog, M: RawMutex = NoopRawMutex> {
     world: &'w World<'s, L, M>,
-    bindings: <Caps as Capacity>::Bindings<NaoSensor, NaoAction>,
+    bindings: NaoBindings,
     percepts: Percepts,
     /// The sonar's last echo in range and the odometry when it was first read.
     echo: Mutex<M, core::cell::Cell<Option<(u32, i64)>>>,
@@ -571,7 +569,11 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
     /// precondition seen since then stops it too (a sensor this walk does not read). Each time
     /// it starts or resumes, it first plans its path: the scenario's `plan_us` of processor
     /// time on a microcontroller, none in virtual time.
-    async fn walk(&self, place: Place, io: &ActionIo<'_>) -> Outcome {
+    async fn walk<Ms: Mission<Facts = FactSet>>(
+        &self,
+        place: Place,
+        io: &ActionIo<'_, Ms>,
+    ) -> Outcome {
         let world = self.world;
         let mut handled = Instant::now();
         let mut stepping = false;
@@ -646,7 +648,7 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
     }
 
     /// "open door": press the handle (an on-demand sample), then push the door if it gives.
-    async fn open_door(&self, io: &ActionIo<'_>) -> Outcome {
+    async fn open_door<Ms: Mission<Facts = FactSet>>(&self, io: &ActionIo<'_, Ms>) -> Outcome {
         let handle = self.bindings.sensor_id(&NaoSensor::Handle);
         if let Some(handle) = handle {
             let asked = Instant::now();
@@ -667,11 +669,11 @@ impl<'w, 's, L: WorldLog, M: RawMutex> Nao<'w, 's, L, M> {
     }
 }
 
-impl<L: WorldLog, M: RawMutex> Sensor for Nao<'_, '_, L, M> {
-    type Id = SensorId;
-
-    async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault> {
-        let device = self.device(sensor).ok_or(SensorFault::Device(1))?;
+/// The robot runs any mission of one word of facts whose sensors and actions its bindings name
+/// (the mission loaded at run time, or the same file compiled in): it reads them by id.
+impl<Ms: Mission<Facts = FactSet>, L: WorldLog, M: RawMutex> Sensor<Ms> for Nao<'_, '_, L, M> {
+    async fn switch_on(&self, sensor: Ms::Sensor) -> Result<(), SensorFault> {
+        let device = self.device(sensor.id()).ok_or(SensorFault::Device(1))?;
         if device == Device::Sonar {
             // What the echo did before the sonar was off says nothing about it now: under SMPA
             // the robot walks between sense phases, and the next box, put down as far ahead
@@ -682,13 +684,14 @@ impl<L: WorldLog, M: RawMutex> Sensor for Nao<'_, '_, L, M> {
         Ok(())
     }
 
-    async fn switch_off(&self, sensor: SensorId) {
-        if let Some(device) = self.device(sensor) {
+    async fn switch_off(&self, sensor: Ms::Sensor) {
+        if let Some(device) = self.device(sensor.id()) {
             self.world.power(device, false);
         }
     }
 
-    async fn sample(&self, sensor: SensorId) -> Result<Option<Reading>, SensorFault> {
+    async fn sample(&self, sensor: Ms::Sensor) -> Result<Option<Reading>, SensorFault> {
+        let sensor = sensor.id();
         let p = self.percepts;
         let clear = FactSet::single(p.path_clear);
         let when = |yes: bool, fact: FactId| {
@@ -811,17 +814,16 @@ impl<L: WorldLog, M: RawMutex> Nao<'_, '_, L, M> {
     }
 }
 
-impl<L: WorldLog, M: RawMutex> Actuator for Nao<'_, '_, L, M> {
-    type Id = ActionId;
-
-    async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
-        let Some(behaviour) = self.bindings.action(action) else {
+impl<Ms: Mission<Facts = FactSet>, L: WorldLog, M: RawMutex> Actuator<Ms> for Nao<'_, '_, L, M> {
+    async fn run(&self, act: Act<'_, Ms>) -> Outcome {
+        let io = act.untyped();
+        let Some(behaviour) = self.bindings.action(io.action().id()) else {
             return Outcome::Failure;
         };
         match behaviour {
-            NaoAction::GoToDoor => self.walk(Place::KitchenDoor, io).await,
-            NaoAction::GoToBackDoor => self.walk(Place::BackDoor, io).await,
-            NaoAction::OpenDoor => self.open_door(io).await,
+            NaoAction::GoToDoor => self.walk(Place::KitchenDoor, &io).await,
+            NaoAction::GoToBackDoor => self.walk(Place::BackDoor, &io).await,
+            NaoAction::OpenDoor => self.open_door(&io).await,
             NaoAction::OpenBackDoor => {
                 Timer::after(OPEN_DOOR).await;
                 self.world.open_door(Place::BackDoor);
@@ -835,11 +837,11 @@ impl<L: WorldLog, M: RawMutex> Actuator for Nao<'_, '_, L, M> {
         }
     }
 
-    fn hold(&self, _action: ActionId, held: bool) {
+    fn hold(&self, _action: Ms::Action, held: bool) {
         self.world.hold(held);
     }
 
-    fn halt(&self, _action: ActionId) {
+    fn halt(&self, _action: Ms::Action) {
         self.world.halt();
     }
 }
@@ -849,4 +851,5 @@ impl<L: WorldLog, M: RawMutex> Platform for Nao<'_, '_, L, M> {
 }
 
 /// The runtime type of a Fetch Tea run, its two sides sharing state through `M`.
-pub type NaoRuntime<'r, 'w, 's, L, T, M = NoopRawMutex> = Runtime<'r, Nao<'w, 's, L, M>, Caps, T>;
+pub type NaoRuntime<'r, 'w, 's, L, T, M = NoopRawMutex> =
+    Runtime<'r, Loaded<'r>, Nao<'w, 's, L, M>, T>;

@@ -53,7 +53,7 @@ pub struct Summary {
 /// the host's poll loop (`simulate_split`), or a task on the firmware's interrupt executor.
 /// The run starts at the current instant; the host and the firmware start it at tick 0 so
 /// their traces agree.
-pub async fn decide<L: WorldLog, T: TraceSink, M: RawMutex>(
+pub async fn decide<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>, M: RawMutex>(
     deciding: &mut DecidingSide<'_, robot::NaoRuntime<'_, '_, '_, L, T, M>>,
     world: &World<'_, L, M>,
     scenario: &Scenario,
@@ -73,7 +73,7 @@ pub async fn decide<L: WorldLog, T: TraceSink, M: RawMutex>(
 
 /// The summary of a run under `arch` that ended with `ending` at `time_cost_ms`
 /// ([`decide`]), from its world and its runtime.
-pub fn summary<L: WorldLog, T: TraceSink, M: RawMutex>(
+pub fn summary<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>, M: RawMutex>(
     arch: Arch,
     world: &World<'_, L, M>,
     runtime: &robot::NaoRuntime<'_, '_, '_, L, T, M>,

@@ -25,7 +25,7 @@ impl WorldLog for WorldRecord {
 #[derive(Debug, Default, Clone)]
 pub struct TraceRecord(pub Vec<(Instant, TraceEvent)>);
 
-impl TraceSink for TraceRecord {
+impl<Ms: psmpa_core::Mission<Facts = psmpa_core::FactSet>> TraceSink<Ms> for TraceRecord {
     fn record(&mut self, at: Instant, event: &TraceEvent) {
         self.0.push((at, *event));
     }
@@ -75,7 +75,7 @@ pub fn run_summary(scenario: &Scenario, arch: Arch) -> Result<Summary, RunError>
 
 /// Runs `scenario` under `arch`, logging the world into `log` and tracing the runtime into
 /// `sink` as the run goes; gives both back with the summary.
-pub fn run_logged<L: WorldLog, T: TraceSink>(
+pub fn run_logged<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>>(
     scenario: &Scenario,
     arch: Arch,
     log: L,
@@ -87,7 +87,7 @@ pub fn run_logged<L: WorldLog, T: TraceSink>(
 /// [`run_logged`], asking `stop` at every step of the run (every wake of its sensing or
 /// deciding side): when it answers `true` the run ends at once with [`RunError::Stopped`]. A
 /// command whose output failed (`--trace /dev/full`) stops there instead of simulating on.
-pub fn run_logged_until<L: WorldLog, T: TraceSink>(
+pub fn run_logged_until<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>>(
     scenario: &Scenario,
     arch: Arch,
     log: L,

@@ -306,7 +306,7 @@ impl WorldLog for Log<'_> {
     }
 }
 
-impl TraceSink for Log<'_> {
+impl<Ms: psmpa_core::Mission<Facts = psmpa_core::FactSet>> TraceSink<Ms> for Log<'_> {
     fn record(&mut self, at: Instant, event: &TraceEvent) {
         if let Some(l) = self.0.borrow_mut().as_mut() {
             l.runtime(at, event);

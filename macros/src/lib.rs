@@ -109,7 +109,7 @@ fn expand(input: &Input) -> syn::Result<Tokens> {
     // A regular file of at most 1 MiB, as psmpa-sim reads one: a FIFO would block the
     // compiler for ever, `/dev/zero` fill its memory.
     let bytes = check::read_input(&file, "mission").map_err(|e| syn::Error::new(span, e))?;
-    let keys = match &input.keys {
+    let keys_option = match &input.keys {
         Some(k) => {
             // A key is a `u8`: 256 distinct ones at most.
             let n = k
@@ -125,16 +125,16 @@ fn expand(input: &Input) -> syn::Result<Tokens> {
                         ),
                     )
                 })? as usize;
-            quote!(#n)
+            Some(n)
         }
-        None => quote!({ ::psmpa_core::platform::MAX_PAIRS + 1 }),
+        None => None,
     };
     // Computed here: a `const fn` over a large file's bytes exceeds the compiler's budget.
     let hash = psmpa_model::mission::mission_hash(&bytes);
     let descriptions =
         Descriptions::of(&bytes).map_err(|e| syn::Error::new(span, format!("{given}: {e}")))?;
     check::check::<_, MAX_WORDS, MAX_FACTS>(Path::new(&given), &bytes, |m| {
-        generate(input, m, &file, &keys, hash, &descriptions)
+        generate(input, m, &file, keys_option, hash, &descriptions)
     })
     .map_err(|e| syn::Error::new(span, e))?
 }
@@ -204,7 +204,7 @@ fn variants(table: &str, names: &[&str], span: Span) -> syn::Result<Vec<Ident>> 
 fn facts(set: FactSetOf<MAX_WORDS>, w: usize) -> Tokens {
     let words = set.words();
     let words = words.iter().take(w);
-    quote!(::psmpa_core::FactSetOf::<W>::from_words([#(#words),*]))
+    quote!(::psmpa_core::FactSetOf::<#w>::from_words([#(#words),*]))
 }
 
 fn millis(d: embassy_time::Duration) -> u64 {
@@ -219,6 +219,9 @@ struct Descriptions {
     sensors: Vec<Option<String>>,
     actions: Vec<Option<String>>,
     plans: Vec<Option<String>>,
+    /// The keys each sensor and action declares for its data store (`"keys"`), by index.
+    sensor_keys: Vec<Vec<String>>,
+    action_keys: Vec<Vec<String>>,
 }
 
 impl Descriptions {
@@ -259,16 +262,33 @@ impl Descriptions {
                 })
                 .collect()
         });
+        let keys = |section: &str| -> Vec<Vec<String>> {
+            v[section].as_array().map_or_else(Vec::new, |items| {
+                items
+                    .iter()
+                    .map(|i| {
+                        i["keys"].as_array().map_or_else(Vec::new, |k| {
+                            k.iter()
+                                .filter_map(|n| n.as_str().map(str::to_owned))
+                                .collect()
+                        })
+                    })
+                    .collect()
+            })
+        };
         Ok(Self {
             facts,
             sensors: of("sensors"),
             actions: of("actions"),
             plans: of("plans"),
+            sensor_keys: keys("sensors"),
+            action_keys: keys("actions"),
         })
     }
 }
 
 /// One of the generated enums: its variants, ids and names.
+#[allow(clippy::too_many_arguments)] // One enum: its kind, types, names and the mission's.
 fn names_enum(
     what: &str,
     ty: &Ident,
@@ -277,6 +297,7 @@ fn names_enum(
     variants: &[Ident],
     names: &[&str],
     described: &[Option<String>],
+    (mission, of): (&Ident, Tokens),
 ) -> Tokens {
     let n = variants.len();
     let index: Vec<usize> = (0..n).collect();
@@ -345,9 +366,18 @@ fn names_enum(
             }
         }
 
-        impl ::psmpa_core::platform::FromId<#id> for #ty {
+        impl #of<#mission> for #ty {
+            fn id(self) -> #id {
+                Self::id(self)
+            }
             fn from_id(id: #id) -> ::core::option::Option<Self> {
                 Self::from_id(id)
+            }
+        }
+
+        impl ::core::convert::From<#ty> for #id {
+            fn from(name: #ty) -> #id {
+                name.id()
             }
         }
 
@@ -361,11 +391,79 @@ fn names_enum(
     }
 }
 
+/// The mission's type name: the module's name in UpperCamelCase (`fetch_tea` is `FetchTea`);
+/// an error where it would clash with another item of the module.
+fn mission_type(module: &Ident) -> syn::Result<Ident> {
+    let name = variant(&module.to_string());
+    const TAKEN: [&str; 17] = [
+        "Sensor", "Action", "Fact", "Event", "Plan", "Run", "Io", "Runtime", "HASH", "W", "NF",
+        "NS", "NA", "NP", "L", "K", "TABLES",
+    ];
+    if TAKEN.contains(&name.as_str()) {
+        return Err(syn::Error::new(
+            module.span(),
+            format!(
+                "the module `{module}` makes the mission's type `{name}`, a name the module \
+                 already gives another item: rename the module"
+            ),
+        ));
+    }
+    syn::parse_str::<Ident>(&name)
+        .map(|i| Ident::new(&i.to_string(), module.span()))
+        .map_err(|_| {
+            syn::Error::new(
+                module.span(),
+                format!("the module `{module}` makes no type name ({name}): rename it"),
+            )
+        })
+}
+
+/// `join` of the futures `items` (each an expression of a future that never ends), nested in
+/// fours, as one expression whose output is a tuple (or tuples) of `Infallible`.
+fn join_tree(items: &[Tokens]) -> Tokens {
+    match items {
+        [] => quote!(::core::future::pending::<::core::convert::Infallible>()),
+        [one] => one.clone(),
+        _ if items.len() <= 4 => {
+            let f = format_ident!("join{}", items.len());
+            let f = if items.len() == 2 {
+                format_ident!("join")
+            } else {
+                f
+            };
+            quote!(::psmpa_core::embassy_futures::join::#f(#(#items),*))
+        }
+        _ => {
+            let chunk = items.len().div_ceil(4);
+            let parts: Vec<Tokens> = items.chunks(chunk).map(join_tree).collect();
+            join_tree(&parts)
+        }
+    }
+}
+
+/// The pattern that takes the first `Infallible` out of a [`join_tree`]'s output.
+fn first_never(n: usize) -> Tokens {
+    match n {
+        0 | 1 => quote!(never),
+        _ if n <= 4 => {
+            let rest = (1..n).map(|_| quote!(_));
+            quote!((never, #(#rest),*))
+        }
+        _ => {
+            let chunk = n.div_ceil(4);
+            let parts = n.div_ceil(chunk);
+            let first = first_never(chunk.min(n));
+            let rest = (1..parts).map(|_| quote!(_));
+            quote!((#first, #(#rest),*))
+        }
+    }
+}
+
 fn generate(
     input: &Input,
     m: &Large<'_, MAX_WORDS, MAX_FACTS>,
     file: &Path,
-    keys: &Tokens,
+    keys_option: Option<usize>,
     hash: u64,
     descriptions: &Descriptions,
 ) -> syn::Result<Tokens> {
@@ -385,6 +483,8 @@ fn generate(
     );
     let w = nf.div_ceil(64).max(1);
     let l = plans.iter().map(|p| p.body.len()).max().unwrap_or(0).max(1);
+    let module = &input.name;
+    let mission = mission_type(module)?;
 
     let fact_v = variants("facts", fact_names, span)?;
     let event_v = variants("events", event_names, span)?;
@@ -392,6 +492,55 @@ fn generate(
     let action_v = variants("actions", &action_names, span)?;
     let plan_v = variants("plans", &plan_names, span)?;
 
+    // The declared keys, numbered across the mission from 1 (0 is a sensor's sample).
+    let mut key_names: Vec<String> = Vec::new();
+    for k in descriptions
+        .sensor_keys
+        .iter()
+        .chain(&descriptions.action_keys)
+        .flatten()
+    {
+        if !key_names.iter().any(|n| n == k) {
+            key_names.push(k.clone());
+        }
+    }
+    if key_names.len() > usize::from(u8::MAX) {
+        return Err(syn::Error::new(
+            span,
+            format!(
+                "the mission declares {} keys: at most 255 (a key is a u8, 0 the sample's)",
+                key_names.len()
+            ),
+        ));
+    }
+    let key_refs: Vec<&str> = key_names.iter().map(String::as_str).collect();
+    let key_v = variants("keys", &key_refs, span)?;
+    let key_of = |name: &str| key_names.iter().position(|k| k == name);
+    // Keys a data store holds: a sensor's sample and its keys, an action's keys; or `keys = N`.
+    let most = descriptions
+        .sensor_keys
+        .iter()
+        .map(|k| k.len().saturating_add(1))
+        .chain(descriptions.action_keys.iter().map(Vec::len))
+        .max()
+        .unwrap_or(0)
+        .max(1);
+    let k = keys_option.unwrap_or(most);
+    if k < most {
+        return Err(syn::Error::new(
+            span,
+            format!(
+                "keys = {k}: a behaviour of the mission declares {} keys, so a data store needs \
+                 room for {most}",
+                most.saturating_sub(1)
+            ),
+        ));
+    }
+
+    let of = |t: &str| -> Tokens {
+        let t = format_ident!("{t}");
+        quote!(::psmpa_core::#t)
+    };
     let enums = [
         names_enum(
             "fact",
@@ -401,6 +550,7 @@ fn generate(
             &fact_v,
             fact_names,
             &descriptions.facts,
+            (&mission, of("FactOf")),
         ),
         names_enum(
             "event",
@@ -410,6 +560,7 @@ fn generate(
             &event_v,
             event_names,
             &[],
+            (&mission, of("EventOf")),
         ),
         names_enum(
             "sensor",
@@ -419,6 +570,7 @@ fn generate(
             &sensor_v,
             &sensor_names,
             &descriptions.sensors,
+            (&mission, of("SensorOf")),
         ),
         names_enum(
             "action",
@@ -428,6 +580,7 @@ fn generate(
             &action_v,
             &action_names,
             &descriptions.actions,
+            (&mission, of("ActionOf")),
         ),
         names_enum(
             "plan",
@@ -437,6 +590,7 @@ fn generate(
             &plan_v,
             &plan_names,
             &descriptions.plans,
+            (&mission, of("PlanOf")),
         ),
     ];
 
@@ -464,16 +618,24 @@ fn generate(
             quote!(::psmpa_core::__tick_rate_check!(#what, #ms);)
         });
 
+    let mode_of = |mode: SensorMode| match mode {
+        SensorMode::Cyclic { period } => {
+            let ms = millis(period);
+            quote!(::psmpa_core::SensorMode::Cyclic { period: ::psmpa_core::embassy_time::Duration::from_millis(#ms) })
+        }
+        SensorMode::OneShot => quote!(::psmpa_core::SensorMode::OneShot),
+        SensorMode::OnDemand => quote!(::psmpa_core::SensorMode::OnDemand),
+    };
+    let max_violation_of = |t: Option<embassy_time::Duration>| match t {
+        Some(t) => {
+            let ms = millis(t);
+            quote!(::core::option::Option::Some(::psmpa_core::embassy_time::Duration::from_millis(#ms)))
+        }
+        None => quote!(::core::option::Option::None),
+    };
     let sensors = d.sensors().iter().map(|s| {
         let (name, pre, per) = (s.name, facts(s.pre, w), facts(s.per, w));
-        let mode = match s.mode {
-            SensorMode::Cyclic { period } => {
-                let ms = millis(period);
-                quote!(::psmpa_core::SensorMode::Cyclic { period: ::psmpa_core::embassy_time::Duration::from_millis(#ms) })
-            }
-            SensorMode::OneShot => quote!(::psmpa_core::SensorMode::OneShot),
-            SensorMode::OnDemand => quote!(::psmpa_core::SensorMode::OnDemand),
-        };
+        let mode = mode_of(s.mode);
         let timeout = millis(s.timeout);
         quote!(::psmpa_core::SensorAction {
             name: #name,
@@ -485,13 +647,7 @@ fn generate(
     });
     let actions = d.actions().iter().map(|a| {
         let (name, pre, add, del) = (a.name, facts(a.pre, w), facts(a.add, w), facts(a.del, w));
-        let max_violation = match a.max_violation {
-            Some(t) => {
-                let ms = millis(t);
-                quote!(::core::option::Option::Some(::psmpa_core::embassy_time::Duration::from_millis(#ms)))
-            }
-            None => quote!(::core::option::Option::None),
-        };
+        let max_violation = max_violation_of(a.max_violation);
         quote!(::psmpa_core::ActuatorAction {
             name: #name,
             pre: #pre,
@@ -519,18 +675,234 @@ fn generate(
     let (init, goal) = (facts(m.task.init, w), facts(m.task.goal, w));
     let mission_name = m.name;
 
+    // One type a sensor: its name for `ActionIo::sample`, and its sampler's constants.
+    let sensor_types = d.sensors().iter().enumerate().map(|(i, s)| {
+        let v = &sensor_v[i];
+        let doc = format!(
+            "The sensor `{}`, as a type: its sampler's constants.",
+            s.name.replace('`', "'")
+        );
+        let mode = mode_of(s.mode);
+        let timeout = millis(s.timeout);
+        let per = facts(s.per, w);
+        let keys = descriptions
+            .sensor_keys
+            .get(i)
+            .into_iter()
+            .flatten()
+            .filter_map(|k| {
+                let kv = key_v.get(key_of(k)?)?;
+                Some(quote! {
+                    impl ::psmpa_core::KeyOf<#v> for super::key::#kv {
+                        fn key(self) -> ::psmpa_core::Key {
+                            ::psmpa_core::Key::from(self)
+                        }
+                    }
+                })
+            });
+        quote! {
+            #[doc = #doc]
+            #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+            pub struct #v;
+
+            impl ::psmpa_core::SensorOf<super::#mission> for #v {
+                fn id(self) -> ::psmpa_core::SensorId {
+                    ::psmpa_core::SensorId::of::<#i>()
+                }
+                fn from_id(id: ::psmpa_core::SensorId) -> ::core::option::Option<Self> {
+                    (id.index() == #i).then_some(Self)
+                }
+            }
+
+            impl ::psmpa_core::spec::SensorSpec<super::#mission> for #v {
+                #[inline(always)]
+                fn id(self) -> ::psmpa_core::SensorId {
+                    ::psmpa_core::SensorId::of::<#i>()
+                }
+                #[inline(always)]
+                fn sensor(self) -> super::Sensor {
+                    super::Sensor::#v
+                }
+                #[inline(always)]
+                fn mode(self) -> ::psmpa_core::SensorMode {
+                    #mode
+                }
+                #[inline(always)]
+                fn timeout(self) -> ::psmpa_core::embassy_time::Duration {
+                    ::psmpa_core::embassy_time::Duration::from_millis(#timeout)
+                }
+                #[inline(always)]
+                fn per(self) -> ::psmpa_core::FactSetOf<#w> {
+                    #per
+                }
+            }
+
+            #(#keys)*
+        }
+    });
+
+    // One type an action, with the sensors Algorithm 2 runs beside it and its own keys.
+    let action_types = d.actions().iter().enumerate().map(|(i, a)| {
+        let v = &action_v[i];
+        let serving = d.sensors_serving(a.pre);
+        let beside = serving.iter().map(|s| {
+            let sv = &sensor_v[s.index()];
+            quote!(impl ::psmpa_core::Beside<super::sensor::#sv> for #v {})
+        });
+        let names: Vec<String> = serving
+            .iter()
+            .map(|s| format!("`{}`", sensor_names[s.index()].replace('`', "'")))
+            .collect();
+        let doc = format!(
+            "The action `{}`, as a type: its I/O reads {}.",
+            a.name.replace('`', "'"),
+            if names.is_empty() {
+                "no sensor".to_owned()
+            } else {
+                format!("the sensors {}", names.join(", "))
+            }
+        );
+        let keys = descriptions
+            .action_keys
+            .get(i)
+            .into_iter()
+            .flatten()
+            .filter_map(|k| {
+                let kv = key_v.get(key_of(k)?)?;
+                Some(quote! {
+                    impl ::psmpa_core::OwnKey<#v> for super::key::#kv {
+                        fn key(self) -> ::psmpa_core::Key {
+                            ::psmpa_core::Key::from(self)
+                        }
+                    }
+                })
+            });
+        quote! {
+            #[doc = #doc]
+            #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+            pub struct #v;
+            #(#beside)*
+            impl ::psmpa_core::Beside<::psmpa_core::spec::io::Nowhere> for #v {}
+            #(#keys)*
+        }
+    });
+
+    let key_types = key_v.iter().enumerate().map(|(i, v)| {
+        let n = u8::try_from(i + 1).unwrap_or(u8::MAX);
+        let doc = format!(
+            "The key `{}` of a data store (key {n}).",
+            key_names[i].replace('`', "'")
+        );
+        quote! {
+            #[doc = #doc]
+            #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+            pub struct #v;
+
+            impl ::core::convert::From<#v> for ::psmpa_core::Key {
+                fn from(_: #v) -> ::psmpa_core::Key {
+                    ::psmpa_core::Key(#n)
+                }
+            }
+        }
+    });
+
+    let run_variants = action_v.iter().map(|v| {
+        let doc = format!(
+            "Run `{}` with its I/O.",
+            action_names[action_v.iter().position(|x| x == v).unwrap_or(0)].replace('`', "'")
+        );
+        quote!(#[doc = #doc] #v(Io<'io, action::#v>))
+    });
+    // An enum of no action still uses its lifetime.
+    let never_variant = action_v.is_empty().then(|| {
+        quote! {
+            #[doc(hidden)]
+            __Never(::core::convert::Infallible, ::core::marker::PhantomData<&'io ()>),
+        }
+    });
+    let typed_arms = action_v
+        .iter()
+        .map(|v| quote!(Action::#v => Run::#v(io.__as())));
+    let typed_body = if action_v.is_empty() {
+        quote!(match io.action() {})
+    } else {
+        quote!(match io.action() { #(#typed_arms,)* })
+    };
+
+    // Algorithm 2 at build time: a state type per action of each plan's body, its constants.
+    let mut state_types = Vec::new();
+    let mut plan_arms = Vec::new();
+    for (pi, p) in plans.iter().enumerate() {
+        let mut steps = Vec::new();
+        let last = p.body.len().saturating_sub(1);
+        for (si, a) in p.body.iter().enumerate() {
+            let Some(spec) = d.action(*a) else { continue };
+            let ty = format_ident!("P{pi}S{si}");
+            let av = &action_v[a.index()];
+            let sensors = d.sensors_serving(spec.pre).bits();
+            let (pre, add, del) = (facts(spec.pre, w), facts(spec.add, w), facts(spec.del, w));
+            let max_violation = max_violation_of(spec.max_violation);
+            let index = u8::try_from(si).unwrap_or(u8::MAX);
+            let doc = format!(
+                "State {si} of plan `{}`: `{}`.",
+                p.name.replace('`', "'"),
+                spec.name.replace('`', "'")
+            );
+            state_types.push(quote! {
+                #[doc = #doc]
+                #[derive(Clone, Copy, Debug)]
+                pub struct #ty;
+
+                impl ::psmpa_core::spec::StateSpec<super::#mission> for #ty {
+                    #[inline(always)]
+                    fn index(self) -> u8 { #index }
+                    #[inline(always)]
+                    fn action(self) -> super::Action { super::Action::#av }
+                    #[inline(always)]
+                    fn sensors(self) -> ::psmpa_core::SensorSet { ::psmpa_core::SensorSet::from_bits(#sensors) }
+                    #[inline(always)]
+                    fn pre(self) -> ::psmpa_core::FactSetOf<#w> { #pre }
+                    #[inline(always)]
+                    fn add(self) -> ::psmpa_core::FactSetOf<#w> { #add }
+                    #[inline(always)]
+                    fn del(self) -> ::psmpa_core::FactSetOf<#w> { #del }
+                    #[inline(always)]
+                    fn max_violation(self) -> ::core::option::Option<::psmpa_core::embassy_time::Duration> { #max_violation }
+                }
+            });
+            if si == last {
+                steps.push(quote!(deciding.state(__states::#ty).await));
+            } else {
+                steps.push(quote!(deciding.state(__states::#ty).await?;));
+            }
+        }
+        plan_arms.push(quote!(#pi => { #(#steps)* }));
+    }
+
+    let samplers: Vec<Tokens> = sensor_v
+        .iter()
+        .map(|v| quote!(sensing.sampler(sensor::#v)))
+        .collect();
+    let joined = join_tree(&samplers);
+    let never = first_never(samplers.len());
+
     let vis = &input.vis;
-    let module = &input.name;
     let file = file.to_string_lossy().into_owned();
     let doc = format!(
-        "The mission `{}` of `{}`, compiled in: its names as enums, its capacities, its \
-         runtime and the mission itself ({nf} facts, {} events, {ns} sensors, {na} actions, \
-         {np} plans).",
+        "The mission `{}` of `{}`, compiled in: its type [`{mission}`], its names as enums and \
+         types, its plans as code and a sampler per sensor ({nf} facts, {} events, {ns} sensors, \
+         {na} actions, {np} plans).",
         mission_name.replace('`', "'"),
         input.path.value(),
         event_names.len()
     );
+    let mission_doc = format!(
+        "The mission `{}` as a type: `Runtime::new({mission}, &robot, sink, config)`. A \
+         platform for it implements `Sensor<{mission}>` and `Actuator<{mission}>`.",
+        mission_name.replace('`', "'")
+    );
     let attrs = &input.attrs;
+    let np_lit = np;
     Ok(quote! {
         #(#attrs)*
         #[doc = #doc]
@@ -554,31 +926,58 @@ fn generate(
             /// The longest plan body.
             pub const L: usize = #l;
             /// Keys each data store holds.
-            pub const K: usize = #keys;
-
-            /// The runtime's capacities, from the mission.
-            pub type Caps = ::psmpa_core::Caps<
-                ::psmpa_core::Sensors<NS>,
-                ::psmpa_core::Actions<NA>,
-                ::psmpa_core::Plans<NP>,
-                ::psmpa_core::Body<L>,
-                ::psmpa_core::Keys<K>,
-                ::psmpa_core::Words<W>,
-                ::psmpa_core::Facts<NF>,
-            >;
-            /// The mission's type.
-            pub type Mission = ::psmpa_core::Mission<'static, NS, NA, NP, L, W, NF>;
-            /// The runtime of platform `P` for this mission, tracing into `T`:
-            /// `Runtime::new(&MISSION, &robot, (), config)`.
-            pub type Runtime<'r, P, T = ()> =
-                ::psmpa_core::Engine<'r, P, T, NS, NA, NP, L, K, W, NF>;
+            pub const K: usize = #k;
 
             #(#tick_checks)*
 
             #(#enums)*
 
-            /// The mission, built at compile time from the file and checked there.
-            pub static MISSION: Mission = ::psmpa_core::Mission {
+            #[doc = #mission_doc]
+            #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+            pub struct #mission;
+
+            /// The runtime of platform `P` for this mission, tracing into `T`:
+            #[doc = concat!("`Runtime::new(", stringify!(#mission), ", &robot, (), config)`.")]
+            pub type Runtime<'r, P, T = ()> = ::psmpa_core::Runtime<'r, #mission, P, T>;
+
+            /// The I/O of action `A` (one of [`action`]'s types): it reads the sensors that
+            /// run beside `A`, and their keys and `A`'s.
+            pub type Io<'io, A> = ::psmpa_core::ActionIo<'io, #mission, A>;
+
+            /// An action to run with its typed I/O: `match act.typed() { .. }` in
+            /// `Actuator::run`.
+            pub enum Run<'io> {
+                #(#run_variants,)*
+                #never_variant
+            }
+
+            /// The mission's sensors as types: what an action's I/O reads
+            /// (`io.sample(sensor::Sonar)`).
+            pub mod sensor {
+                #(#sensor_types)*
+            }
+
+            /// The mission's actions as types: each says which sensors run beside it
+            /// (`psmpa_core::Beside`) and which keys its own data store has.
+            pub mod action {
+                #(#action_types)*
+            }
+
+            /// The keys the mission declares for its data stores (`"keys"` of a sensor or an
+            /// action).
+            pub mod key {
+                #(#key_types)*
+            }
+
+            #[doc(hidden)]
+            pub mod __states {
+                #(#state_types)*
+            }
+
+            /// The mission's tables, built at compile time from the file and checked there:
+            /// what tools read (names, modes, plans). The runtime is made from
+            #[doc = concat!("[`", stringify!(#mission), "`].")]
+            pub static TABLES: ::psmpa_core::Tables<'static, NS, NA, NP, L, #w, NF> = ::psmpa_core::Tables {
                 name: #mission_name,
                 domain: ::psmpa_core::Domain::from_tables(
                     [#(#fact_names),*],
@@ -593,6 +992,74 @@ fn generate(
                     goal: #goal,
                 },
             };
+
+            impl ::psmpa_core::Mission for #mission {
+                type Facts = ::psmpa_core::FactSetOf<#w>;
+                type Sensor = Sensor;
+                type Action = Action;
+                type Plan = Plan;
+                type Fact = Fact;
+                type Event = Event;
+                type Storage<Mx: ::psmpa_core::embassy_sync::blocking_mutex::raw::RawMutex> =
+                    ::psmpa_core::spec::Store<Mx, #ns, #na, #k, #w>;
+                type Run<'io> = Run<'io> where Self: 'io;
+                type Body = ::psmpa_core::__heapless::Vec<::psmpa_core::ActionId, #l>;
+                type Actions<'a> = ::psmpa_core::__heapless::Vec<::psmpa_core::ActuatorAction<'a, #w>, #na> where Self: 'a;
+
+                fn name(&self) -> &str {
+                    #mission_name
+                }
+                fn fact_names(&self) -> &[&str] {
+                    TABLES.domain.fact_names()
+                }
+                fn event_names(&self) -> &[&str] {
+                    TABLES.domain.event_names()
+                }
+                fn sensors(&self) -> &[::psmpa_core::SensorAction<'_, #w>] {
+                    TABLES.domain.sensors()
+                }
+                fn actions(&self) -> &[::psmpa_core::ActuatorAction<'_, #w>] {
+                    TABLES.domain.actions()
+                }
+                fn plan_count(&self) -> usize {
+                    #np_lit
+                }
+                fn plan(
+                    &self,
+                    id: ::psmpa_core::PlanId,
+                ) -> ::core::option::Option<::psmpa_core::spec::PlanRef<'_, ::psmpa_core::FactSetOf<#w>>> {
+                    TABLES.library.get(id).map(|p| ::psmpa_core::spec::PlanRef {
+                        name: p.name,
+                        trigger: p.trigger,
+                        context: p.context,
+                        context_not: p.context_not,
+                        body: &p.body,
+                    })
+                }
+                fn task(&self) -> ::psmpa_core::Task<#w> {
+                    TABLES.task
+                }
+                fn typed(io: ::psmpa_core::ActionIo<'_, Self, ::psmpa_core::Untyped>) -> Run<'_> {
+                    #typed_body
+                }
+                async fn execute<E: ::psmpa_core::spec::Deciding<Mission = Self>>(
+                    &self,
+                    deciding: &E,
+                    plan: ::psmpa_core::PlanId,
+                ) -> ::core::result::Result<(), ::psmpa_core::Failure<#w>> {
+                    match plan.index() {
+                        #(#plan_arms)*
+                        _ => deciding.run_time(plan).await,
+                    }
+                }
+                async fn sensing<E: ::psmpa_core::spec::Sensing<Mission = Self>>(
+                    &self,
+                    sensing: &E,
+                ) -> ::core::convert::Infallible {
+                    let #never = #joined.await;
+                    never
+                }
+            }
         }
     })
 }

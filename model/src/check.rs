@@ -16,12 +16,12 @@ use std::vec::Vec;
 
 use crate::action::{ActuatorAction, SensorSet};
 use crate::json;
-use crate::mission::{self, AnyBehaviour, JsonError, LoadError, Mission, Problem};
+use crate::mission::{self, AnyBehaviour, JsonError, LoadError, Problem, Tables};
 use crate::planner::{Planner, PlanningError, Strategy};
 
 /// The capacities a mission is checked at: 32 sensors, 64 actions, 32 plans of at most 16
 /// actions; `NF` facts in fact sets of `W` words.
-pub type Large<'a, const W: usize = 1, const NF: usize = 64> = Mission<'a, 32, 64, 32, 16, W, NF>;
+pub type Large<'a, const W: usize = 1, const NF: usize = 64> = Tables<'a, 32, 64, 32, 16, W, NF>;
 
 /// A mission that failed to load, as one line naming the file and what is wrong. The bytes
 /// were strict JSON ([`json::strict`]), so a syntax error from `serde-json-core` can only be a
@@ -51,7 +51,7 @@ pub fn unreachable_goal<
     const W: usize,
     const NF: usize,
 >(
-    m: &Mission<'_, NS, NA, NP, L, W, NF>,
+    m: &Tables<'_, NS, NA, NP, L, W, NF>,
 ) -> Option<String> {
     let d = &m.domain;
     let perceivable = d.perception_of(SensorSet::from_bits(u32::MAX));
@@ -98,7 +98,7 @@ pub fn warnings<
     const W: usize,
     const NF: usize,
 >(
-    m: &Mission<'_, NS, NA, NP, L, W, NF>,
+    m: &Tables<'_, NS, NA, NP, L, W, NF>,
 ) -> Vec<String> {
     let d = &m.domain;
     let mut out = Vec::new();

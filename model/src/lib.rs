@@ -59,7 +59,7 @@ pub mod task;
 pub use action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, SensorSet};
 pub use domain::{Domain, DomainError, EventId};
 pub use facts::{FactId, FactSet, FactSetOf};
-pub use mission::{Bindings, LoadError, Loaded, Mission, Registry};
+pub use mission::{Bindings, LoadError, Loaded, Registry, Tables};
 pub use names::FactNames;
 pub use plan::{Plan, PlanError, PlanId, PlanLibrary};
 pub use task::Task;

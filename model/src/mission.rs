@@ -4,7 +4,7 @@
 //! `load` (feature `loader`) reads a mission file with `serde-json-core` in three streaming passes over the same
 //! bytes (facts and events; sensors and actions; plans and the task), so that names are
 //! resolved to ids as they are read, in any key order, with no intermediate copies: the only
-//! memory used is the [`Mission`] itself. Names borrow from the file's bytes. Behaviour names
+//! memory used is the [`Tables`] itself. Names borrow from the file's bytes. Behaviour names
 //! are bound to the platform's behaviours through a [`Registry`]: a name the platform cannot run
 //! is an error at load time, not at run time.
 //!
@@ -64,7 +64,7 @@ use crate::task::Task;
 /// the task of one robot, with room for `NS` sensors, `NA` actions, `NP` plans of at most `L`
 /// actions each.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Mission<
+pub struct Tables<
     'a,
     const NS: usize,
     const NA: usize,
@@ -410,7 +410,7 @@ struct Builder<
     const NF: usize,
 > {
     /// Written in place: the mission is never copied while it is built.
-    mission: &'r mut Mission<'a, NS, NA, NP, L, W, NF>,
+    mission: &'r mut Tables<'a, NS, NA, NP, L, W, NF>,
     bindings: &'r mut Bindings<R::Sensor, R::Action, NS, NA>,
     registry: &'r R,
     at: Location,
@@ -781,7 +781,7 @@ impl<'a, const W: usize> DeserializeSeed<'a> for Entry<'_, 'a, W> {
 
 /// The fields each kind of entry has.
 #[cfg(feature = "loader")]
-const SENSOR_KEYS: [&str; 7] = [
+const SENSOR_KEYS: [&str; 8] = [
     "name",
     "pre",
     "per",
@@ -789,16 +789,76 @@ const SENSOR_KEYS: [&str; 7] = [
     "period_ms",
     "timeout_ms",
     "description",
+    "keys",
 ];
 #[cfg(feature = "loader")]
-const ACTION_KEYS: [&str; 6] = [
+const ACTION_KEYS: [&str; 7] = [
     "name",
     "pre",
     "add",
     "del",
     "max_violation_ms",
     "description",
+    "keys",
 ];
+
+/// The most keys a sensor or an action declares for its data store (`"keys"`).
+pub const MAX_DECLARED_KEYS: usize = 16;
+
+/// A behaviour's `"keys"`: names of the keys of its data store, each non-blank and given once,
+/// at most [`MAX_DECLARED_KEYS`]. Checked here; a compiled mission makes them types, a mission
+/// loaded at run time reads its keys by number.
+#[cfg(feature = "loader")]
+struct KeyList<'s, 'a, const W: usize>(&'s mut dyn Build<'a, W>);
+
+#[cfg(feature = "loader")]
+impl<'a, const W: usize> DeserializeSeed<'a> for KeyList<'_, 'a, W> {
+    type Value = ();
+    fn deserialize<D: de::Deserializer<'a>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_seq(self)
+    }
+}
+
+#[cfg(feature = "loader")]
+impl<'a, const W: usize> Visitor<'a> for KeyList<'_, 'a, W> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a list of key names")
+    }
+    fn visit_seq<S: SeqAccess<'a>>(self, mut seq: S) -> Result<(), S::Error> {
+        let KeyList(b) = self;
+        let mut seen: [Option<&'a str>; MAX_DECLARED_KEYS] = [None; MAX_DECLARED_KEYS];
+        let mut count = 0usize;
+        while let Some(name) = seq.next_element_seed(Str)? {
+            let problem = if crate::domain::blank(name) {
+                Some(Problem::EmptyName)
+            } else if seen
+                .iter()
+                .flatten()
+                .any(|k| crate::domain::same_name(k, name))
+            {
+                Some(Problem::Duplicate(name))
+            } else {
+                None
+            };
+            if let Some(problem) = problem {
+                return Err(fail(b, problem));
+            }
+            let Some(slot) = seen.get_mut(count) else {
+                return Err(fail(
+                    b,
+                    Problem::Capacity {
+                        what: "keys",
+                        limit: MAX_DECLARED_KEYS,
+                    },
+                ));
+            };
+            *slot = Some(name);
+            count = count.saturating_add(1);
+        }
+        Ok(())
+    }
+}
 #[cfg(feature = "loader")]
 const PLAN_KEYS: [&str; 6] = [
     "name",
@@ -868,6 +928,8 @@ impl<'a, const W: usize> Visitor<'a> for Entry<'_, 'a, W> {
                 "description" => {
                     map.next_value::<IgnoredAny>()?;
                 }
+                // The data store's keys: checked, then used by `include_mission!` only.
+                "keys" => map.next_value_seed(KeyList(&mut *b))?,
                 "body" => {
                     f.body = true;
                     map.next_value_seed(NameList(&mut *b, ListKind::Body))?;
@@ -1219,7 +1281,7 @@ pub fn load_into<
 >(
     json: &'a [u8],
     registry: &R,
-    mission: &mut Mission<'a, NS, NA, NP, L, W, NF>,
+    mission: &mut Tables<'a, NS, NA, NP, L, W, NF>,
     bindings: &mut Bindings<R::Sensor, R::Action, NS, NA>,
 ) -> Result<(), LoadError<'a>> {
     // Emptied in place: assigning empty ones would build them on the stack first.
@@ -1307,7 +1369,7 @@ pub struct Loaded<
     const NF: usize = 64,
 > {
     /// The mission.
-    pub mission: Mission<'a, NS, NA, NP, L, W, NF>,
+    pub mission: Tables<'a, NS, NA, NP, L, W, NF>,
     /// The behaviour of every sensor and action id.
     pub bindings: Bindings<S, A, NS, NA>,
 }
@@ -1326,7 +1388,7 @@ impl<
     /// Nothing loaded yet; usable in a `static`.
     pub const fn empty() -> Self {
         Self {
-            mission: Mission::empty(),
+            mission: Tables::empty(),
             bindings: Bindings::new(),
         }
     }
@@ -1339,7 +1401,7 @@ impl<
     const L: usize,
     const W: usize,
     const NF: usize,
-> Mission<'_, NS, NA, NP, L, W, NF>
+> Tables<'_, NS, NA, NP, L, W, NF>
 {
     /// A mission with nothing in it; usable in a `static`.
     pub const fn empty() -> Self {

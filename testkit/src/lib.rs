@@ -42,28 +42,60 @@ pub mod sim;
 pub use sim::{Completed, SimError, simulate, simulate_split};
 
 mod record {
+    use core::fmt;
+    use core::marker::PhantomData;
+
     use embassy_time::{Duration, Instant};
-    use psmpa_core::platform::FromId;
-    use psmpa_core::{ActionId, Failure, PlanId, SensorId, TraceEvent, TraceSink};
+    use psmpa_core::{
+        ActionOf, Describe, FactSetOf, Failure, Mission, PlanOf, SensorOf, TraceEvent, TraceSink,
+    };
 
-    /// A trace sink that keeps every event with its instant (of a runtime whose fact sets have
-    /// `W` words).
-    #[derive(Clone, Debug, Default, PartialEq, Eq)]
-    pub struct Recorder<const W: usize = 1>(pub Vec<(Instant, TraceEvent<W>)>);
+    /// A trace sink that keeps every event of a runtime of mission `M` with its instant. Its
+    /// views name what they list with `M`'s names (`plans_selected::<dock::Plan>()`): another
+    /// mission's names do not compile.
+    pub struct Recorder<M: Mission<Facts = FactSetOf<W>>, const W: usize = 1> {
+        /// The events, in order, with their instants.
+        pub events: Vec<(Instant, TraceEvent<W>)>,
+        mission: PhantomData<fn() -> M>,
+    }
 
-    impl<const W: usize> TraceSink<W> for Recorder<W> {
-        fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
-            self.0.push((at, *event));
+    impl<M: Mission<Facts = FactSetOf<W>>, const W: usize> Default for Recorder<M, W> {
+        fn default() -> Self {
+            Self {
+                events: Vec::new(),
+                mission: PhantomData,
+            }
         }
     }
 
-    impl<const W: usize> Recorder<W> {
+    impl<M: Mission<Facts = FactSetOf<W>>, const W: usize> Clone for Recorder<M, W> {
+        fn clone(&self) -> Self {
+            Self {
+                events: self.events.clone(),
+                mission: PhantomData,
+            }
+        }
+    }
+
+    impl<M: Mission<Facts = FactSetOf<W>>, const W: usize> fmt::Debug for Recorder<M, W> {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            f.debug_list().entries(&self.events).finish()
+        }
+    }
+
+    impl<M: Mission<Facts = FactSetOf<W>>, const W: usize> TraceSink<M> for Recorder<M, W> {
+        fn record(&mut self, at: Instant, event: &TraceEvent<W>) {
+            self.events.push((at, *event));
+        }
+    }
+
+    impl<M: Mission<Facts = FactSetOf<W>>, const W: usize> Recorder<M, W> {
         /// The events `matching` picks, with their instants.
         pub fn find(
             &self,
             matching: impl Fn(&TraceEvent<W>) -> bool,
         ) -> Vec<(Instant, TraceEvent<W>)> {
-            self.0
+            self.events
                 .iter()
                 .filter(|(_, e)| matching(e))
                 .copied()
@@ -72,25 +104,29 @@ mod record {
 
         /// The instant of the first event `matching` picks.
         pub fn first(&self, matching: impl Fn(&TraceEvent<W>) -> bool) -> Option<Instant> {
-            self.0.iter().find(|(_, e)| matching(e)).map(|(t, _)| *t)
+            self.events
+                .iter()
+                .find(|(_, e)| matching(e))
+                .map(|(t, _)| *t)
         }
 
-        /// The plans selected, in order, as `P` names them: a compiled mission's `Plan`
-        /// (`plans_selected::<dock::Plan>()`), or [`PlanId`], which also names a plan the
-        /// planner generated ([`PlanId::GENERATED`]; the mission's `Plan` has none, so it is
-        /// left out of a list of those).
-        pub fn plans_selected<P: FromId<PlanId>>(&self) -> Vec<P> {
-            self.0
+        /// The plans selected, in order, as `P` names them: `M`'s `Plan`
+        /// (`plans_selected::<dock::Plan>()`), or [`PlanId`](psmpa_core::PlanId), which
+        /// also names a plan the planner generated
+        /// ([`PlanId::GENERATED`](psmpa_core::PlanId::GENERATED); the mission's `Plan` has
+        /// none, so it is left out of a list of those).
+        pub fn plans_selected<P: PlanOf<M>>(&self) -> Vec<P> {
+            self.events
                 .iter()
                 .filter(|(_, e)| matches!(e, TraceEvent::PlanSelected { .. }))
-                .filter_map(|(_, e)| e.plan())
+                .filter_map(|(_, e)| P::from_id(e.plan()?))
                 .collect()
         }
 
         /// Every plan that failed, when, and why (its plan as [`Recorder::plans_selected`]
         /// names it).
-        pub fn plan_failures<P: FromId<PlanId>>(&self) -> Vec<(Instant, P, Failure<W>)> {
-            self.0
+        pub fn plan_failures<P: PlanOf<M>>(&self) -> Vec<(Instant, P, Failure<W>)> {
+            self.events
                 .iter()
                 .filter_map(|(t, e)| match e {
                     TraceEvent::PlanFailed { plan, reason } => {
@@ -101,11 +137,10 @@ mod record {
                 .collect()
         }
 
-        /// Every state entered, in order: its action and the sensors running beside it, as a
-        /// compiled mission's `Action` and `Sensor` name them (or [`psmpa_core::ActionId`]
-        /// and [`psmpa_core::SensorId`]).
-        pub fn states_entered<A: FromId<ActionId>, S: FromId<SensorId>>(&self) -> Vec<(A, Vec<S>)> {
-            self.0
+        /// Every state entered, in order: its action and the sensors running beside it, as
+        /// `M`'s `Action` and `Sensor` name them (or by id).
+        pub fn states_entered<A: ActionOf<M>, S: SensorOf<M>>(&self) -> Vec<(A, Vec<S>)> {
+            self.events
                 .iter()
                 .filter_map(|(_, e)| match e {
                     TraceEvent::StateEntered {
@@ -118,16 +153,30 @@ mod record {
                 })
                 .collect()
         }
+
+        /// The trace in words, one line an event with its instant, with `mission`'s names
+        /// (`M`'s: another mission's does not compile).
+        pub fn describe(&self, mission: &M) -> Vec<String> {
+            self.events
+                .iter()
+                .map(|(at, e)| {
+                    let ms = Duration::from_ticks(at.as_ticks()).as_millis();
+                    format!("{ms} ms: {}", mission.describe(*e))
+                })
+                .collect()
+        }
     }
 
     #[cfg(test)]
     mod tests {
         use super::*;
-        use psmpa_core::{EventId, TraceSink};
+        use psmpa_core::{EventId, PlanId, TraceSink};
+
+        psmpa_core::include_mission!(mod hello = "tests/hello.json");
 
         #[test]
         fn the_recorder_lists_the_plans_selected_and_those_that_failed() {
-            let mut r: Recorder = Recorder::default();
+            let mut r: Recorder<hello::Hello> = Recorder::default();
             let (first, second) = (PlanId::new(0).unwrap(), PlanId::GENERATED);
             let failed = Failure::SensingStalled;
             let at = |ms| Instant::from_millis(ms);
@@ -135,17 +184,20 @@ mod record {
                 plan,
                 event: EventId::FIRST,
             };
-            r.record(at(0), &selected(first));
-            r.record(
+            let mut record = |at, e| TraceSink::<hello::Hello>::record(&mut r, at, &e);
+            record(at(0), selected(first));
+            record(
                 at(5),
-                &TraceEvent::PlanFailed {
+                TraceEvent::PlanFailed {
                     plan: first,
                     reason: failed,
                 },
             );
-            r.record(at(5), &selected(second));
+            record(at(5), selected(second));
             assert_eq!(r.plans_selected::<PlanId>(), [first, second]);
             assert_eq!(r.plan_failures::<PlanId>(), [(at(5), first, failed)]);
+            // The mission's own names leave the generated plan out.
+            assert_eq!(r.plans_selected::<hello::Plan>(), [hello::Plan::GoThere]);
         }
     }
 

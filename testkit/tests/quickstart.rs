@@ -1,18 +1,17 @@
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Timer};
-use psmpa_core::{ActionIo, Actuator, Config, Outcome, Platform};
+use psmpa_core::{Act, Actuator, Config, Outcome, Platform};
 use psmpa_core::{Reading, Sensor, SensorFault, TraceEvent};
 use psmpa_testkit::{Recorder, simulate};
 
 // One sensor (a bumper, every 20 ms), one action that needs what it senses, one plan: checked
-// when this file compiles, and turned into enums, capacities and a runtime type.
+// when this file compiles, and turned into a mission type (`hello::Hello`), its names, its
+// plan as code and the bumper's sampler.
 psmpa_core::include_mission!(mod hello = "tests/hello.json");
 
 struct Robot;
 
-impl Sensor for Robot {
-    type Id = hello::Sensor;
-
+impl Sensor<hello::Hello> for Robot {
     async fn switch_on(&self, _: hello::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -25,12 +24,11 @@ impl Sensor for Robot {
     }
 }
 
-impl Actuator for Robot {
-    type Id = hello::Action;
-
-    async fn run(&self, action: hello::Action, _: &ActionIo<'_>) -> Outcome {
-        match action {
-            hello::Action::Drive => Timer::after(Duration::from_secs(2)).await, // drive for 2 s
+impl Actuator<hello::Hello> for Robot {
+    async fn run(&self, act: Act<'_, hello::Hello>) -> Outcome {
+        match act.typed() {
+            // Drive for 2 s (`io` reads the bumper, which runs beside the drive).
+            hello::Run::Drive(_io) => Timer::after(Duration::from_secs(2)).await,
         }
         Outcome::Success
     }
@@ -46,12 +44,7 @@ impl Platform for Robot {
 
 #[test]
 fn the_robot_gets_there_in_virtual_time() {
-    let mut rt = hello::Runtime::new(
-        &hello::MISSION,
-        &Robot,
-        Recorder::default(),
-        Config::default(),
-    );
+    let mut rt = hello::Runtime::new(hello::Hello, &Robot, Recorder::default(), Config::default());
     // Both sides on one executor, sensing first; ends with the control loop's result.
     let done = simulate(rt.run_with_sensing(), Duration::from_secs(10)).unwrap();
     assert!(done.output.is_ok());

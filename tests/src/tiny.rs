@@ -5,18 +5,19 @@ use core::cell::RefCell;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
-    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, Domain, FactSet,
-    Key, Keys, Mission, Outcome, Plan, PlanLibrary, Plans, Platform, Reading, Runtime, Sensor,
-    SensorAction, SensorFault, SensorId, SensorMode, Sensors, Task, Value,
+    Act, ActionId, ActionIo, Actuator, ActuatorAction, Config, Domain, FactSet, Key, Outcome, Plan,
+    PlanLibrary, Platform, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId,
+    SensorMode, Tables, Task, Value,
 };
 
 use crate::Recorder;
 
-/// Capacities of the tiny mission: 2 sensors, 4 actions, 4 plans of up to 4 actions.
-pub type TinyMission = Mission<'static, 2, 4, 4, 4>;
-/// The runtime of the tiny mission, keys per store `K`.
-pub type TinyRuntime<'r, const K: usize> =
-    Runtime<'r, TinyWorld, Caps<Sensors<2>, Actions<4>, Plans<4>, Body<4>, Keys<K>>, Recorder>;
+/// The tiny mission's tables: 2 sensors, 4 actions, 4 plans of up to 4 actions.
+pub type TinyMission = Tables<'static, 2, 4, 4, 4>;
+/// The tiny mission as the runtime's mission type: its tables, loaded at run time.
+pub type Tiny<'m> = &'m TinyMission;
+/// The runtime of the tiny mission.
+pub type TinyRuntime<'r> = Runtime<'r, Tiny<'r>, TinyWorld, Recorder<Tiny<'r>>>;
 
 /// Ids in the tiny mission.
 #[derive(Clone, Copy, Debug)]
@@ -105,7 +106,7 @@ pub fn mission(with_failing_plan: bool) -> (TinyMission, Ids) {
         goal: FactSet::single(open_f),
     };
     (
-        Mission {
+        Tables {
             name: "tiny",
             domain: d,
             library,
@@ -196,7 +197,7 @@ impl TinyWorld {
         self.state.borrow().notes.clone()
     }
 
-    async fn walk(&self, io: &ActionIo<'_>, fail: bool) -> Outcome {
+    async fn walk(&self, io: &ActionIo<'_, Tiny<'_>>, fail: bool) -> Outcome {
         if fail {
             Timer::after_millis(300).await;
             return Outcome::Failure;
@@ -235,9 +236,7 @@ impl TinyWorld {
     }
 }
 
-impl Sensor for TinyWorld {
-    type Id = SensorId;
-
+impl Sensor<Tiny<'_>> for TinyWorld {
     async fn switch_on(&self, sensor: SensorId) -> Result<(), SensorFault> {
         self.advance();
         if let Some(on) = self.state.borrow_mut().on.get_mut(sensor.index()) {
@@ -287,12 +286,12 @@ impl Platform for TinyWorld {
     type Mutex = NoopRawMutex;
 }
 
-impl Actuator for TinyWorld {
-    type Id = ActionId;
-
-    async fn run(&self, action: ActionId, io: &ActionIo<'_>) -> Outcome {
+impl Actuator<Tiny<'_>> for TinyWorld {
+    async fn run(&self, act: Act<'_, Tiny<'_>>) -> Outcome {
+        let io = act.untyped();
+        let action = io.action();
         if action == self.ids.walk || action == self.ids.stumble {
-            self.walk(io, action == self.ids.stumble).await
+            self.walk(&io, action == self.ids.stumble).await
         } else {
             Timer::after_millis(self.open_ms.get()).await;
             Outcome::Success
@@ -320,11 +319,11 @@ pub fn config(policy: psmpa_core::Policy) -> Config {
 }
 
 /// A runtime of `mission` on `world`, recording its trace, with `config`.
-pub fn runtime<'r, const K: usize>(
+pub fn runtime<'r>(
     mission: &'r TinyMission,
     world: &'r TinyWorld,
     config: Config,
-) -> TinyRuntime<'r, K> {
+) -> TinyRuntime<'r> {
     TinyRuntime::new(mission, world, Recorder::default(), config)
 }
 

@@ -13,7 +13,7 @@ const DOCK: &[u8] = include_bytes!("../../examples/dock/mission.json");
 fn a_compiled_mission_is_the_mission_the_loader_gives() {
     use fetch_tea::{L, NA, NF, NP, NS, W};
     let loaded: Loaded<'_, (), (), NS, NA, NP, L, W, NF> = load(FETCH_TEA, &AnyBehaviour).unwrap();
-    assert_eq!(loaded.mission, fetch_tea::MISSION);
+    assert_eq!(loaded.mission, fetch_tea::TABLES);
     let loaded: Loaded<
         '_,
         (),
@@ -25,7 +25,7 @@ fn a_compiled_mission_is_the_mission_the_loader_gives() {
         { dock::W },
         { dock::NF },
     > = load(DOCK, &AnyBehaviour).unwrap();
-    assert_eq!(loaded.mission, dock::MISSION);
+    assert_eq!(loaded.mission, dock::TABLES);
 }
 
 #[test]
@@ -42,15 +42,16 @@ fn capacities_come_from_the_file() {
         ),
         (8, 4, 6, 1, 3, 1)
     );
-    // A reading and all its pairs by default; what `keys` says otherwise.
-    assert_eq!(fetch_tea::K, psmpa_core::platform::MAX_PAIRS + 1);
+    // Room for a sensor's sample and the keys the mission declares (none here) by default;
+    // what `keys` says otherwise.
+    assert_eq!(fetch_tea::K, 1);
     assert_eq!(dock::K, 8);
 }
 
 #[test]
 fn names_are_enums_with_the_missions_names_and_ids() {
     use fetch_tea::{Action, Event, Fact, Plan, Sensor};
-    let d = &fetch_tea::MISSION.domain;
+    let d = &fetch_tea::TABLES.domain;
     assert_eq!(Action::GoToDoor.name(), "go to door");
     assert_eq!(Some(Action::GoToDoor.id()), d.action_id("go to door"));
     assert_eq!(
@@ -67,12 +68,11 @@ fn names_are_enums_with_the_missions_names_and_ids() {
     assert_eq!(Sensor::from_id(psmpa_core::SensorId::new(9).unwrap()), None);
 }
 
-/// A platform written for the dock mission: its ids are `dock`'s enums.
+/// A platform written for the dock mission (a platform for another mission does not compile:
+/// `tests/ui/platform_of_another_mission.rs`).
 struct DockOnly;
 
-impl psmpa_core::Sensor for DockOnly {
-    type Id = dock::Sensor;
-
+impl psmpa_core::Sensor<dock::Dock> for DockOnly {
     async fn switch_on(&self, _: dock::Sensor) -> Result<(), psmpa_core::SensorFault> {
         Ok(())
     }
@@ -85,11 +85,10 @@ impl psmpa_core::Sensor for DockOnly {
     }
 }
 
-impl psmpa_core::Actuator for DockOnly {
-    type Id = dock::Action;
+impl psmpa_core::Actuator<dock::Dock> for DockOnly {
     fn halt(&self, _: dock::Action) {} // nothing to stop
 
-    async fn run(&self, _: dock::Action, _: &psmpa_core::ActionIo<'_>) -> psmpa_core::Outcome {
+    async fn run(&self, _: psmpa_core::Act<'_, dock::Dock>) -> psmpa_core::Outcome {
         psmpa_core::Outcome::Success
     }
 }
@@ -98,45 +97,78 @@ impl psmpa_core::Platform for DockOnly {
     type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
 }
 
+psmpa_core::include_mission!(mod paired = "missions/paired.json", keys = 1);
+
+/// A sensor whose reading carries a pair its store has no room for.
+struct Paired;
+
+impl psmpa_core::Sensor<paired::Paired> for Paired {
+    async fn switch_on(&self, _: paired::Sensor) -> Result<(), psmpa_core::SensorFault> {
+        Ok(())
+    }
+    async fn switch_off(&self, _: paired::Sensor) {}
+    async fn sample(
+        &self,
+        _: paired::Sensor,
+    ) -> Result<Option<psmpa_core::Reading>, psmpa_core::SensorFault> {
+        let reading = psmpa_core::Reading::flag(true)
+            .with(psmpa_core::Key(1), psmpa_core::Value::Int(1_500))
+            .map_err(|_| psmpa_core::SensorFault::Device(0))?;
+        Ok(Some(reading))
+    }
+}
+
+impl psmpa_core::Actuator<paired::Paired> for Paired {
+    fn halt(&self, _: paired::Action) {} // nothing to stop
+
+    async fn run(&self, _: psmpa_core::Act<'_, paired::Paired>) -> psmpa_core::Outcome {
+        psmpa_core::Outcome::Success
+    }
+}
+
+impl psmpa_core::Platform for Paired {
+    type Mutex = embassy_sync::blocking_mutex::raw::NoopRawMutex;
+}
+
+/// A sensor store with no room: the sample is an error that fails the state, never dropped.
 #[test]
-fn a_platform_written_for_another_mission_is_an_error_before_anything_runs() {
-    use fetch_tea::{K, L, NA, NF, NP, NS, W};
-    // Fetch Tea has six actions, the dock's enum four: the fifth has no name on the platform.
-    let mut rt: psmpa_core::Engine<'_, DockOnly, psmpa_testkit::Recorder, NS, NA, NP, L, K, W, NF> =
-        psmpa_core::Engine::new(
-            &fetch_tea::MISSION,
-            &DockOnly,
-            psmpa_testkit::Recorder::default(),
-            psmpa_core::Config::default(),
-        );
-    let done = psmpa_testkit::simulate(rt.run_with_sensing(), embassy_time::Duration::from_secs(1))
+fn a_full_sensor_store_is_an_error_not_a_silent_drop() {
+    use psmpa_core::{ControlError, Failure, TraceEvent};
+    // Room for the sample alone (`keys = 1`, no key declared), and the sonar puts a pair
+    // under an undeclared key beside it.
+    assert_eq!(paired::K, 1);
+    let mut config = psmpa_core::Config::default();
+    config.max_failures = 0;
+    let mut rt = paired::Runtime::new(
+        paired::Paired,
+        &Paired,
+        psmpa_testkit::Recorder::default(),
+        config,
+    );
+    let done = psmpa_testkit::simulate(rt.run_with_sensing(), embassy_time::Duration::from_secs(5))
         .unwrap();
-    let error = done.output.unwrap_err();
+    // The very first sample, establishing the model, finds no room for its pair.
     assert_eq!(
-        error,
-        psmpa_core::ControlError::Unbound {
-            sensor: None,
-            action: Some(fetch_tea::Action::ALL[4].id()),
-        }
+        done.output,
+        Err(ControlError::InitialModel {
+            failure: Failure::StoreFull {
+                key: psmpa_core::Key(1)
+            }
+        })
     );
-    use psmpa_core::Describe;
-    assert_eq!(
-        fetch_tea::MISSION.describe_error(error).to_string(),
-        format!(
-            "the platform is written for another mission: it has no action {}",
-            fetch_tea::Action::ALL[4]
-        )
+    let trace = rt.into_sink().events;
+    assert!(
+        !trace
+            .iter()
+            .any(|(_, e)| matches!(e, TraceEvent::Sample { .. }))
     );
-    // Nothing ran: no sensor switched on, no state entered, at no time.
-    assert_eq!(done.elapsed, embassy_time::Duration::from_ticks(0));
-    assert!(rt.into_sink().0.is_empty());
 }
 
 #[test]
 fn a_compiled_runtime_is_named_by_its_module_and_built_by_inference() {
     // `dock::Runtime::new` infers the platform and the sink from its arguments.
     let mut rt = dock::Runtime::new(
-        &dock::MISSION,
+        dock::Dock,
         &DockOnly,
         psmpa_testkit::Recorder::default(),
         psmpa_core::Config::default(),
@@ -159,9 +191,7 @@ psmpa_core::include_mission!(mod unplanned = "missions/no-plans.json");
 /// A robot with no sensors: its sensor enum has no value, so it has nothing to match.
 struct Blind;
 
-impl psmpa_core::Sensor for Blind {
-    type Id = blind::Sensor;
-
+impl psmpa_core::Sensor<blind::Blind> for Blind {
     async fn switch_on(&self, id: blind::Sensor) -> Result<(), psmpa_core::SensorFault> {
         match id {}
     }
@@ -176,11 +206,10 @@ impl psmpa_core::Sensor for Blind {
     }
 }
 
-impl psmpa_core::Actuator for Blind {
-    type Id = blind::Action;
+impl psmpa_core::Actuator<blind::Blind> for Blind {
     fn halt(&self, _: blind::Action) {} // nothing to stop
 
-    async fn run(&self, _: blind::Action, _: &psmpa_core::ActionIo<'_>) -> psmpa_core::Outcome {
+    async fn run(&self, _: psmpa_core::Act<'_, blind::Blind>) -> psmpa_core::Outcome {
         psmpa_core::Outcome::Success
     }
 }
@@ -199,7 +228,7 @@ fn a_mission_with_no_sensors_or_no_plans_compiles_as_check_accepts_it() {
     );
     // With no sensor, the plan's actions still run to the goal.
     let mut rt = blind::Runtime::new(
-        &blind::MISSION,
+        blind::Blind,
         &Blind,
         psmpa_testkit::Recorder::default(),
         psmpa_core::Config::default(),
@@ -252,7 +281,16 @@ fn a_description_reaches_its_variant_and_loads_at_run_time() {
     assert_eq!(described::Fact::There.description(), None);
     // The loader reads the same file.
     let json = include_bytes!("../missions/described.json");
-    let loaded: psmpa_core::LoadedOf<'_, psmpa_core::mission::AnyBehaviour, described::Caps> =
-        psmpa_core::mission::load(json, &psmpa_core::mission::AnyBehaviour).unwrap();
-    assert_eq!(loaded.mission.domain, described::MISSION.domain);
+    let loaded: psmpa_core::Loaded<
+        '_,
+        (),
+        (),
+        { described::NS },
+        { described::NA },
+        { described::NP },
+        { described::L },
+        { described::W },
+        { described::NF },
+    > = psmpa_core::mission::load(json, &psmpa_core::mission::AnyBehaviour).unwrap();
+    assert_eq!(loaded.mission.domain, described::TABLES.domain);
 }

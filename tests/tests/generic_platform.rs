@@ -5,7 +5,7 @@
 use core::cell::Cell;
 
 use embassy_time::Duration;
-use psmpa_core::{ActionIo, Actuator, Config, Outcome, Platform, Reading, Sensor, SensorFault};
+use psmpa_core::{Act, Actuator, Config, Outcome, Platform, Reading, Sensor, SensorFault};
 use psmpa_testkit::simulate;
 
 psmpa_core::include_mission!(mod hello = "../testkit/tests/hello.json");
@@ -20,9 +20,7 @@ struct Robot<H> {
     hw: H,
 }
 
-impl<H: Hardware> Sensor for Robot<H> {
-    type Id = hello::Sensor;
-
+impl<H: Hardware> Sensor<hello::Hello> for Robot<H> {
     async fn switch_on(&self, _: hello::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -32,10 +30,8 @@ impl<H: Hardware> Sensor for Robot<H> {
     }
 }
 
-impl<H: Hardware> Actuator for Robot<H> {
-    type Id = hello::Action;
-
-    async fn run(&self, _: hello::Action, _: &ActionIo<'_>) -> Outcome {
+impl<H: Hardware> Actuator<hello::Hello> for Robot<H> {
+    async fn run(&self, _: Act<'_, hello::Hello>) -> Outcome {
         embassy_time::Timer::after(Duration::from_millis(500)).await;
         Outcome::Success
     }
@@ -74,7 +70,7 @@ fn a_runtime_generic_over_the_hardware_runs_with_one() {
         },
     };
     let mut rt: RobotRuntime<'_, Simulated> =
-        hello::Runtime::new(&hello::MISSION, &robot, (), Config::default());
+        hello::Runtime::new(hello::Hello, &robot, (), Config::default());
     let done = simulate(rt.run_with_sensing(), Duration::from_secs(10)).unwrap();
     assert!(done.output.is_ok(), "{:?}", done.output);
     assert_eq!(robot.hw.stops.get(), 0, "a clear way: no safety stop");

@@ -6,9 +6,8 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::mission::{AnyBehaviour, load};
 use psmpa_core::{
-    ActionId, ActionIo, Actions, Actuator, Body, Caps, Config, ControlError, Failure, Keys,
-    LoadedOf, Outcome, Plans, Platform, Reading, Report, Runtime, Sensor, SensorFault, SensorId,
-    Sensors,
+    Act, ActionId, Actuator, Config, ControlError, Failure, Loaded, Outcome, Platform, Reading,
+    Report, Runtime, Sensor, SensorFault, SensorId, Tables,
 };
 use psmpa_testkit::{Recorder, simulate_split};
 
@@ -20,15 +19,14 @@ const MISSION: &str = r#"{ "name": "pick", "facts": ["item_seen", "picked"], "ev
   "plans": [{ "name": "p", "trigger": "go", "body": ["pick"] }],
   "task": { "event": "go", "init": [], "goal": ["picked"] } }"#;
 
-type PickCaps = Caps<Sensors<1>, Actions<1>, Plans<1>, Body<1>, Keys<4>>;
+/// The mission, loaded at run time: its tables.
+type Pick<'a> = &'a Tables<'a, 1, 1, 1, 1>;
 
 /// The camera sees the item (a read takes 20 ms); "pick" asks for it, then picks once the
 /// precondition holds.
 struct Picker;
 
-impl Sensor for Picker {
-    type Id = SensorId;
-
+impl Sensor<Pick<'_>> for Picker {
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -41,11 +39,11 @@ impl Sensor for Picker {
     }
 }
 
-impl Actuator for Picker {
-    type Id = ActionId;
+impl Actuator<Pick<'_>> for Picker {
     fn halt(&self, _: ActionId) {} // nothing to stop
 
-    async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
+    async fn run(&self, act: Act<'_, Pick<'_>>) -> Outcome {
+        let io = act.untyped();
         let Some(camera) = SensorId::new(0) else {
             return Outcome::Failure;
         };
@@ -69,9 +67,9 @@ impl Platform for Picker {
 /// the instants and reasons of the plans that failed.
 fn run(tolerance_ms: u32) -> (Result<Report, ControlError>, Vec<(Instant, Failure)>) {
     let json = MISSION.replace("TOLERANCE", &tolerance_ms.to_string());
-    let loaded: LoadedOf<'_, AnyBehaviour, PickCaps> =
+    let loaded: Loaded<'_, (), (), 1, 1, 1, 1> =
         load(json.as_bytes(), &AnyBehaviour).unwrap_or_else(|e| panic!("the mission loads: {e}"));
-    let mut rt = Runtime::<'_, Picker, PickCaps, Recorder>::new(
+    let mut rt = Runtime::<'_, Pick<'_>, Picker, Recorder<Pick<'_>>>::new(
         &loaded.mission,
         &Picker,
         Recorder::default(),

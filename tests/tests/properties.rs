@@ -7,8 +7,8 @@ use embassy_time::Instant;
 use proptest::prelude::*;
 use psmpa_core::planner::{Planner, Strategy};
 use psmpa_core::{
-    ActionId, ActuatorAction, DataStore, Domain, FactId, FactSet, Fsm, Key, Plan, PlanId,
-    SensorAction, SensorMode, StoreAccess, Target, Value,
+    ActionId, ActuatorAction, DataStore, Domain, FactId, FactSet, Fsm, Key, PlanId, SensorAction,
+    SensorMode, StoreAccess, Target, Value,
 };
 
 fn facts(bits: u64, n: u32) -> FactSet {
@@ -63,11 +63,12 @@ proptest! {
             d.add_action(ActuatorAction::new(name, set(pre), FactSet::EMPTY, FactSet::EMPTY)).unwrap();
         }
         let body_ids: Vec<ActionId> = body.iter().map(|a| ActionId::new(*a).unwrap()).collect();
-        let plan: Plan<'_, 8> = Plan::new("p", ev, FactSet::EMPTY, &body_ids).unwrap();
-        let fsm = Fsm::compile(PlanId::new(0).unwrap(), &plan, &d).unwrap();
+        let _ = ev;
+        let fsm = Fsm::compile(PlanId::new(0).unwrap(), &body_ids, d.actions()).unwrap();
 
-        prop_assert_eq!(fsm.states().len(), body.len());
-        for (i, state) in fsm.states().iter().enumerate() {
+        let states: Vec<_> = fsm.states(d.actions(), d.sensors()).collect();
+        prop_assert_eq!(states.len(), body.len());
+        for (i, state) in states.iter().enumerate() {
             let action = d.action(state.action).unwrap().name;
             prop_assert_eq!(action, actions[body[i]].0.as_str());
             let got: BTreeSet<&str> =

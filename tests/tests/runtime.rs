@@ -31,13 +31,13 @@ fn run_with(
 
 /// Runs `mission` on `world` under `policy` to its end.
 fn run_on(mission: &tiny::TinyMission, world: &TinyWorld, policy: Policy) -> Run {
-    let mut rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(mission, world, tiny::config(policy));
+    let mut rt: tiny::TinyRuntime<'_> = tiny::runtime(mission, world, tiny::config(policy));
     let (mut sensing, mut deciding) = rt.split();
     let done = simulate_split(sensing.run(), deciding.run(), LIMIT).expect("simulation completes");
     let hash = rt.trace_hash().value();
     Run {
         result: done.output,
-        trace: rt.into_sink().0,
+        trace: rt.into_sink().events,
         hash,
         notes: world.notes(),
         elapsed: done.elapsed,
@@ -315,7 +315,7 @@ fn no_applicable_plan_is_a_clear_error_not_a_hang() {
         .unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let mut rt: tiny::TinyRuntime<'_, 4> =
+    let mut rt: tiny::TinyRuntime<'_> =
         tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let (mut sensing, mut deciding) = rt.split();
     let out = simulate_split(sensing.run(), deciding.run(), LIMIT)
@@ -344,7 +344,7 @@ fn repeated_failure_ends_with_exhausted_not_a_loop() {
         .unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let mut rt: tiny::TinyRuntime<'_, 4> =
+    let mut rt: tiny::TinyRuntime<'_> =
         tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let (mut sensing, mut deciding) = rt.split();
     let out = simulate_split(sensing.run(), deciding.run(), LIMIT)
@@ -404,7 +404,7 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
     world.camera_answers.set(false);
-    let mut rt: tiny::TinyRuntime<'_, 4> =
+    let mut rt: tiny::TinyRuntime<'_> =
         tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let planner =
         psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
@@ -432,7 +432,7 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
     // The planner finds nothing either; the error keeps the library's reason, the camera.
     if let Err(e) = planned {
         assert_eq!(
-            mission.describe_error(e).to_string(),
+            (&mission).describe_error(e).to_string(),
             "no plan for get_in could start: passed over first, second; sensors out of service [camera]"
         );
     }
@@ -460,7 +460,7 @@ fn a_state_that_needs_a_faulty_sensor_fails_at_once_until_the_faults_are_cleared
         }
         other => panic!("expected Inapplicable, got {other:?}"),
     }
-    let trace = rt.into_sink().0;
+    let trace = rt.into_sink().events;
     let failures: Vec<(Instant, Failure)> = trace
         .iter()
         .filter_map(|(t, e)| match e {
@@ -570,7 +570,7 @@ fn a_precondition_that_stays_violated_fails_the_state() {
     let mut config = tiny::config(Policy::PSmpa);
     config.max_violation = Duration::from_secs(3);
     config.max_failures = 0;
-    let mut rt: tiny::TinyRuntime<'_, 4> = tiny::runtime(&mission, &world, config);
+    let mut rt: tiny::TinyRuntime<'_> = tiny::runtime(&mission, &world, config);
     let (mut sensing, mut deciding) = rt.split();
     let out = simulate_split(sensing.run(), deciding.run(), LIMIT).unwrap();
     assert!(matches!(
@@ -582,35 +582,6 @@ fn a_precondition_that_stays_violated_fails_the_state() {
     ));
     // Seen at 2.0 s, given up 3 s later.
     assert_eq!(out.elapsed, Duration::from_secs(5));
-}
-
-/// A sensor store with no room: the sample is an error that fails the state, never dropped.
-#[test]
-fn a_full_sensor_store_is_an_error_not_a_silent_drop() {
-    let (mission, ids) = tiny::mission(false);
-    let world = TinyWorld::new(ids, &[]);
-    let mut config = tiny::config(Policy::PSmpa);
-    config.max_failures = 0;
-    let mut rt: tiny::TinyRuntime<'_, 0> = tiny::runtime(&mission, &world, config);
-    let (mut sensing, mut deciding) = rt.split();
-    let out = simulate_split(sensing.run(), deciding.run(), LIMIT)
-        .unwrap()
-        .output;
-    // The very first sample, establishing the model, finds no room.
-    assert_eq!(
-        out,
-        Err(ControlError::InitialModel {
-            failure: Failure::StoreFull {
-                key: psmpa_core::store::SAMPLE_KEY
-            }
-        })
-    );
-    let trace = rt.into_sink().0;
-    assert!(
-        !trace
-            .iter()
-            .any(|(_, e)| matches!(e, TraceEvent::Sample { .. }))
-    );
 }
 
 #[test]
@@ -648,21 +619,21 @@ fn the_same_run_gives_the_same_trace_hash_twice_and_on_8_parallel_threads() {
 fn sensor_stores_keep_the_latest_sample_with_its_time() {
     let (mission, ids) = tiny::mission(false);
     let world = TinyWorld::new(ids, &[]);
-    let mut rt: tiny::TinyRuntime<'_, 4> =
+    let mut rt: tiny::TinyRuntime<'_> =
         tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let (mut sensing, mut deciding) = rt.split();
     simulate_split(sensing.run(), deciding.run(), LIMIT)
         .unwrap()
         .output
         .unwrap();
-    let store: &DataStore<_, 4> = rt.sensor_store(ids.range).unwrap();
+    let store: &DataStore<_, 5> = rt.sensor_store(ids.range).unwrap();
     let last = store.get(psmpa_core::store::SAMPLE_KEY).unwrap();
     assert_eq!(last.value, Value::Mm(2550));
     // Sampled every 100 ms from 0 while walking. The walk ends at 10.0 s, the instant the next
     // sample is due: sensing comes first at an instant, so that sample is taken before the
     // walk, and the sensor with it, ends.
     assert_eq!(last.at, Instant::from_millis(10_000));
-    let model = rt.model();
+    let model = rt.model::<2>();
     assert!(model.goal_holds());
     assert_eq!(model.percept(ids.range), Some(last));
 }
@@ -857,7 +828,7 @@ fn a_new_run_does_not_know_what_an_earlier_run_sensed() {
     library.add(get_in.unwrap()).unwrap();
     mission.library = library;
     let world = TinyWorld::new(ids, &[]);
-    let mut rt: tiny::TinyRuntime<'_, 4> =
+    let mut rt: tiny::TinyRuntime<'_> =
         tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let (mut sensing, mut deciding) = rt.split();
     let (first, second) = simulate_split(
@@ -868,7 +839,7 @@ fn a_new_run_does_not_know_what_an_earlier_run_sensed() {
     .unwrap()
     .output;
     assert!(first.is_ok() && second.is_ok(), "{first:?} {second:?}");
-    assert_eq!(selected_plans(&rt.into_sink().0), [1, 1]);
+    assert_eq!(selected_plans(&rt.into_sink().events), [1, 1]);
 }
 
 /// An action's effects are known as a percept is: a fact a sensor perceives, deleted by an
@@ -928,7 +899,7 @@ fn a_plan_known_to_be_inapplicable_is_skipped() {
             assert_eq!(known_false, clear);
             // In words, with the mission's names.
             assert_eq!(
-                mission.describe_error(e).to_string(),
+                (&mission).describe_error(e).to_string(),
                 "no plan for get_in could start: passed over stumble-first, get-in; \
                  known false {path_clear}"
             );
@@ -964,7 +935,7 @@ fn a_plan_known_to_be_inapplicable_is_skipped() {
 fn a_planner_that_finds_nothing_keeps_the_reason_plans_were_passed_over() {
     let (mission, ids) = tiny::mission(true);
     let world = TinyWorld::new(ids, &[(0, 60_000)]);
-    let mut rt: tiny::TinyRuntime<'_, 4> =
+    let mut rt: tiny::TinyRuntime<'_> =
         tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let planner =
         psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
@@ -1003,7 +974,7 @@ fn a_planner_that_finds_nothing_keeps_the_reason_plans_were_passed_over() {
         ))
         .unwrap();
     let world = TinyWorld::new(ids, &[(0, 60_000)]);
-    let mut rt: tiny::TinyRuntime<'_, 4> =
+    let mut rt: tiny::TinyRuntime<'_> =
         tiny::runtime(&mission, &world, tiny::config(Policy::PSmpa));
     let mut small =
         psmpa_core::planner::Planner::<64>::new(psmpa_core::planner::Strategy::BreadthFirst);
@@ -1067,9 +1038,7 @@ fn an_action_with_a_tolerance_of_its_own_starts_on_a_blocked_path_and_waits() {
 
 #[test]
 fn with_no_sink_nothing_is_traced_and_hashing_keeps_the_recorders_hash() {
-    use psmpa_core::{Actions, Body, Keys, Plans, Sensors};
-    use psmpa_core::{Caps, Hashing, Runtime, TraceHash};
-    type Sized4 = Caps<Sensors<2>, Actions<4>, Plans<4>, Body<4>, Keys<4>>;
+    use psmpa_core::{Hashing, Runtime, TraceHash};
     let (mission, ids) = tiny::mission(false);
     let recorded = run_with(Policy::PSmpa, &[], false, |_| {});
     // Each run on a world of its own, from the same start.
@@ -1077,13 +1046,15 @@ fn with_no_sink_nothing_is_traced_and_hashing_keeps_the_recorders_hash() {
         let world = TinyWorld::new(ids, &[]);
         let config = tiny::config(Policy::PSmpa);
         if traced {
-            let mut rt =
-                Runtime::<'_, TinyWorld, Sized4, Hashing>::new(&mission, &world, Hashing, config);
+            let mut rt = Runtime::<'_, tiny::Tiny<'_>, TinyWorld, Hashing>::new(
+                &mission, &world, Hashing, config,
+            );
             let (mut s, mut d) = rt.split();
             simulate_split(s.run(), d.run(), LIMIT).unwrap();
             (rt.trace_hash(), rt.trace_events())
         } else {
-            let mut rt = Runtime::<'_, TinyWorld, Sized4, ()>::new(&mission, &world, (), config);
+            let mut rt =
+                Runtime::<'_, tiny::Tiny<'_>, TinyWorld, ()>::new(&mission, &world, (), config);
             let (mut s, mut d) = rt.split();
             simulate_split(s.run(), d.run(), LIMIT).unwrap();
             (rt.trace_hash(), rt.trace_events())

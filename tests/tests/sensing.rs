@@ -9,10 +9,9 @@ use core::cell::{Cell, RefCell};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{
-    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, ControlError,
-    Domain, Entry, FactSet, Failure, Key, Keys, Mission, Outcome, Plan, PlanLibrary, Plans,
-    Platform, Reading, Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode, Sensors,
-    Task, TraceEvent, Value,
+    Act, ActionId, ActionIo, Actuator, ActuatorAction, Config, ControlError, Domain, Entry,
+    FactSet, Failure, Key, Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor,
+    SensorAction, SensorFault, SensorId, SensorMode, Tables, Task, TraceEvent, Value,
 };
 use psmpa_testkit::{simulate, simulate_split};
 use psmpa_tests::Recorder;
@@ -23,7 +22,9 @@ const TOF_PERIOD: Duration = Duration::from_millis(100);
 const STRENGTH: Key = Key(1);
 const LIMIT: Duration = Duration::from_secs(60);
 
-type Pair = Mission<'static, 2, 2, 1, 2>;
+type Pair = Tables<'static, 2, 2, 1, 2>;
+/// The mission as the runtime's mission type: its tables, loaded at run time.
+type PairOf<'a> = &'a Pair;
 
 struct Ids {
     tof: SensorId,
@@ -85,7 +86,7 @@ fn two_states(park: bool) -> (Pair, Ids) {
         init: FactSet::EMPTY,
         goal,
     };
-    let mission = Mission {
+    let mission = Tables {
         name: "pair",
         domain: d,
         library,
@@ -137,7 +138,7 @@ fn slow_fact() -> Pair {
     library
         .add(Plan::new("drive", go, FactSet::EMPTY, &[prepare, drive]).unwrap())
         .unwrap();
-    Mission {
+    Tables {
         name: "slow fact",
         domain: d,
         library,
@@ -205,9 +206,8 @@ impl<const WAKES: bool> Robot<WAKES> {
     }
 }
 
-impl<const WAKES: bool> Sensor for Robot<WAKES> {
+impl<const WAKES: bool> Sensor<PairOf<'_>> for Robot<WAKES> {
     const WAKES: bool = WAKES;
-    type Id = SensorId;
 
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
         Ok(())
@@ -244,7 +244,7 @@ impl<const WAKES: bool> Sensor for Robot<WAKES> {
 }
 
 impl<const WAKES: bool> Robot<WAKES> {
-    fn look(&self, io: &ActionIo<'_>) -> Seen {
+    fn look(&self, io: &ActionIo<'_, PairOf<'_>>) -> Seen {
         Seen {
             at: Instant::now(),
             cliff: io.sample(self.ids.cliff),
@@ -255,14 +255,14 @@ impl<const WAKES: bool> Robot<WAKES> {
     }
 }
 
-impl<const WAKES: bool> Actuator for Robot<WAKES> {
-    type Id = ActionId;
+impl<const WAKES: bool> Actuator<PairOf<'_>> for Robot<WAKES> {
     fn halt(&self, _: ActionId) {} // nothing to stop
 
-    async fn run(&self, _: ActionId, io: &ActionIo<'_>) -> Outcome {
-        self.started.borrow_mut().push(self.look(io));
+    async fn run(&self, act: Act<'_, PairOf<'_>>) -> Outcome {
+        let io = act.untyped();
+        self.started.borrow_mut().push(self.look(&io));
         Timer::after(self.drive).await;
-        self.seen.set(Some(self.look(io)));
+        self.seen.set(Some(self.look(&io)));
         Outcome::Success
     }
 }
@@ -271,8 +271,7 @@ impl<const WAKES: bool> Platform for Robot<WAKES> {
     type Mutex = NoopRawMutex;
 }
 
-type PairCaps = Caps<Sensors<2>, Actions<2>, Plans<1>, Body<2>, Keys<4>>;
-type PairRuntime<'r> = Runtime<'r, Robot, PairCaps, Recorder>;
+type PairRuntime<'r> = Runtime<'r, PairOf<'r>, Robot, Recorder<PairOf<'r>>>;
 
 /// Runs the mission; returns the trace and when the drive state started.
 fn run(robot: &Robot) -> (Vec<(Instant, TraceEvent)>, Instant) {
@@ -284,7 +283,7 @@ fn run_mission(robot: &Robot, mission: Pair) -> (Vec<(Instant, TraceEvent)>, Ins
     let (mut sensing, mut deciding) = rt.split();
     let done = simulate_split(sensing.run(), deciding.run(), LIMIT).unwrap();
     done.output.unwrap();
-    let trace = rt.into_sink().0;
+    let trace = rt.into_sink().events;
     let start = trace
         .iter()
         .find(|(_, e)| matches!(e, TraceEvent::StateEntered { .. }))
@@ -433,7 +432,7 @@ fn a_platform_that_says_its_sensors_never_wake_early_keeps_the_grid() {
     // The same edges as above, on a platform that says `WAKES = false`: not one early read.
     let mut robot = Robot::<false>::new(0, 1_000);
     robot.edges = vec![s + 307, s + 553, s + 600];
-    let mut rt = Runtime::<'_, Robot<false>, PairCaps, Recorder>::new(
+    let mut rt = Runtime::<'_, PairOf<'_>, Robot<false>, Recorder<PairOf<'_>>>::new(
         &pair,
         &robot,
         Recorder::default(),
@@ -519,9 +518,7 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
 
     /// A platform whose state would live in atomics or critical-section mutexes.
     struct Stateless;
-    impl Sensor for Stateless {
-        type Id = SensorId;
-
+    impl Sensor<PairOf<'_>> for Stateless {
         async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
             Ok(())
         }
@@ -531,11 +528,10 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
             Ok(None)
         }
     }
-    impl Actuator for Stateless {
-        type Id = ActionId;
+    impl Actuator<PairOf<'_>> for Stateless {
         fn halt(&self, _: ActionId) {} // nothing to stop
 
-        async fn run(&self, _: ActionId, _: &ActionIo<'_>) -> Outcome {
+        async fn run(&self, _: Act<'_, PairOf<'_>>) -> Outcome {
             Outcome::Success
         }
     }
@@ -546,8 +542,7 @@ fn with_a_critical_section_mutex_the_runtime_is_sync_and_its_sensing_side_send()
     impl Platform for Stateless {
         type Mutex = CriticalSectionRawMutex;
     }
-    type StatelessRuntime<'r> =
-        Runtime<'r, Stateless, Caps<Sensors<2>, Actions<2>, Plans<1>, Body<2>, Keys<4>>>;
+    type StatelessRuntime<'r> = Runtime<'r, PairOf<'r>, Stateless>;
     let mut rt = StatelessRuntime::new(&mission, &Stateless, (), Config::default());
     shared(&rt);
     let (mut sensing, _) = rt.split();

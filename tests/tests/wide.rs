@@ -7,10 +7,9 @@
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant};
 use psmpa_core::{
-    ActionId, ActionIo, Actions, Actuator, ActuatorAction, Body, Caps, Config, Describe, Domain,
-    FactId, FactSetOf, Keys, Mission, Outcome, Plan, PlanLibrary, Plans, Platform, Reading,
-    Runtime, Sensor, SensorAction, SensorFault, SensorId, SensorMode, Sensors, Task, TraceEvent,
-    TraceHash, Value, Words,
+    Act, ActionId, ActionIo, Actuator, ActuatorAction, Config, Describe, Domain, FactId, FactSetOf,
+    Mission, Outcome, Plan, PlanLibrary, Platform, Reading, Runtime, Sensor, SensorAction,
+    SensorFault, SensorId, SensorMode, Tables, Task, TraceEvent, TraceHash, Value,
 };
 use psmpa_testkit::simulate_split;
 use psmpa_tests::Recorder;
@@ -19,13 +18,8 @@ use psmpa_tests::Recorder;
 const W: usize = 2;
 const NF: usize = 128;
 type Wide = FactSetOf<W>;
-type WideMission = Mission<'static, 1, 1, 1, 1, W, NF>;
-type WideRuntime<'r> = Runtime<
-    'r,
-    Robot,
-    Caps<Sensors<1>, Actions<1>, Plans<1>, Body<1>, Keys<4>, Words<W>, psmpa_core::Facts<NF>>,
-    Recorder<W>,
->;
+type WideMission = Tables<'static, 1, 1, 1, 1, W, NF>;
+type WideRuntime<'r> = Runtime<'r, &'r WideMission, Robot, Recorder<&'r WideMission, W>>;
 
 /// The box stands in the way from .. to, ms.
 const BOX: (u64, u64) = (300, 700);
@@ -80,7 +74,7 @@ fn mission() -> (WideMission, Facts) {
         init: Wide::EMPTY,
         goal: Wide::single(arrived),
     };
-    let mission = Mission {
+    let mission = Tables {
         name: "wide",
         domain: d,
         library,
@@ -91,9 +85,7 @@ fn mission() -> (WideMission, Facts) {
 
 struct Robot;
 
-impl Sensor<W> for Robot {
-    type Id = SensorId;
-
+impl Sensor<&WideMission> for Robot {
     async fn switch_on(&self, _: SensorId) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -107,17 +99,16 @@ impl Sensor<W> for Robot {
     }
 }
 
-impl Actuator<W> for Robot {
-    type Id = ActionId;
+impl Actuator<&WideMission> for Robot {
     fn halt(&self, _: ActionId) {} // nothing to stop
 
-    async fn run(&self, _: ActionId, io: &ActionIo<'_, W>) -> Outcome {
-        drive(io).await
+    async fn run(&self, act: Act<'_, &WideMission>) -> Outcome {
+        drive(&act.untyped()).await
     }
 }
 
 /// Drives for `DRIVE_MS` of clear way: waits while the precondition is violated.
-async fn drive<const N: usize>(io: &ActionIo<'_, N>) -> Outcome {
+async fn drive<M: Mission, A>(io: &ActionIo<'_, M, A>) -> Outcome {
     let mut driven = 0;
     let mut version = io.version();
     while driven < DRIVE_MS {
@@ -151,7 +142,7 @@ fn run() -> (WideMission, Vec<(Instant, TraceEvent<W>)>, TraceHash) {
                 .contains(mission.task.goal.iter().next().unwrap())
         );
         let hash = rt.trace_hash();
-        (rt.into_sink().0, hash)
+        (rt.into_sink().events, hash)
     };
     (mission, trace.0, trace.1)
 }
@@ -185,7 +176,7 @@ fn facts_past_the_first_word_are_sensed_monitored_and_achieved() {
     // Events print with the mission's names, whatever the word a fact is in.
     let text = format!(
         "{}",
-        mission.describe(TraceEvent::PreconditionViolated {
+        (&mission).describe(TraceEvent::PreconditionViolated {
             action: ActionId::new(0).unwrap(),
             missing: clear,
         })
@@ -242,9 +233,7 @@ psmpa_core::include_mission!(mod wide200 = "missions/wide-200.json");
 /// The robot of the 200-fact mission: the same box, the same drive.
 struct Typed;
 
-impl Sensor<{ wide200::W }> for Typed {
-    type Id = wide200::Sensor;
-
+impl Sensor<wide200::Wide200> for Typed {
     async fn switch_on(&self, _: wide200::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -265,13 +254,12 @@ impl Sensor<{ wide200::W }> for Typed {
     }
 }
 
-impl Actuator<{ wide200::W }> for Typed {
-    type Id = wide200::Action;
+impl Actuator<wide200::Wide200> for Typed {
     fn halt(&self, _: wide200::Action) {} // nothing to stop
 
-    async fn run(&self, action: wide200::Action, io: &ActionIo<'_, { wide200::W }>) -> Outcome {
-        match action {
-            wide200::Action::Drive => drive(io).await,
+    async fn run(&self, act: Act<'_, wide200::Wide200>) -> Outcome {
+        match act.typed() {
+            wide200::Run::Drive(io) => drive(&io).await,
         }
     }
 }
@@ -290,16 +278,16 @@ fn a_compiled_mission_of_200_facts_runs_end_to_end_in_four_words() {
     );
     let run = || {
         let mut rt = wide200::Runtime::new(
-            &wide200::MISSION,
+            wide200::Wide200,
             &Typed,
-            Recorder::<{ wide200::W }>::default(),
+            Recorder::<wide200::Wide200, { wide200::W }>::default(),
             Config::default(),
         );
         let (mut sensing, mut deciding) = rt.split();
         let done = simulate_split(sensing.run(), deciding.run(), Duration::from_secs(10)).unwrap();
         let report = done.output.unwrap();
         let hash = rt.trace_hash();
-        (report, rt.into_sink().0, hash)
+        (report, rt.into_sink().events, hash)
     };
     let (report, trace, hash) = run();
     // The goal, in the fourth word, holds.
@@ -336,5 +324,5 @@ fn a_compiled_mission_of_200_facts_runs_end_to_end_in_four_words() {
         &psmpa_core::mission::AnyBehaviour,
     )
     .unwrap();
-    assert_eq!(loaded.mission, wide200::MISSION);
+    assert_eq!(loaded.mission, wide200::TABLES);
 }

@@ -1,8 +1,7 @@
 // The lower-level entry points are not public: the sides are the way in (`split`).
-use psmpa_core::{Actions, Body, Caps, Keys, Plans, Runtime, Sensors};
-use psmpa_tests::tiny::TinyWorld;
+use psmpa_tests::tiny::TinyRuntime;
 
-type Rt<'r> = Runtime<'r, TinyWorld, Caps<Sensors<2>, Actions<4>, Plans<4>, Body<4>, Keys<4>>>;
+type Rt<'r> = TinyRuntime<'r>;
 
 fn entry_points(rt: &Rt<'_>) {
     let _ = rt.sensing();

@@ -1,9 +1,8 @@
 // One control loop at a time: running the deciding side twice at once does not compile
 // (one after the other does).
-use psmpa_core::{Actions, Body, Caps, Keys, Plans, Runtime, Sensors};
-use psmpa_tests::tiny::TinyWorld;
+use psmpa_tests::tiny::TinyRuntime;
 
-type Rt<'r> = Runtime<'r, TinyWorld, Caps<Sensors<2>, Actions<4>, Plans<4>, Body<4>, Keys<4>>>;
+type Rt<'r> = TinyRuntime<'r>;
 
 async fn twice(rt: &mut Rt<'_>) {
     let (_, mut deciding) = rt.split();

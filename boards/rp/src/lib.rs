@@ -45,7 +45,7 @@ use embassy_rp::pwm::{self, Pwm};
 use embassy_rp::watchdog::{ResetReason, Watchdog};
 use embassy_time::{Duration, Instant, Timer};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
-use psmpa_core::{Config, DecidingSide, SensingSide, SensorMode};
+use psmpa_core::{Config, DecidingSide, SensingSide};
 use psmpa_drivers::Active;
 use psmpa_drivers::hbridge::{Channel, Drive};
 use psmpa_drivers::hcsr04::Hcsr04;
@@ -247,29 +247,8 @@ async fn main(spawner: Spawner) {
         }
     }
 
-    // The compiled mission, copied to RAM: the calibration may set its sampling periods.
-    static MISSION: StaticCell<fetch_tea::Mission> = StaticCell::new();
-    let mission = MISSION.init(fetch_tea::MISSION.clone());
-    for (sensor, period) in [
-        (fetch_tea::Sensor::Sonar, settings.sonar_period),
-        (fetch_tea::Sensor::Bumper, settings.bumper_period),
-    ] {
-        let Some(period) = period else {
-            continue;
-        };
-        if let Err(e) = mission
-            .domain
-            .set_sensor_mode(sensor.id(), SensorMode::Cyclic { period })
-        {
-            error!(
-                "the {} period cannot be set: {}",
-                sensor,
-                defmt::Debug2Format(&e)
-            );
-            return;
-        }
-    }
-    let mission: &'static fetch_tea::Mission = mission;
+    // The compiled mission's tables, in flash: the log's names.
+    let mission = &fetch_tea::TABLES;
 
     // The pin table (README.md): GP2 trigger, GP3 echo, GP4 bumper, GP5 marker, GP6 handle,
     // GP9 STBY, GP10/11/12 left IN1/IN2/PWM (slice 6 A), GP13/14/15 right (slice 7 B).
@@ -324,11 +303,21 @@ async fn main(spawner: Spawner) {
     static RUNTIME: StaticCell<Runtime> = StaticCell::new();
     let robot = ROBOT.init(FetchTea::new(devices, settings).with_compute(Busy));
     let runtime: &'static mut Runtime = RUNTIME.init(Runtime::new(
-        mission,
+        fetch_tea::FetchTea,
         robot,
         Log(mission),
         Config::default(),
     ));
+    // The calibration's sampling periods, where it gives them.
+    for (sensor, period) in [
+        (fetch_tea::Sensor::Sonar, settings.sonar_period),
+        (fetch_tea::Sensor::Bumper, settings.bumper_period),
+    ] {
+        if period.is_some() && !runtime.set_period(sensor, period) {
+            error!("the {} period cannot be set", sensor);
+            return;
+        }
+    }
     let (sensing_side, deciding_side) = runtime.split();
 
     // Sensing above deciding: priority 2 preempts thread mode; GPIO (embassy-rp's bank 0
@@ -359,7 +348,7 @@ async fn main(spawner: Spawner) {
 #[embassy_executor::task]
 async fn control(
     mut side: DecidingSide<'static, Runtime>,
-    mission: &'static fetch_tea::Mission,
+    mission: &'static log::Tables,
     space: &'static mut PlannerSpace,
 ) {
     let outcome = side.run_planning(&PLANNER, space).await;

@@ -137,11 +137,19 @@ fn note(sensor: SensorId, at: Instant, event: &TraceEvent) -> bool {
     true
 }
 
-/// The mission whose names the log shows.
-type Mission = fetch_tea::Mission;
+/// The tables of the mission whose names the log shows.
+pub type Tables = psmpa_core::Tables<
+    'static,
+    { fetch_tea::NS },
+    { fetch_tea::NA },
+    { fetch_tea::NP },
+    { fetch_tea::L },
+    { fetch_tea::W },
+    { fetch_tea::NF },
+>;
 
-/// Writes each trace event to the defmt log with the mission's names.
-pub struct Log(pub &'static Mission);
+/// Writes each trace event to the defmt log with the mission's names (its tables, in flash).
+pub struct Log(pub &'static Tables);
 
 /// A failure, or the control loop's error, with the mission's names (`go to door`, `sonar`,
 /// `GetIn Kitchen`, `{path_clear}`) rather than ids.
@@ -270,7 +278,7 @@ impl Log {
     }
 }
 
-impl TraceSink for Log {
+impl<Ms: psmpa_core::Mission<Facts = psmpa_core::FactSet>> TraceSink<Ms> for Log {
     fn record(&mut self, at: Instant, event: &TraceEvent) {
         #[cfg(feature = "recorder")]
         crate::record::take(at, event);

@@ -9,19 +9,19 @@
 //! end loop                           ... until the goal holds, or a clear error
 //! ```
 
-use heapless::Vec;
-
-use crate::action::{ActionId, ActuatorAction, SensorId, SensorMode, SensorSet};
+use crate::action::{ActuatorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
 use crate::facts::FactSetOf;
 use crate::failure::Failure;
 use crate::fmt::{info, warning};
-use crate::plan::{FailureMemory, Plan, PlanId, PlanSet};
-use crate::planner::{Found, Planner, PlanningError, Search};
-use crate::platform::{Actuator, FromId, Platform, Sensor};
-use crate::runtime::engine::Engine;
+use crate::plan::{FailureMemory, PlanId, PlanSet};
+use crate::planner::{Planner, PlanningError, Search};
+use crate::platform::{Actuator, Platform, Sensor};
+use crate::runtime::Runtime;
 use crate::runtime::fsm::{Fsm, FsmError};
-use crate::runtime::shared::Mode;
+use crate::runtime::state::{perception_of, sensors_serving};
+use crate::spec::storage::Mode;
+use crate::spec::{Body, Mission};
 use crate::trace::{TraceEvent, TraceSink};
 use core::convert::Infallible;
 
@@ -68,7 +68,7 @@ pub enum ControlError<const W: usize = 1> {
     /// action needs a fact a percept has already shown false and has no tolerance of its own
     /// to wait with ([`ActuatorAction::may_start_violated`]), or its `context_not` needs a
     /// fact false that no sample has shown yet, or one of its actions needs a sensor out of
-    /// service ([`Engine::faulty_sensors`]).
+    /// service ([`Runtime::faulty_sensors`]).
     Inapplicable {
         /// The event.
         event: EventId,
@@ -89,18 +89,18 @@ pub enum ControlError<const W: usize = 1> {
         failed: PlanSet,
         /// The beliefs.
         beliefs: FactSetOf<W>,
-        /// The sensors out of service ([`Engine::faulty_sensors`]): a plan that failed on a
+        /// The sensors out of service ([`Runtime::faulty_sensors`]): a plan that failed on a
         /// sensor fault says so here.
         faulty: SensorSet,
     },
-    /// More plans failed than [`Config::max_failures`](crate::runtime::engine::Config::max_failures).
+    /// More plans failed than [`Config::max_failures`](crate::Config::max_failures).
     TooManyFailures {
         /// Plans that failed.
         failures: u16,
         /// The last failure.
         last: Failure<W>,
     },
-    /// More plans ran than [`Config::max_plans`](crate::runtime::engine::Config::max_plans) without reaching
+    /// More plans ran than [`Config::max_plans`](crate::Config::max_plans) without reaching
     /// the goal.
     PlanLimit {
         /// Plans started.
@@ -126,57 +126,27 @@ pub enum ControlError<const W: usize = 1> {
         /// What went wrong.
         failure: Failure<W>,
     },
-    /// The platform names no sensor or no action of an id of the mission: its
-    /// [`Sensor::Id`] or [`Actuator::Id`] is another mission's (checked before anything runs).
-    Unbound {
-        /// The first sensor the platform has no name for.
-        sensor: Option<SensorId>,
-        /// The first action the platform has no name for.
-        action: Option<ActionId>,
-    },
 }
 
-impl<
-    'r,
-    P: Platform + Sensor<W> + Actuator<W>,
-    T: TraceSink<W>,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-    const W: usize,
-    const NF: usize,
-> Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
+impl<'r, M, P, T, const W: usize> Runtime<'r, M, P, T>
+where
+    M: Mission<Facts = FactSetOf<W>>,
+    P: Platform + Sensor<M> + Actuator<M>,
+    T: TraceSink<M>,
 {
-    /// Every sensor and action of the mission has a name on the platform ([`Sensor::Id`],
-    /// [`Actuator::Id`]): a platform written for another mission is an error before anything
-    /// runs, not a sensor fault or a failed action halfway through.
-    fn bound(&self) -> Result<(), ControlError<W>> {
-        let domain = &self.mission.domain;
-        let sensor = (0..domain.sensors().len())
-            .filter_map(SensorId::new)
-            .find(|s| <P as Sensor<W>>::Id::from_id(*s).is_none());
-        let action = (0..domain.actions().len())
-            .filter_map(ActionId::new)
-            .find(|a| <P as Actuator<W>>::Id::from_id(*a).is_none());
-        match (sensor, action) {
-            (None, None) => Ok(()),
-            (sensor, action) => Err(ControlError::Unbound { sensor, action }),
-        }
-    }
-
     /// Algorithm 1 line 2: the beliefs start at `τ0`; every cyclic or one-shot sensor in service
     /// whose `pre(s)` holds is switched on, sampled once and switched off again, all at once.
     pub(crate) async fn establish_initial_model(&self) -> Result<FactSetOf<W>, ControlError<W>> {
-        let init = self.mission.task.init;
+        let init = self.mission.task().init;
         // A new model: what earlier runs sensed is not known now.
-        self.shared.lock(|s| s.sensed.set(FactSetOf::EMPTY));
-        self.set_beliefs(init);
-        let faulty = self.faulty_sensors();
+        let faulty = self.shared().lock(|s| {
+            s.sensed.set(FactSetOf::EMPTY);
+            s.beliefs.set(init);
+            s.notify();
+            s.faulty.get()
+        });
         let eligible: SensorSet = self
             .mission
-            .domain
             .sensors()
             .iter()
             .enumerate()
@@ -214,16 +184,16 @@ impl<
     /// action runs, so they are assumed to hold unless a sample already showed them false (and
     /// even then for an action that [may start violated](ActuatorAction::may_start_violated)).
     /// An action beside a sensor that failed cannot be monitored: it never applies.
-    fn planning_actions(&self) -> Vec<ActuatorAction<'r, W>, NA> {
-        let domain = &self.mission.domain;
+    fn planning_actions(&self) -> M::Actions<'_> {
+        let sensors = self.mission.sensors();
         let known_false = self.known_false();
         let faulty = self.faulty_sensors();
-        domain
+        self.mission
             .actions()
             .iter()
             .map(|a| {
-                let serving = domain.sensors_serving(a.pre);
-                let checked = domain.perception_of(serving);
+                let serving = sensors_serving(sensors, a.pre);
+                let checked = perception_of(sensors, serving);
                 let pre = if serving.intersects(faulty) {
                     FactSetOf::ALL
                 } else if a.may_start_violated() {
@@ -254,22 +224,32 @@ impl<
         &self,
         memory: &FailureMemory<W>,
         beliefs: FactSetOf<W>,
-    ) -> Result<(PlanId, Vec<ActionId, L>), ControlError<W>> {
-        let task = self.mission.task;
-        let library = &self.mission.library;
-        let domain = &self.mission.domain;
+    ) -> Result<PlanId, ControlError<W>> {
+        let task = self.mission.task();
+        let sensors = self.mission.sensors();
+        let actions = self.mission.actions();
         let excluded = memory.excluded(task.event, beliefs);
         let (known_false, unknown, out_of_service) = self.knowledge();
         let mut skipped = PlanSet::EMPTY;
         let mut why = (FactSetOf::EMPTY, FactSetOf::EMPTY, SensorSet::EMPTY);
-        while let Some(id) = library.select(task.event, beliefs, excluded.union(skipped)) {
-            let Some(plan) = library.get(id) else {
-                break; // An id the library gave: never the case.
+        // Plans in the library's order: the first applicable one not passed over.
+        let candidates = (0..self.mission.plan_count())
+            .filter_map(PlanId::new)
+            .filter(|id| !excluded.contains(*id));
+        for id in candidates {
+            let Some(plan) = self.mission.plan(id) else {
+                break;
             };
+            let applicable = plan.trigger == task.event
+                && plan.context.is_subset(beliefs)
+                && !plan.context_not.intersects(beliefs);
+            if !applicable {
+                continue;
+            }
             let first_false = plan
                 .body
                 .first()
-                .and_then(|a| domain.action(*a))
+                .and_then(|a| actions.get(a.index()))
                 .filter(|a| !a.may_start_violated())
                 .map_or(FactSetOf::EMPTY, |a| a.pre.intersection(known_false));
             let unsure = plan.context_not.intersection(unknown);
@@ -278,18 +258,14 @@ impl<
             } else {
                 plan.body
                     .iter()
-                    .filter_map(|a| domain.action(*a))
+                    .filter_map(|a| actions.get(a.index()))
                     .fold(SensorSet::EMPTY, |acc, a| {
-                        acc.union(domain.sensors_serving(a.pre))
+                        acc.union(sensors_serving(sensors, a.pre))
                     })
                     .intersection(out_of_service)
             };
             if first_false.is_empty() && unsure.is_empty() && faulty.is_empty() {
-                // Copied once, for the plan that runs.
-                return Ok((id, plan.body.clone()));
-            }
-            if skipped.contains(id) {
-                break; // An id without a bit: never the case in a library.
+                return Ok(id);
             }
             skipped = skipped.with(id);
             why = (
@@ -327,13 +303,14 @@ impl<
         &self,
         planner: &mut G,
         beliefs: FactSetOf<W>,
-    ) -> Result<Vec<ActionId, L>, ControlError<W>> {
-        let goal = self.mission.task.goal;
+    ) -> Result<M::Body, ControlError<W>> {
+        let goal = self.mission.task().goal;
         let actions = self.planning_actions();
-        planner.start(&actions, beliefs, goal);
+        let actions = actions.as_ref();
+        planner.start(actions, beliefs, goal);
         let slice = u32::from(self.config.plan_slice.max(1));
-        let found: Found<L> = loop {
-            if let Some(result) = planner.step(&actions, slice) {
+        let (body, expanded) = loop {
+            if let Some(result) = planner.step::<M::Body>(actions, slice) {
                 break result.map_err(|error| ControlError::Planning {
                     error,
                     faulty: self.faulty_sensors(),
@@ -342,19 +319,19 @@ impl<
             // Let sensing, and everything else ready, run between two slices.
             yield_now().await;
         };
+        let length = body.as_ref().len();
         self.trace(TraceEvent::PlanGenerated {
-            length: u8::try_from(found.body.len()).unwrap_or(u8::MAX),
-            expanded: found.expanded,
+            length: u8::try_from(length).unwrap_or(u8::MAX),
+            expanded,
         });
-        info!("generated a plan of {} actions", found.body.len());
-        Ok(found.body)
+        info!("generated a plan of {} actions", length);
+        Ok(body)
     }
 
     /// `planner` is a type, not an `Option`: a run without one then links no search (an
     /// option lives in the future's state, where the compiler cannot see that it stays `None`).
     async fn control<G: Fallback<W>>(&self, mut planner: G) -> Result<Report<W>, ControlError<W>> {
-        let task = self.mission.task;
-        self.bound()?;
+        let task = self.mission.task();
         self.establish_initial_model().await?;
         let mut memory = FailureMemory::new();
         let mut generated_failed: Option<FactSetOf<W>> = None;
@@ -372,12 +349,12 @@ impl<
                     plans: report.plans_started,
                 });
             }
-            let (plan, body) = match self.select(&memory, beliefs) {
-                Ok(selected) => selected,
+            let (plan, generated) = match self.select(&memory, beliefs) {
+                Ok(plan) => (plan, None),
                 // The same search from the same beliefs would give the plan that just failed.
                 Err(no_plan) if G::PLANS && generated_failed != Some(beliefs) => {
                     match self.generate(&mut planner, beliefs).await {
-                        Ok(body) => (PlanId::GENERATED, body),
+                        Ok(body) => (PlanId::GENERATED, Some(body)),
                         // The planner proved there is no plan either: plans passed over, and
                         // why, say more than "unsolvable" does. (A search out of budget says
                         // so itself: a larger budget may find one.)
@@ -392,26 +369,21 @@ impl<
                 }
                 Err(no_plan) => return Err(no_plan),
             };
-            let named = Plan {
-                name: self
-                    .mission
-                    .library
-                    .get(plan)
-                    .map_or("generated", |p| p.name),
-                trigger: task.event,
-                context: FactSetOf::EMPTY,
-                context_not: FactSetOf::EMPTY,
-                body,
-            };
-            let fsm: Fsm<L> = Fsm::compile(plan, &named, &self.mission.domain)
-                .map_err(|error| ControlError::Compile { plan, error })?;
             self.trace(TraceEvent::PlanSelected {
                 plan,
                 event: task.event,
             });
             report.plans_started = report.plans_started.saturating_add(1);
             // executePlans and updateModel (percepts and effects are applied as they happen).
-            match self.execute(&fsm).await {
+            let executed = match &generated {
+                // Algorithm 2 at run time for the plan the planner made.
+                Some(body) => match Fsm::compile(plan, body.as_ref(), self.mission.actions()) {
+                    Ok(fsm) => self.execute_fsm(&fsm).await,
+                    Err(error) => return Err(ControlError::Compile { plan, error }),
+                },
+                None => self.execute(plan).await,
+            };
+            match executed {
                 Ok(()) => self.trace(TraceEvent::PlanSucceeded { plan }),
                 Err(reason) => {
                     self.trace(TraceEvent::PlanFailed { plan, reason });
@@ -443,12 +415,12 @@ pub(crate) trait Fallback<const W: usize> {
     const PLANS: bool;
     /// Sets a search up from `init` to `goal`.
     fn start(&mut self, actions: &[ActuatorAction<'_, W>], init: FactSetOf<W>, goal: FactSetOf<W>);
-    /// Runs `slice` nodes of it: the result once it ended.
-    fn step<const L: usize>(
+    /// Runs `slice` nodes of it: the plan and the nodes expanded once it ended.
+    fn step<B: Body>(
         &mut self,
         actions: &[ActuatorAction<'_, W>],
         slice: u32,
-    ) -> Option<Result<Found<L>, PlanningError>>;
+    ) -> Option<Result<(B, u32), PlanningError>>;
 }
 
 /// The library's plans only.
@@ -457,11 +429,11 @@ pub(crate) struct NoPlanner;
 impl<const W: usize> Fallback<W> for NoPlanner {
     const PLANS: bool = false;
     fn start(&mut self, _: &[ActuatorAction<'_, W>], _: FactSetOf<W>, _: FactSetOf<W>) {}
-    fn step<const L: usize>(
+    fn step<B: Body>(
         &mut self,
         _: &[ActuatorAction<'_, W>],
         _: u32,
-    ) -> Option<Result<Found<L>, PlanningError>> {
+    ) -> Option<Result<(B, u32), PlanningError>> {
         Some(Err(PlanningError::Unsolvable { expanded: 0 }))
     }
 }
@@ -475,11 +447,11 @@ impl<const N: usize, const W: usize> Fallback<W> for (&Planner<N, W>, &mut Searc
         self.1.start(self.0, actions, init, goal);
     }
     #[inline(never)]
-    fn step<const L: usize>(
+    fn step<B: Body>(
         &mut self,
         actions: &[ActuatorAction<'_, W>],
         slice: u32,
-    ) -> Option<Result<Found<L>, PlanningError>> {
-        self.1.step(actions, slice)
+    ) -> Option<Result<(B, u32), PlanningError>> {
+        B::step(self.1, actions, slice)
     }
 }

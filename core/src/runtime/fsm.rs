@@ -9,11 +9,8 @@
 //!   the last state to [`Target::Done`]; the failure edge of every state (the action failed, or
 //!   a percept made its precondition false and it stayed false) leads to [`Target::Failed`].
 
-use heapless::Vec;
-
-use crate::action::{ActionId, SensorSet};
-use crate::domain::Domain;
-use crate::plan::{Plan, PlanId};
+use crate::action::{ActionId, ActuatorAction, SensorAction, SensorSet};
+use crate::plan::PlanId;
 
 /// Where a transition leads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,45 +92,36 @@ impl core::fmt::Display for FsmError {
 
 impl core::error::Error for FsmError {}
 
-/// A finite state machine `f(Λ, T)` compiled from a plan of at most `L` actions.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Fsm<const L: usize> {
+/// A finite state machine `f(Λ, T)` compiled from a plan at run time: a plan the planner made,
+/// or a library plan of a mission loaded at run time (a compiled mission's plans are code,
+/// [`Mission::execute`](crate::Mission::execute)). It borrows the plan's body and computes a
+/// state `δ_i` from the domain's tables when asked, so it needs no room of its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fsm<'p> {
     plan: PlanId,
-    states: Vec<BehaviourState, L>,
+    body: &'p [ActionId],
 }
 
-impl<const L: usize> Fsm<L> {
-    /// Algorithm 2 for one plan. O(L · NS).
+impl<'p> Fsm<'p> {
+    /// Algorithm 2 for one plan of body `body`, with the domain's actions `actions`: checks
+    /// that every action exists and the states can be addressed. O(L).
     // Out of line: one decision, timed on the chip (`cargo xtask hil`'s `decision_cycles`).
     #[inline(never)]
-    pub fn compile<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
+    pub fn compile<const W: usize>(
         id: PlanId,
-        plan: &Plan<'_, L, W>,
-        domain: &Domain<'_, NS, NA, W, NF>,
+        body: &'p [ActionId],
+        actions: &[ActuatorAction<'_, W>],
     ) -> Result<Self, FsmError> {
-        let last = plan.body.len().checked_sub(1).ok_or(FsmError::EmptyBody)?;
-        let mut states = Vec::new();
-        for (i, &action) in plan.body.iter().enumerate() {
-            let a = domain
-                .action(action)
-                .ok_or(FsmError::UnknownAction(action))?;
-            // Lines 4-10: the state and its ordering rule; lines 11-15: the parallel sensors.
-            let on_success = if i == last {
-                Target::Done
-            } else {
-                let next =
-                    u8::try_from(i.saturating_add(1)).map_err(|_| FsmError::TooManyStates)?;
-                Target::State(next)
-            };
-            let state = BehaviourState {
-                action,
-                sensors: domain.sensors_serving(a.pre),
-                on_success,
-                on_failure: Target::Failed,
-            };
-            states.push(state).map_err(|_| FsmError::TooManyStates)?;
+        if body.is_empty() {
+            return Err(FsmError::EmptyBody);
         }
-        Ok(Self { plan: id, states })
+        if body.len() > usize::from(u8::MAX) {
+            return Err(FsmError::TooManyStates);
+        }
+        if let Some(unknown) = body.iter().find(|a| actions.get(a.index()).is_none()) {
+            return Err(FsmError::UnknownAction(*unknown));
+        }
+        Ok(Self { plan: id, body })
     }
 
     /// The plan this machine was compiled from.
@@ -141,26 +129,71 @@ impl<const L: usize> Fsm<L> {
         self.plan
     }
 
-    /// The states `Λ`, in order; the first is the initial state.
-    pub fn states(&self) -> &[BehaviourState] {
-        &self.states
+    /// How many states `Λ` it has.
+    pub const fn len(&self) -> usize {
+        self.body.len()
     }
 
-    /// The state with index `index`.
-    pub fn state(&self, index: u8) -> Option<&BehaviourState> {
-        self.states.get(usize::from(index))
+    /// Whether it has no state (never: a compiled plan has one at least).
+    pub const fn is_empty(&self) -> bool {
+        self.body.is_empty()
+    }
+
+    /// The state with index `index` (lines 4-10: the state and its ordering rule; lines
+    /// 11-15: the parallel sensors), from the domain's `actions` and `sensors`. O(NS).
+    pub fn state<const W: usize>(
+        &self,
+        index: u8,
+        actions: &[ActuatorAction<'_, W>],
+        sensors: &[SensorAction<'_, W>],
+    ) -> Option<BehaviourState> {
+        let i = usize::from(index);
+        let action = *self.body.get(i)?;
+        let a = actions.get(action.index())?;
+        let on_success = if i.saturating_add(1) == self.body.len() {
+            Target::Done
+        } else {
+            Target::State(index.checked_add(1)?)
+        };
+        Some(BehaviourState {
+            action,
+            sensors: crate::runtime::state::sensors_serving(sensors, a.pre),
+            on_success,
+            on_failure: Target::Failed,
+        })
+    }
+
+    /// The states `Λ`, in order; the first is the initial state.
+    pub fn states<'t, const W: usize>(
+        &self,
+        actions: &'t [ActuatorAction<'_, W>],
+        sensors: &'t [SensorAction<'_, W>],
+    ) -> impl Iterator<Item = BehaviourState> + 't
+    where
+        'p: 't,
+    {
+        let fsm = *self;
+        (0..=u8::MAX)
+            .take(self.body.len())
+            .filter_map(move |i| fsm.state(i, actions, sensors))
     }
 
     /// The sensors that run in any state of the machine.
-    pub fn all_sensors(&self) -> SensorSet {
-        SensorSet::from_bits(self.states.iter().fold(0, |acc, s| acc | s.sensors.bits()))
+    pub fn all_sensors<const W: usize>(
+        &self,
+        actions: &[ActuatorAction<'_, W>],
+        sensors: &[SensorAction<'_, W>],
+    ) -> SensorSet {
+        self.states(actions, sensors)
+            .fold(SensorSet::EMPTY, |acc, s| acc.union(s.sensors))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::action::{ActuatorAction, SensorAction, SensorMode};
+    use crate::action::SensorMode;
+    use crate::domain::Domain;
     use crate::facts::FactSet;
     use embassy_time::Duration;
 
@@ -219,10 +252,11 @@ mod tests {
             ))
             .unwrap();
         let ev = d.add_event("e").unwrap();
-        let plan: Plan<'_, 3> = Plan::new("p", ev, FactSet::EMPTY, &[go, open, rest]).unwrap();
-        let fsm = Fsm::compile(PlanId::new(0).unwrap(), &plan, &d).unwrap();
+        let _ = ev;
+        let body = [go, open, rest];
+        let fsm = Fsm::compile(PlanId::new(0).unwrap(), &body, d.actions()).unwrap();
 
-        let states = fsm.states();
+        let states: std::vec::Vec<_> = fsm.states(d.actions(), d.sensors()).collect();
         assert_eq!(states.len(), 3);
         assert_eq!(states[0].sensors, SensorSet::EMPTY.with(sonar));
         assert_eq!(states[1].sensors, SensorSet::EMPTY.with(camera));
@@ -235,19 +269,23 @@ mod tests {
                 .iter()
                 .all(|s| s.next(Edge::Failure) == Target::Failed)
         );
-        assert_eq!(fsm.all_sensors(), SensorSet::EMPTY.with(sonar).with(camera));
+        assert_eq!(
+            fsm.all_sensors(d.actions(), d.sensors()),
+            SensorSet::EMPTY.with(sonar).with(camera)
+        );
     }
 
     #[test]
     fn unknown_action_is_an_error() {
         let d: Domain<'_, 1, 1> = Domain::new();
-        let mut d2 = d.clone();
-        let ev = d2.add_event("e").unwrap();
-        let plan: Plan<'_, 1> =
-            Plan::new("p", ev, FactSet::EMPTY, &[ActionId::new(3).unwrap()]).unwrap();
+        let body = [ActionId::new(3).unwrap()];
         assert_eq!(
-            Fsm::compile(PlanId::new(0).unwrap(), &plan, &d),
+            Fsm::compile(PlanId::new(0).unwrap(), &body, d.actions()),
             Err(FsmError::UnknownAction(ActionId::new(3).unwrap()))
+        );
+        assert_eq!(
+            Fsm::compile(PlanId::new(0).unwrap(), &[], d.actions()),
+            Err(FsmError::EmptyBody)
         );
     }
 }

@@ -1,16 +1,20 @@
 //! The sensing side of the runtime (the paper's sensory controller): every sensor samples on
 //! its own, above the deciding side.
 //!
-//! [`SensingSide::run`](crate::SensingSide::run) runs one *sampler* per sensor of the domain. A sampler waits until the
+//! [`SensingSide::run`](crate::SensingSide::run) runs one *sampler* per sensor of the mission
+//! ([`Mission::sensing`]): a compiled mission's are each specialised
+//! for their sensor ([`SensorSpec`]: one machine code a sensor, no branch for the modes it
+//! lacks), a run-time mission's read their sensor from the tables. A sampler waits until the
 //! deciding side commands its sensor (a state that needs it started: least commitment), then
 //! switches it on and samples it:
 //!
-//! * cyclic: at `start`, `start + T`, `start + 2T`, ... The next instant follows from the
-//!   previous *due* instant, not from when the sample finished, so the phase is kept; an
+//! * cyclic: at `start`, `start + T`, `start + 2T`, ... (`T` the mission's period, or the one
+//!   [`Runtime::set_period`](crate::Runtime::set_period) gave). The next instant follows from
+//!   the previous *due* instant, not from when the sample finished, so the phase is kept; an
 //!   instant that passed while a slow read was still running is skipped, so one sensor never
 //!   samples twice at one instant and never queues up a backlog;
 //! * one-shot: once, at the start of the state (under SMPA, of its first sense phase);
-//! * on demand: whenever the running behaviour asks ([`ActionIo::request`](crate::platform::ActionIo::request)).
+//! * on demand: whenever the running behaviour asks ([`ActionIo::request`](crate::ActionIo::request)).
 //!
 //! A sample's read is bounded by the sensor's timeout and awaits only that sensor's I/O:
 //! another sensor's read time, timeout, loss or fault never moves this sensor's instants, and
@@ -28,7 +32,6 @@
 //! trace events (O(1) each). Every wake of the sensing future polls each of the NS samplers
 //! once (O(NS)).
 
-use core::cell::Cell;
 use core::convert::Infallible;
 use core::future::{Future, pending, poll_fn};
 use core::pin::{Pin, pin};
@@ -41,12 +44,12 @@ use embassy_time::{Instant, TimeoutError, Timer, with_timeout};
 use pin_project_lite::pin_project;
 
 use crate::action::{ActionId, SensorAction, SensorId, SensorMode, SensorSet};
-use crate::domain::Domain;
 use crate::facts::FactSetOf;
-use crate::failure::{Failure, SensorFault, Violation};
-use crate::platform::{Actuator, FromId, Platform, Reading, Sensor};
-use crate::runtime::engine::Engine;
-use crate::runtime::shared::{Mode, Shared, poll_shared};
+use crate::failure::{Evidence, Failure, SensorFault, Violation};
+use crate::platform::{Actuator, Platform, Reading, Sensor};
+use crate::runtime::{Runtime, SensorsOf};
+use crate::spec::storage::{Mode, PerSensor, Shared, poll_shared};
+use crate::spec::{DynSensor, Mission, Sensing, SensorOf, SensorSpec, Storage};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
 use crate::trace::{TraceEvent, TraceSink};
 
@@ -78,17 +81,39 @@ pub(crate) fn next_due(due: Instant, period: u64, now: Instant) -> Instant {
     }
 }
 
+/// The shared state of a runtime of facts `F` and per-sensor state `S`.
+type SharedMutex<Mx, F, S> = Mutex<Mx, Shared<F, S>>;
+
+impl<'r, M, P, T, const W: usize> Sensing for Runtime<'r, M, P, T>
+where
+    M: Mission<Facts = FactSetOf<W>>,
+    P: Platform + Sensor<M> + Actuator<M>,
+    T: TraceSink<M>,
+{
+    type Mission = M;
+
+    fn sampler<S: SensorSpec<M>>(&self, sensor: S) -> impl Future<Output = Infallible> {
+        self.sample_loop(sensor)
+    }
+
+    fn samplers<const N: usize>(&self) -> impl Future<Output = Infallible> {
+        let samplers: [_; N] = core::array::from_fn(|index| self.table_sampler(index));
+        Samplers {
+            samplers: join_array(samplers),
+        }
+    }
+}
+
 pin_project! {
-    /// The sensing side of a runtime ([`SensingSide::run`](crate::runtime::sides::SensingSide::run)):
-    /// its samplers, each polled in place. Never ends.
+    /// Samplers that never end, polled in place.
     #[must_use = "futures do nothing unless polled"]
-    pub struct Sensing<F> {
+    struct Samplers<F> {
         #[pin]
         samplers: F,
     }
 }
 
-impl<F: Future> Future for Sensing<F> {
+impl<F: Future> Future for Samplers<F> {
     type Output = Infallible;
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Infallible> {
@@ -98,76 +123,77 @@ impl<F: Future> Future for Sensing<F> {
     }
 }
 
-impl<
-    'r,
-    P: Platform + Sensor<W> + Actuator<W>,
-    T: TraceSink<W>,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-    const W: usize,
-    const NF: usize,
-> Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
+impl<'r, M, P, T, const W: usize> Runtime<'r, M, P, T>
+where
+    M: Mission<Facts = FactSetOf<W>>,
+    P: Platform + Sensor<M> + Actuator<M>,
+    T: TraceSink<M>,
 {
-    /// The sensing side's samplers ([`SensingSide::run`](crate::runtime::sides::SensingSide::run)).
-    #[inline(never)]
-    pub(crate) fn sensing(&self) -> Sensing<impl Future<Output = [(); NS]> + '_> {
-        let samplers: [_; NS] = core::array::from_fn(|index| self.sampler(index));
-        Sensing {
-            samplers: join_array(samplers),
+    /// The general sampler of sensor `index`, its sensor read from the mission's tables.
+    async fn table_sampler(&self, index: usize) -> Infallible {
+        let spec = SensorId::new(index).and_then(|id| {
+            let s = self.mission.sensors().get(index)?;
+            Some(DynSensor::<M> {
+                id,
+                sensor: M::Sensor::from_id(id)?,
+                mode: s.mode,
+                timeout: s.timeout,
+                per: s.per,
+            })
+        });
+        match spec {
+            Some(spec) => self.sample_loop(spec).await,
+            // A capacity the mission does not use.
+            None => pending().await,
         }
     }
 
-    /// The sampler of sensor `index`: serves every command that includes it, forever. One flat
-    /// loop, so that little of its state lives across awaits (its future is in the sensing
-    /// side's `NS` times).
-    async fn sampler(&self, index: usize) {
-        let Some((sensor, spec)) =
-            SensorId::new(index).and_then(|id| Some((id, self.mission.domain.sensor(id)?)))
-        else {
-            // A capacity the domain does not use.
-            return pending().await;
-        };
-        // The platform's name of the sensor (`Sensor::Id`); none: `SensorFault::Unbound`.
-        let name = <P as Sensor<W>>::Id::from_id(sensor);
+    /// The sampler of sensor `spec`: serves every command that includes it, forever. One flat
+    /// loop, so that little of its state lives across awaits.
+    async fn sample_loop<S: SensorSpec<M>>(&self, spec: S) -> Infallible {
+        let sensor = spec.id();
+        let name = spec.sensor();
+        let timeout = spec.timeout();
         let mut served = None;
         loop {
             // A command that includes this sensor, and that it has not served yet.
-            let (epoch, mode, start) = poll_fn(|cx| {
+            let (epoch, mode, start, period) = poll_fn(|cx| {
                 self.poll_sensing(cx, |s| {
                     let c = s.command.get();
-                    (c.sensors.contains(sensor) && served != Some(c.epoch))
-                        .then_some((c.epoch, c.mode, c.start))
+                    (c.sensors.contains(sensor) && served != Some(c.epoch)).then(|| {
+                        let period = s.sensor(sensor).and_then(|p| p.period.get());
+                        (c.epoch, c.mode, c.start, period)
+                    })
                 })
             })
             .await;
             served = Some(epoch);
-            self.shared
+            self.shared()
                 .lock(|s| s.active.set(s.active.get().with(sensor)));
-            let fault = match name {
-                Some(name) => match with_timeout(spec.timeout, self.platform.switch_on(name)).await
-                {
-                    Ok(Ok(())) => None,
-                    Ok(Err(fault)) => Some(fault),
-                    Err(_) => Some(SensorFault::Timeout),
-                },
-                None => Some(SensorFault::Unbound),
+            let fault = match with_timeout(timeout, self.platform.switch_on(name)).await {
+                Ok(Ok(())) => None,
+                Ok(Err(fault)) => Some(fault),
+                Err(_) => Some(SensorFault::Timeout),
             };
-            let (Some(name), None) = (name, fault) else {
-                self.sensor_failed(sensor, fault.unwrap_or(SensorFault::Unbound), epoch);
-                self.shared
-                    .lock(|s| s.active.set(s.active.get().without(sensor)));
-                self.notify();
+            if let Some(fault) = fault {
+                self.sensor_failed(sensor, fault, epoch);
+                self.shared().lock(|s| {
+                    s.active.set(s.active.get().without(sensor));
+                    s.notify();
+                });
                 continue;
-            };
+            }
             self.trace(TraceEvent::SensorOn { sensor });
-            self.shared.lock(|s| {
+            self.shared().lock(|s| {
                 s.running.set(s.running.get().with(sensor));
                 s.fresh.set(s.fresh.get().without(sensor));
             });
-            let mut due = match (spec.mode, mode) {
+            // A cyclic sensor's period: the mission's, or the one the runtime was given.
+            let cyclic = match spec.mode() {
+                SensorMode::Cyclic { period: own } => Some(period.unwrap_or(own).as_ticks()),
+                _ => None,
+            };
+            let mut due = match (spec.mode(), mode) {
                 (SensorMode::Cyclic { .. }, _) => Some(start),
                 (SensorMode::OneShot, Mode::Phase { first: false }) => None,
                 (SensorMode::OneShot, _) => Some(start),
@@ -184,21 +210,22 @@ impl<
             // Sample until the command ends or the sensor fails. The end of the command comes
             // first at every await: no sample starts, or is delivered, once the state is over.
             loop {
-                let waited = match (spec.mode, due) {
+                let waited = match (spec.mode(), due) {
                     (SensorMode::OnDemand, _) => {
                         self.bounded(epoch, None, self.requested(sensor)).await
                     }
                     // The sample's instant, if any (else the command's end); a cyclic
                     // sensor's device may make it due early (`wake`). One wait for all.
-                    (mode, due) => {
+                    (sensor_mode, due) => {
                         let mut timer = due.map(Timer::at);
                         let mut timed = move |cx: &mut Context<'_>| {
                             timer
                                 .as_mut()
                                 .is_some_and(|t| Pin::new(t).poll(cx).is_ready())
                         };
-                        let early = matches!(mode, SensorMode::Cyclic { .. }) && due.is_some();
-                        if early && <P as Sensor<W>>::WAKES {
+                        let early =
+                            matches!(sensor_mode, SensorMode::Cyclic { .. }) && due.is_some();
+                        if early && <P as Sensor<M>>::WAKES {
                             let mut wake = pin!(self.platform.wake(name));
                             let wait = poll_fn(move |cx| {
                                 if timed(cx) || wake.as_mut().poll(cx).is_ready() {
@@ -232,28 +259,25 @@ impl<
                     // sense phase that just ended, or the initial model): a sensor never takes
                     // two samples of one instant. Its percept counts for this command too: the
                     // beliefs may have been reset since (a new initial model).
-                    let domain = &self.mission.domain;
-                    let change = self.shared.lock(|s| {
+                    let table = self.mission.sensors();
+                    let per = spec.per();
+                    let change = self.shared().lock(|s| {
                         let delivered = s
-                            .percepts
-                            .get(sensor.index())
-                            .and_then(|p| p.get())
+                            .sensor(sensor)
+                            .and_then(|p| p.percept.get())
                             .is_some_and(|e| e.at == started);
                         if !delivered {
                             return None;
                         }
-                        let holds = s
-                            .holds
-                            .get(sensor.index())
-                            .map_or(FactSetOf::EMPTY, Cell::get);
-                        fuse(s, domain, sensor, spec.per, holds);
-                        let change = check(s, domain);
+                        let holds = s.sensor(sensor).map_or(FactSetOf::EMPTY, |p| p.holds.get());
+                        fuse(s, table, sensor, per, holds);
+                        let change = check(s, table);
                         s.notify();
                         change
                     });
                     self.trace_change(change);
                 } else {
-                    let limit = started.saturating_add(spec.timeout);
+                    let limit = started.saturating_add(timeout);
                     let read = match self
                         .bounded(epoch, Some(limit), self.platform.sample(name))
                         .await
@@ -264,7 +288,7 @@ impl<
                         Bound::Ended => break,
                     };
                     last = Some(started);
-                    if self.take(sensor, spec, read, started, epoch).is_err() {
+                    if self.take(sensor, spec.per(), read, started, epoch).is_err() {
                         break;
                     }
                 }
@@ -272,15 +296,15 @@ impl<
                     self.mark_ready(sensor, epoch);
                     marked = true;
                 }
-                due = match (spec.mode, mode, due) {
-                    (SensorMode::Cyclic { .. }, Mode::Once, _) => None,
-                    (SensorMode::Cyclic { period }, _, Some(due)) => {
+                due = match (cyclic, mode, due) {
+                    (Some(_), Mode::Once, _) => None,
+                    (Some(period), _, Some(due)) => {
                         let now = Instant::now();
                         // An early sample (`wake`) that ended before its instant keeps it.
                         Some(if now < due {
                             due
                         } else {
-                            next_due(due, period.as_ticks(), now)
+                            next_due(due, period, now)
                         })
                     }
                     _ => None,
@@ -288,7 +312,7 @@ impl<
             }
             // A sensor that does not answer is traced and counted off: it is not used again
             // until it is switched on.
-            if with_timeout(spec.timeout, self.platform.switch_off(name))
+            if with_timeout(timeout, self.platform.switch_off(name))
                 .await
                 .is_err()
             {
@@ -298,12 +322,12 @@ impl<
                 });
             }
             self.trace(TraceEvent::SensorOff { sensor });
-            self.shared.lock(|s| {
+            self.shared().lock(|s| {
                 s.running.set(s.running.get().without(sensor));
                 s.fresh.set(s.fresh.get().without(sensor));
                 s.active.set(s.active.get().without(sensor));
+                s.notify();
             });
-            self.notify();
         }
     }
 
@@ -315,9 +339,9 @@ impl<
         epoch: u32,
         deadline: Option<Instant>,
         inner: F,
-    ) -> Bounded<'_, Mutex<P::Mutex, Shared<NS, W>>, F> {
+    ) -> Bounded<'_, P::Mutex, FactSetOf<W>, SensorsOf<M, P>, F> {
         Bounded {
-            shared: &self.shared,
+            shared: self.shared(),
             epoch,
             inner,
             timer: deadline.map(Timer::at),
@@ -326,10 +350,9 @@ impl<
 
     /// Whether a read of `sensor` started at `at`.
     fn read_at(&self, sensor: SensorId, at: Instant) -> bool {
-        self.shared.lock(|s| {
-            s.last_read
-                .get(sensor.index())
-                .is_some_and(|r| r.get() == Some(at))
+        self.shared().lock(|s| {
+            s.sensor(sensor)
+                .is_some_and(|p| p.last_read.get() == Some(at))
         })
     }
 
@@ -346,43 +369,39 @@ impl<
     }
 
     fn mark_ready(&self, sensor: SensorId, epoch: u32) {
-        let marked = self.shared.lock(|s| {
+        self.shared().lock(|s| {
             let current = s.command.get().epoch == epoch && !s.ready.get().contains(sensor);
             if current {
                 s.ready.set(s.ready.get().with(sensor));
+                s.notify();
             }
-            current
         });
-        if marked {
-            self.notify();
-        }
     }
 
-    /// Takes the outcome of one read of `sensor` that started at `started`: delivers a reading,
-    /// counts a lost sample, or reports a fault. `Err` when the sensor failed (reported).
+    /// Takes the outcome of one read of `sensor` (perceiving `per`) that started at `started`:
+    /// delivers a reading, counts a lost sample, or reports a fault. `Err` when the sensor
+    /// failed (reported).
     fn take(
         &self,
         sensor: SensorId,
-        spec: &SensorAction<'_, W>,
+        per: FactSetOf<W>,
         read: Result<Result<Option<Reading<W>>, SensorFault>, TimeoutError>,
         started: Instant,
         epoch: u32,
     ) -> Result<(), ()> {
-        if !matches!(read, Ok(Ok(Some(_)))) {
-            self.shared.lock(|s| s.record_read(sensor, started));
-        }
         let fault = match read {
             Ok(Ok(Some(reading))) => {
-                return self.deliver(sensor, spec, &reading, started).map_err(|f| {
+                return self.deliver(sensor, per, &reading, started).map_err(|f| {
                     self.report(f, epoch);
                 });
             }
             Ok(Ok(None)) => {
                 self.trace(TraceEvent::SampleLost { sensor });
-                let lost = self.shared.lock(|s| {
-                    s.lost.get(sensor.index()).map_or(u8::MAX, |n| {
-                        n.set(n.get().saturating_add(1));
-                        n.get()
+                let lost = self.shared().lock(|s| {
+                    s.record_read(sensor, started);
+                    s.sensor(sensor).map_or(u8::MAX, |p| {
+                        p.lost.set(p.lost.get().saturating_add(1));
+                        p.lost.get()
                     })
                 });
                 if lost < self.config.max_lost {
@@ -393,6 +412,7 @@ impl<
             Ok(Err(fault)) => fault,
             Err(TimeoutError) => SensorFault::Timeout,
         };
+        self.shared().lock(|s| s.record_read(sensor, started));
         self.sensor_failed(sensor, fault, epoch);
         Err(())
     }
@@ -401,12 +421,13 @@ impl<
     fn deliver(
         &self,
         sensor: SensorId,
-        spec: &SensorAction<'_, W>,
+        per: FactSetOf<W>,
         reading: &Reading<W>,
         at: Instant,
     ) -> Result<(), Failure<W>> {
         let store = self
-            .sensor_stores
+            .storage
+            .sensor_stores()
             .get(sensor.index())
             .ok_or(Failure::SensorUnavailable { sensor })?;
         let full = |e: crate::store::StoreFull| Failure::StoreFull { key: e.key };
@@ -414,25 +435,21 @@ impl<
         for (key, value) in reading.pairs() {
             store.put(key, value, at).map_err(full)?;
         }
-        let holds = reading.holds.intersection(spec.per);
-        let domain = &self.mission.domain;
+        let holds = reading.holds.intersection(per);
+        let table = self.mission.sensors();
         // One lock for the whole delivery: fuse, record, check pre(a), wake the deciding side.
-        let change = self.shared.lock(|s| {
-            s.record_read(sensor, at);
-            if let Some(n) = s.lost.get(sensor.index()) {
-                n.set(0);
-            }
-            if let Some(h) = s.holds.get(sensor.index()) {
-                h.set(holds);
-            }
-            fuse(s, domain, sensor, spec.per, holds);
-            if let Some(p) = s.percepts.get(sensor.index()) {
-                p.set(Some(Entry {
+        let change = self.shared().lock(|s| {
+            if let Some(p) = s.sensor(sensor) {
+                p.last_read.set(Some(at));
+                p.lost.set(0);
+                p.holds.set(holds);
+                p.percept.set(Some(Entry {
                     value: reading.value,
                     at,
                 }));
             }
-            let change = check(s, domain);
+            fuse(s, table, sensor, per, holds);
+            let change = check(s, table);
             s.notify();
             change
         });
@@ -449,8 +466,8 @@ impl<
     /// deciding side fails the state once a violation has lasted its action's `max_violation`.
     /// Reads and updates the violation in one lock: the two sides both call it.
     pub(crate) fn check_precondition(&self) {
-        let domain = &self.mission.domain;
-        let change = self.shared.lock(|s| check(s, domain));
+        let table = self.mission.sensors();
+        let change = self.shared().lock(|s| check(s, table));
         self.trace_change(change);
     }
 
@@ -470,7 +487,7 @@ impl<
     /// A sensor failed: it is out of service until [`clear_faults`](Self::clear_faults), and
     /// the deciding side is told.
     fn sensor_failed(&self, sensor: SensorId, fault: SensorFault, epoch: u32) {
-        self.shared
+        self.shared()
             .lock(|s| s.faulty.set(s.faulty.get().with(sensor)));
         self.trace(TraceEvent::SensorFailed { sensor, fault });
         self.report(Failure::SensorFault { sensor, fault }, epoch);
@@ -479,36 +496,34 @@ impl<
     /// Hands `failure` to the deciding side, unless an earlier one of the same command is
     /// pending or the command is over.
     fn report(&self, failure: Failure<W>, epoch: u32) {
-        self.shared.lock(|s| {
+        self.shared().lock(|s| {
             if s.command.get().epoch == epoch && s.failure.get().is_none() {
                 s.failure.set(Some((epoch, failure)));
             }
+            s.notify();
         });
-        self.notify();
     }
 }
 
 pin_project! {
-    /// A sampler's await ([`Engine::bounded`]).
+    /// A sampler's await ([`Runtime::bounded`]).
     #[must_use = "futures do nothing unless polled"]
-    struct Bounded<'s, S, F> {
-        shared: &'s S,
+    struct Bounded<'s, Mx: RawMutex, F: crate::spec::Width, S, Fut> {
+        shared: &'s SharedMutex<Mx, F, S>,
         epoch: u32,
         #[pin]
-        inner: F,
+        inner: Fut,
         timer: Option<Timer>,
     }
 }
 
-impl<const NS: usize, const W: usize, M: RawMutex, F: Future> Future
-    for Bounded<'_, Mutex<M, Shared<NS, W>>, F>
-{
-    type Output = Bound<F::Output>;
+impl<Mx: RawMutex, F: crate::spec::Width, S, Fut: Future> Future for Bounded<'_, Mx, F, S, Fut> {
+    type Output = Bound<Fut::Output>;
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
         let this = self.project();
         let epoch = *this.epoch;
-        let ended = |s: &Shared<NS, W>| s.epoch.get() != epoch;
+        let ended = |s: &Shared<F, S>| s.epoch.get() != epoch;
         if this.shared.lock(ended) {
             return Poll::Ready(Bound::Ended);
         }
@@ -527,7 +542,7 @@ impl<const NS: usize, const W: usize, M: RawMutex, F: Future> Future
     }
 }
 
-/// How a sampler's [`bounded`](Engine::bounded) await ended.
+/// How a sampler's [`bounded`](Runtime::bounded) await ended.
 enum Bound<T> {
     /// The awaited future completed.
     Done(T),
@@ -541,9 +556,9 @@ enum Bound<T> {
 /// caller's lock, and marks the sensor fresh. Fusion by conjunction: a fact of `per(s)` holds
 /// only if no running sensor that perceives it and has sampled says otherwise (the sonar sees a
 /// box while the bumper feels nothing: the path is not clear). O(NS).
-fn fuse<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
-    s: &Shared<NS, W>,
-    domain: &Domain<'_, NS, NA, W, NF>,
+fn fuse<const W: usize, S: AsRef<[PerSensor<FactSetOf<W>>]>>(
+    s: &Shared<FactSetOf<W>, S>,
+    table: &[SensorAction<'_, W>],
     sensor: SensorId,
     per: FactSetOf<W>,
     holds: FactSetOf<W>,
@@ -552,8 +567,8 @@ fn fuse<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
     s.fresh.set(fresh);
     let sampled = SensorSet::from_bits(s.running.get().bits() & fresh.bits()).without(sensor);
     let decided = sampled.iter().fold(holds, |acc, t| {
-        let per_t = domain.sensor(t).map_or(FactSetOf::EMPTY, |t| t.per);
-        let holds_t = s.holds.get(t.index()).map_or(FactSetOf::EMPTY, Cell::get);
+        let per_t = table.get(t.index()).map_or(FactSetOf::EMPTY, |t| t.per);
+        let holds_t = s.sensor(t).map_or(FactSetOf::EMPTY, |p| p.holds.get());
         acc.difference(per_t.difference(holds_t))
     });
     s.beliefs
@@ -567,9 +582,9 @@ type Change<const W: usize> = (ActionId, Option<Violation<W>>, Option<Violation<
 /// Compares the watched action's `pre(a)` with the beliefs and updates the violation, in the
 /// caller's lock. `None` when nothing is watched or nothing changed. O(NS).
 #[inline]
-fn check<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
-    s: &Shared<NS, W>,
-    domain: &Domain<'_, NS, NA, W, NF>,
+fn check<const W: usize, S: AsRef<[PerSensor<FactSetOf<W>>]>>(
+    s: &Shared<FactSetOf<W>, S>,
+    table: &[SensorAction<'_, W>],
 ) -> Option<Change<W>> {
     let (action, pre) = s.command.get().watch?;
     let missing = pre.difference(s.beliefs.get());
@@ -577,14 +592,14 @@ fn check<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
     if missing.is_empty() && s.violation.get().is_none() {
         return None;
     }
-    check_changed(s, domain, action, missing)
+    check_changed(s, table, action, missing)
 }
 
 /// [`check`] when the precondition is false or was.
 #[inline(never)]
-fn check_changed<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
-    s: &Shared<NS, W>,
-    domain: &Domain<'_, NS, NA, W, NF>,
+fn check_changed<const W: usize, S: AsRef<[PerSensor<FactSetOf<W>>]>>(
+    s: &Shared<FactSetOf<W>, S>,
+    table: &[SensorAction<'_, W>],
     action: ActionId,
     missing: FactSetOf<W>,
 ) -> Option<Change<W>> {
@@ -597,51 +612,70 @@ fn check_changed<const NS: usize, const NA: usize, const W: usize, const NF: usi
     let running = s.running.get();
     let ready = running.intersection(s.ready.get().union(s.fresh.get()));
     let waiting = running.intersection(SensorSet::from_bits(!ready.bits()));
-    let unread = domain
-        .perception_of(waiting)
-        .difference(domain.perception_of(ready));
+    let perception = |set: SensorSet| crate::runtime::state::perception_of(table, set);
+    let unread = perception(waiting).difference(perception(ready));
     let missing = missing.difference(unread);
     let before = s.violation.get();
     let after = match (missing.is_empty(), before) {
         (true, None) => return None,
         (true, Some(_)) => None,
-        (false, None) => {
-            let seen = evidence(s, domain, missing).unwrap_or_else(Instant::now);
-            Some(Violation {
-                missing,
-                since: seen,
-                last_seen: seen,
+        (false, before) => {
+            let (by, evidence) = evidence(s, table, missing);
+            let seen = evidence.map(|e| e.at);
+            Some(match before {
+                None => {
+                    let at = seen.unwrap_or_else(Instant::now);
+                    Violation {
+                        missing,
+                        since: at,
+                        last_seen: at,
+                        by,
+                        evidence,
+                    }
+                }
+                Some(v) => Violation {
+                    missing,
+                    last_seen: seen.unwrap_or(v.last_seen),
+                    by,
+                    evidence: evidence.or(v.evidence),
+                    ..v
+                },
             })
         }
-        (false, Some(v)) => Some(Violation {
-            missing,
-            last_seen: evidence(s, domain, missing).unwrap_or(v.last_seen),
-            ..v
-        }),
     };
     s.violation.set(after);
     Some((action, before, after))
 }
 
-/// When the latest sample was taken that says one of `missing` does not hold: the newest
-/// evidence of a violation. Samples of other sensors that only repeat the fused verdict are not
-/// evidence. O(NS).
-fn evidence<const NS: usize, const NA: usize, const W: usize, const NF: usize>(
-    s: &Shared<NS, W>,
-    domain: &Domain<'_, NS, NA, W, NF>,
+/// The running, sampled sensors whose latest sample says one of `missing` does not hold, and
+/// the newest of those samples: the evidence of a violation. Samples of other sensors that
+/// only repeat the fused verdict are not evidence. O(NS).
+fn evidence<const W: usize, S: AsRef<[PerSensor<FactSetOf<W>>]>>(
+    s: &Shared<FactSetOf<W>, S>,
+    table: &[SensorAction<'_, W>],
     missing: FactSetOf<W>,
-) -> Option<Instant> {
+) -> (SensorSet, Option<Evidence>) {
     let sampled = SensorSet::from_bits(s.running.get().bits() & s.fresh.get().bits());
-    sampled
-        .iter()
-        .filter(|t| {
-            let per_t = domain.sensor(*t).map_or(FactSetOf::EMPTY, |t| t.per);
-            let holds_t = s.holds.get(t.index()).map_or(FactSetOf::EMPTY, |h| h.get());
-            per_t.difference(holds_t).intersects(missing)
-        })
-        .filter_map(|t| s.percepts.get(t.index()).and_then(|p| p.get()))
-        .map(|e| e.at)
-        .max()
+    let mut by = SensorSet::EMPTY;
+    let mut newest: Option<Evidence> = None;
+    for t in sampled.iter() {
+        let per_t = table.get(t.index()).map_or(FactSetOf::EMPTY, |t| t.per);
+        let Some(p) = s.sensor(t) else { continue };
+        if !per_t.difference(p.holds.get()).intersects(missing) {
+            continue;
+        }
+        by = by.with(t);
+        if let Some(e) = p.percept.get()
+            && newest.is_none_or(|n| e.at > n.at)
+        {
+            newest = Some(Evidence {
+                sensor: t,
+                at: e.at,
+                value: e.value,
+            });
+        }
+    }
+    (by, newest)
 }
 
 #[cfg(test)]

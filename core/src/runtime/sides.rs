@@ -1,20 +1,19 @@
-//! The runtime's two sides, handed out once: [`Engine::split`] takes the runtime mutably and
+//! The runtime's two sides, handed out once: [`Runtime::split`] takes the runtime mutably and
 //! returns the sensing side and the deciding side, so a second sampler, a second control loop
 //! running at once, or a second split while the first is in use does not compile.
 //!
 //! ```
-//! # use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault};
+//! # use psmpa_core::{Act, Actuator, Outcome, Platform, Reading, Sensor, SensorFault};
 //! # psmpa_core::include_mission!(mod hello = "../testkit/tests/hello.json");
+//! # use hello::Hello;
 //! # struct Robot;
-//! # impl Sensor for Robot {
-//! #     type Id = hello::Sensor;
+//! # impl Sensor<Hello> for Robot {
 //! #     async fn switch_on(&self, _: hello::Sensor) -> Result<(), SensorFault> { Ok(()) }
 //! #     async fn switch_off(&self, _: hello::Sensor) {}
 //! #     async fn sample(&self, _: hello::Sensor) -> Result<Option<Reading>, SensorFault> { Ok(None) }
 //! # }
-//! # impl Actuator for Robot {
-//! #     type Id = hello::Action;
-//! #     async fn run(&self, _: hello::Action, _: &ActionIo<'_>) -> Outcome { Outcome::Success }
+//! # impl Actuator<Hello> for Robot {
+//! #     async fn run(&self, _: Act<'_, Hello>) -> Outcome { Outcome::Success }
 //! #     fn halt(&self, _: hello::Action) {}
 //! # }
 //! # impl Platform for Robot { type Mutex = psmpa_core::embassy_sync::blocking_mutex::raw::NoopRawMutex; }
@@ -36,20 +35,23 @@
 use core::future::Future;
 use core::ops::Deref;
 
+use core::convert::Infallible;
+
+use crate::facts::FactSetOf;
 use crate::planner::{Planner, Search};
 use crate::platform::{Actuator, Platform, Sensor};
+use crate::runtime::Runtime;
 use crate::runtime::control::{ControlError, Report, beside_sensing};
-use crate::runtime::engine::Engine;
-use crate::runtime::sensing::Sensing;
+use crate::spec::Mission;
 use crate::trace::TraceSink;
 
-/// The sensing side of a runtime ([`Engine::split`]): every sensor samples on its own schedule.
+/// The sensing side of a runtime ([`Runtime::split`]): every sensor samples on its own schedule.
 /// Place its [`run`](SensingSide::run) on an executor of higher priority than the deciding
-/// side, or beside it on one executor ([`Engine::run_with_sensing`]). Dereferences to the
+/// side, or beside it on one executor ([`Runtime::run_with_sensing`]). Dereferences to the
 /// runtime for what it knows (beliefs, stores, faults).
 pub struct SensingSide<'a, E>(&'a E);
 
-/// The deciding side of a runtime ([`Engine::split`]): Algorithm 1's control loop, the FSM,
+/// The deciding side of a runtime ([`Runtime::split`]): Algorithm 1's control loop, the FSM,
 /// the behaviours. Its runs take it mutably: one control loop at a time (run again once one
 /// ended). Dereferences to the runtime for what it knows (beliefs, stores, faults).
 pub struct DecidingSide<'a, E>(&'a E);
@@ -82,23 +84,23 @@ impl<E> Deref for DecidingSide<'_, E> {
     }
 }
 
-impl<
-    'r,
-    P: Platform + Sensor<W> + Actuator<W>,
-    T: TraceSink<W>,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-    const W: usize,
-    const NF: usize,
-> Engine<'r, P, T, NS, NA, NP, L, K, W, NF>
+impl<'r, M, P, T, const W: usize> Runtime<'r, M, P, T>
+where
+    M: Mission<Facts = FactSetOf<W>>,
+    P: Platform + Sensor<M> + Actuator<M>,
+    T: TraceSink<M>,
 {
     /// The two sides, each handed out once for as long as they are in use.
-    #[allow(clippy::type_complexity)]
     pub fn split(&mut self) -> (SensingSide<'_, Self>, DecidingSide<'_, Self>) {
         (SensingSide(self), DecidingSide(self))
+    }
+
+    /// The sensing side's samplers, built here, out of line, not in the first poll: the
+    /// temporaries of building them stay off the stack of whatever polls them (an interrupt,
+    /// on a microcontroller, on top of the deciding side's stack).
+    #[inline(never)]
+    pub(crate) fn sensing(&self) -> impl Future<Output = Infallible> + '_ {
+        self.mission.sensing(self)
     }
 
     /// Both sides on the executor that polls this future: the sensing side (polled first at
@@ -107,12 +109,12 @@ impl<
     /// loop's result. For a robot with one executor; with an interrupt executor, [`split`] the
     /// runtime and run the sensing side on it.
     ///
-    /// [`split`]: Engine::split
+    /// [`split`]: Runtime::split
     pub async fn run_with_sensing(&mut self) -> Result<Report<W>, ControlError<W>> {
         beside_sensing(self.sensing(), self.run()).await
     }
 
-    /// [`DecidingSide::run_planning`] beside the sensing side, as [`Engine::run_with_sensing`]
+    /// [`DecidingSide::run_planning`] beside the sensing side, as [`Runtime::run_with_sensing`]
     /// runs [`DecidingSide::run`].
     pub async fn run_planning_with_sensing<const N: usize>(
         &mut self,
@@ -123,49 +125,31 @@ impl<
     }
 }
 
-impl<
-    'a,
-    'r,
-    P: Platform + Sensor<W> + Actuator<W>,
-    T: TraceSink<W>,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-    const W: usize,
-    const NF: usize,
-> SensingSide<'a, Engine<'r, P, T, NS, NA, NP, L, K, W, NF>>
+impl<'r, M, P, T, const W: usize> SensingSide<'_, Runtime<'r, M, P, T>>
+where
+    M: Mission<Facts = FactSetOf<W>>,
+    P: Platform + Sensor<M> + Actuator<M>,
+    T: TraceSink<M>,
 {
     /// The samplers, one per sensor, all concurrent. Never ends; drop it to stop sensing.
     ///
-    /// The samplers are built here, out of line, not in the first poll: the temporaries of
-    /// building `NS` of them stay off the stack of whatever polls them (an interrupt, on a
-    /// microcontroller, on top of the deciding side's stack). Pin the result where it is made
-    /// (`pin!(sensing.run())`) and it is never copied again.
-    pub fn run(&mut self) -> Sensing<impl Future<Output = [(); NS]> + '_> {
+    /// The samplers are built here, out of line, not in the first poll. Pin the result where
+    /// it is made (`pin!(sensing.run())`) and it is never copied again.
+    pub fn run(&mut self) -> impl Future<Output = Infallible> + '_ {
         self.0.sensing()
     }
 }
 
-impl<
-    'a,
-    'r,
-    P: Platform + Sensor<W> + Actuator<W>,
-    T: TraceSink<W>,
-    const NS: usize,
-    const NA: usize,
-    const NP: usize,
-    const L: usize,
-    const K: usize,
-    const W: usize,
-    const NF: usize,
-> DecidingSide<'a, Engine<'r, P, T, NS, NA, NP, L, K, W, NF>>
+impl<'r, M, P, T, const W: usize> DecidingSide<'_, Runtime<'r, M, P, T>>
+where
+    M: Mission<Facts = FactSetOf<W>>,
+    P: Platform + Sensor<M> + Actuator<M>,
+    T: TraceSink<M>,
 {
     /// Algorithm 1 with plans from the library only: establishes the model, then selects and
     /// executes plans until the task's goal holds. Ends with an error, never a hang, when no
     /// plan applies, every applicable plan failed, or the failure or plan limit of the
-    /// [`Config`](crate::runtime::engine::Config) is reached.
+    /// [`Config`](crate::Config) is reached.
     pub fn run(&mut self) -> impl Future<Output = Result<Report<W>, ControlError<W>>> + '_ {
         self.0.run()
     }
@@ -173,7 +157,7 @@ impl<
     /// Algorithm 1 where `generatePlans` falls back on `planner` when no library plan applies,
     /// and plans again from the current beliefs after a failure. The search runs in `space`
     /// (keep it in a `static` on a microcontroller), in slices of
-    /// [`Config::plan_slice`](crate::runtime::engine::Config::plan_slice) nodes with a yield
+    /// [`Config::plan_slice`](crate::Config::plan_slice) nodes with a yield
     /// between two, so that on a cooperative executor it holds the deciding side's turn for one
     /// slice at a time.
     pub fn run_planning<'s, const N: usize>(

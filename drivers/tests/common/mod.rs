@@ -233,7 +233,7 @@ pub struct Run {
     /// How the mission ended.
     pub result: Result<Report, ControlError>,
     /// The runtime's trace.
-    pub trace: Recorder,
+    pub trace: Recorder<fetch_tea::FetchTea>,
     /// The sonar's trigger pin.
     pub trigger: RecordedPin,
     /// The bumper's pin (its reads).
@@ -274,7 +274,7 @@ pub fn run_with(world: World, settings: Settings) -> Run {
         settings,
     );
     let mut rt = FetchTeaRuntime::new(
-        &fetch_tea::MISSION,
+        fetch_tea::FetchTea,
         &robot,
         Recorder::default(),
         Config::default(),
@@ -294,22 +294,19 @@ pub fn run_with(world: World, settings: Settings) -> Run {
 
 /// The id of the mission's sensor `name`.
 pub fn sensor(name: &str) -> SensorId {
-    fetch_tea::MISSION.domain.sensor_id(name).expect("a sensor")
+    fetch_tea::TABLES.domain.sensor_id(name).expect("a sensor")
 }
 
 /// The id of the mission's action `name`.
 pub fn action(name: &str) -> ActionId {
-    fetch_tea::MISSION
-        .domain
-        .action_id(name)
-        .expect("an action")
+    fetch_tea::TABLES.domain.action_id(name).expect("an action")
 }
 
 impl Run {
     /// The samples of `sensor`: their instants and values.
     pub fn samples(&self, of: SensorId) -> Vec<(Instant, psmpa_core::Value)> {
         self.trace
-            .0
+            .events
             .iter()
             .filter_map(|(at, e)| match *e {
                 TraceEvent::Sample { sensor, value, .. } if sensor == of => Some((*at, value)),

@@ -19,11 +19,11 @@ use core::cell::Cell;
 
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant, Timer};
-use psmpa_core::{ActionIo, Actuator, Outcome, Platform, Reading, Sensor, SensorFault, Value};
+use psmpa_core::{Act, Actuator, Beside, Outcome, Platform, Reading, Sensor, SensorFault, Value};
 
-// The mission, checked and built when the crate builds: its sensors, actions and plans as
-// enums, its capacities, its runtime type. 4 keys per data store (the readings' pairs).
-psmpa_core::include_mission!(pub mod dock = "mission.json", keys = 4);
+// The mission, checked and built when the crate builds: its type (`dock::Dock`), its sensors,
+// actions and plans as enums and types, its plans as code, a sampler per sensor.
+psmpa_core::include_mission!(pub mod dock = "mission.json");
 
 /// The dock robot's runtime, tracing into `T`.
 pub type DockRuntime<'r, T = ()> = dock::Runtime<'r, Dock<'r>, T>;
@@ -141,9 +141,7 @@ pub struct Dock<'y> {
     pub yard: &'y Yard,
 }
 
-impl Sensor for Dock<'_> {
-    type Id = dock::Sensor;
-
+impl Sensor<dock::Dock> for Dock<'_> {
     async fn switch_on(&self, _: dock::Sensor) -> Result<(), SensorFault> {
         Ok(())
     }
@@ -171,8 +169,12 @@ impl Sensor for Dock<'_> {
 }
 
 impl Dock<'_> {
-    /// Drives to `NEAR_MM` before the dock at `speed`, braking while the precondition is false.
-    async fn approach(&self, io: &ActionIo<'_>, speed: i32) -> Outcome {
+    /// Drives to `NEAR_MM` before the dock at `speed`, braking while the precondition is false:
+    /// "drive" or "creep", each beside the time-of-flight ranger and the cliff sensor.
+    async fn approach<A>(&self, io: &dock::Io<'_, A>, speed: i32) -> Outcome
+    where
+        A: Beside<dock::sensor::Tof> + Beside<dock::sensor::Cliff>,
+    {
         let yard = self.yard;
         let mut version = io.version();
         loop {
@@ -199,18 +201,16 @@ impl Dock<'_> {
     }
 }
 
-impl Actuator for Dock<'_> {
-    type Id = dock::Action;
-
-    async fn run(&self, action: dock::Action, io: &ActionIo<'_>) -> Outcome {
-        match action {
-            dock::Action::Drive => self.approach(io, DRIVE_MM_S).await,
-            dock::Action::Creep => self.approach(io, CREEP_MM_S).await,
-            dock::Action::Align => {
+impl Actuator<dock::Dock> for Dock<'_> {
+    async fn run(&self, act: Act<'_, dock::Dock>) -> Outcome {
+        match act.typed() {
+            dock::Run::Drive(io) => self.approach(&io, DRIVE_MM_S).await,
+            dock::Run::Creep(io) => self.approach(&io, CREEP_MM_S).await,
+            dock::Run::Align(_) => {
                 Timer::after(Duration::from_millis(500)).await;
                 Outcome::Success
             }
-            dock::Action::Connect => {
+            dock::Run::Connect(_) => {
                 Timer::after(Duration::from_millis(300)).await;
                 Outcome::Success
             }

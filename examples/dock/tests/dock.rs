@@ -2,7 +2,7 @@
 
 use embassy_time::Duration;
 use psmpa_core::{Config, ControlError, Report, SensorSet, TraceEvent};
-use psmpa_dock::dock::{Action, MISSION, Plan, Sensor};
+use psmpa_dock::dock::{Action, Plan, Sensor};
 use psmpa_dock::{DOCK_MM, Dock, DockRuntime, NEAR_MM, TOF_LATENCY, Yard};
 use psmpa_testkit::{Recorder, simulate};
 
@@ -10,9 +10,19 @@ const LIMIT: Duration = Duration::from_secs(120);
 const TOF_PERIOD_MS: u64 = 100;
 
 /// Runs the mission in `yard`: how it ended, and the trace.
-fn run(yard: &Yard) -> (Result<Report, ControlError>, Recorder) {
+fn run(
+    yard: &Yard,
+) -> (
+    Result<Report, ControlError>,
+    Recorder<psmpa_dock::dock::Dock>,
+) {
     let dock = Dock { yard };
-    let mut rt = DockRuntime::new(&MISSION, &dock, Recorder::default(), Config::default());
+    let mut rt = DockRuntime::new(
+        psmpa_dock::dock::Dock,
+        &dock,
+        Recorder::default(),
+        Config::default(),
+    );
     let done = simulate(rt.run_with_sensing(), LIMIT).unwrap();
     (done.output, rt.into_sink())
 }
@@ -45,7 +55,7 @@ fn a_box_stops_the_drive_within_one_ranger_period_and_the_robot_docks_after_it()
     let violated = trace
         .first(|e| {
             matches!(e, TraceEvent::PreconditionViolated { .. })
-                && e.action() == Some(Action::Drive)
+                && e.action() == Some(Action::Drive.id())
         })
         .unwrap()
         .as_millis();
@@ -108,11 +118,11 @@ fn each_state_runs_exactly_the_sensors_its_precondition_needs() {
     let mut on = SensorSet::EMPTY;
     let mut needed = SensorSet::EMPTY;
     let model = trace
-        .0
+        .events
         .iter()
         .position(|(_, e)| matches!(e, TraceEvent::ModelEstablished { .. }))
         .unwrap();
-    for (at, e) in &trace.0[model..] {
+    for (at, e) in &trace.events[model..] {
         match *e {
             TraceEvent::StateEntered { sensors, .. } => needed = sensors,
             TraceEvent::StateLeft { .. } => needed = SensorSet::EMPTY,

@@ -11,7 +11,7 @@ fn the_kit_runs_a_mission_at_the_crates_own_tick_rate() {
     let yard = Yard::new().with_box(2_000, 3_000);
     let dock = Dock { yard: &yard };
     let mut rt = DockRuntime::new(
-        &psmpa_dock::dock::MISSION,
+        psmpa_dock::dock::Dock,
         &dock,
         Recorder::default(),
         Config::default(),
@@ -46,8 +46,8 @@ fn a_mission_compiled_in_is_the_loaded_one_at_this_tick_rate() {
         { dock::W },
         { dock::NF },
     > = load(include_bytes!("../../dock/mission.json"), &AnyBehaviour).unwrap();
-    assert_eq!(loaded.mission, dock::MISSION);
+    assert_eq!(loaded.mission, dock::TABLES);
     let tof = dock::Sensor::Tof;
-    let spec = dock::MISSION.domain.sensor(tof.id()).unwrap();
+    let spec = dock::TABLES.domain.sensor(tof.id()).unwrap();
     assert_eq!(spec.name, "tof");
 }

@@ -29,7 +29,7 @@ mod product {
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_time::{Instant, Timer};
     use psmpa_core::{
-        ActionIo, Actuator, Config, Outcome, Platform, Reading, Sensor, SensorFault, Value,
+        Act, Actuator, Config, Outcome, Platform, Reading, Sensor, SensorFault, Value,
     };
     use psmpa_core::{DecidingSide, SensingSide};
     use psmpa_firmware::board::{exit, fail, guard_stack, stack_high_water};
@@ -43,9 +43,7 @@ mod product {
     /// await its device, a stub awaits a timer of the device's time.
     struct Stubs;
 
-    impl Sensor for Stubs {
-        type Id = fetch_tea::Sensor;
-
+    impl Sensor<fetch_tea::FetchTea> for Stubs {
         async fn switch_on(&self, _sensor: fetch_tea::Sensor) -> Result<(), SensorFault> {
             Ok(())
         }
@@ -70,20 +68,21 @@ mod product {
         type Mutex = CriticalSectionRawMutex;
     }
 
-    impl Actuator for Stubs {
-        type Id = fetch_tea::Action;
+    impl Actuator<fetch_tea::FetchTea> for Stubs {
         fn halt(&self, _: fetch_tea::Action) {} // nothing to stop
 
-        async fn run(&self, action: fetch_tea::Action, io: &ActionIo<'_>) -> Outcome {
+        async fn run(&self, act: Act<'_, fetch_tea::FetchTea>) -> Outcome {
             use fetch_tea::Action::{
                 EnterByBackDoor, EnterKitchen, GoToBackDoor, GoToDoor, OpenBackDoor, OpenDoor,
             };
-            let steps = match action {
+            let steps = match act.action() {
                 GoToDoor | GoToBackDoor => 20,
                 OpenDoor | OpenBackDoor => 5,
                 EnterKitchen | EnterByBackDoor => 10,
             };
-            // 100 ms a step; a step does not start while the precondition is false.
+            // 100 ms a step; a step does not start while the precondition is false. (Every
+            // action's I/O alike: the stubs read no sensor.)
+            let io = act.untyped();
             for _ in 0..steps {
                 if io.violation().is_some() {
                     return Outcome::Interrupted;
@@ -160,7 +159,7 @@ mod product {
             overflow(u32::MAX);
         }
         runtime.write(ProductRuntime::new(
-            &fetch_tea::MISSION,
+            fetch_tea::FetchTea,
             &Stubs,
             (),
             Config::default(),

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use psmpa_core::mission::{self, AnyBehaviour};
 use psmpa_core::planner::{Planner, PlanningError, Strategy};
-use psmpa_core::{Fsm, Mission, PlanId, SensorSet, Target};
+use psmpa_core::{Fsm, PlanId, SensorSet, Tables, Target};
 
 use crate::json;
 use crate::robot::{self, NaoAction, NaoRegistry, NaoSensor};
@@ -43,7 +43,7 @@ fn target(t: Target) -> String {
 
 /// The report of a valid mission, and its Graphviz graph.
 pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usize>(
-    m: &Mission<'_, NS, NA, NP, L>,
+    m: &Tables<'_, NS, NA, NP, L>,
 ) -> (String, String) {
     let d = &m.domain;
     let mut out = String::new();
@@ -91,9 +91,9 @@ pub fn describe<const NS: usize, const NA: usize, const NP: usize, const L: usiz
             dot,
             "    p{i}_done [label=\"done\", shape=doublecircle];\n    p{i}_failed [label=\"failed\", shape=circle, color=red];"
         );
-        match Fsm::<L>::compile(id, plan, d) {
+        match Fsm::compile(id, &plan.body, d.actions()) {
             Ok(fsm) => {
-                for (k, state) in fsm.states().iter().enumerate() {
+                for (k, state) in fsm.states(d.actions(), d.sensors()).enumerate() {
                     let action = d.action(state.action).map_or("?", |a| a.name);
                     let par = sensors(d, state.sensors);
                     let kind = if state.is_parallel() {
@@ -204,7 +204,7 @@ pub type Checked = (String, String, Vec<String>);
 /// unreachable.
 fn reachable_then_describe<const NS: usize, const NA: usize, const NP: usize, const L: usize>(
     file: &Path,
-    m: &Mission<'_, NS, NA, NP, L>,
+    m: &Tables<'_, NS, NA, NP, L>,
 ) -> Result<Checked, String> {
     match unreachable_goal(m) {
         Some(why) => Err(format!("{}: {why}", file.display())),

@@ -25,7 +25,7 @@ fn secs(ms: u64) -> f64 {
     ms as f64 / 1000.0
 }
 
-/// A core trace event in words, with the mission's names (the core's [`psmpa_core::Mission::describe`]),
+/// A core trace event in words, with the mission's names (the core's [`psmpa_core::Describe::describe`]),
 /// and the robot's own events spelled out.
 pub fn describe(mission: &FetchTea<'_>, e: &TraceEvent) -> String {
     match *e {
@@ -726,7 +726,7 @@ impl WorldLog for WorldStream<'_> {
 /// The runtime's side of [`Streams`].
 pub struct TraceStream<'a>(pub &'a RefCell<Streams>);
 
-impl TraceSink for TraceStream<'_> {
+impl<Ms: psmpa_core::Mission<Facts = psmpa_core::FactSet>> TraceSink<Ms> for TraceStream<'_> {
     fn record(&mut self, at: Instant, event: &TraceEvent) {
         let mut s = self.0.borrow_mut();
         if let Some(csv) = &mut s.csv {
@@ -739,7 +739,7 @@ impl TraceSink for TraceStream<'_> {
             log.runtime(at, event);
         }
         if let Some(record) = &mut s.record {
-            record.record(at, event);
+            TraceSink::<Ms>::record(record, at, event);
         }
     }
 }

@@ -119,7 +119,7 @@ pub fn ending(e: &Ending, scenario: &Scenario) -> String {
         Ending::Error(e) => match crate::robot::fetch_tea(scenario) {
             Ok(robot) => format!(
                 "the control loop gave up: {}",
-                robot.mission.describe_error(*e)
+                (&robot.mission).describe_error(*e)
             ),
             Err(_) => format!("the control loop gave up: {e:?}"),
         },

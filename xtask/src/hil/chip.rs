@@ -108,7 +108,11 @@ mod tests {
             } else {
                 TraceEvent::SensorOff { sensor: sonar }
             };
-            TraceSink::<1>::record(&mut rec, Instant::from_micros(us), &e);
+            TraceSink::<psmpa_drivers::robot::fetch_tea::FetchTea>::record(
+                &mut rec,
+                Instant::from_micros(us),
+                &e,
+            );
         }
         let lines = rec.into_inner().0;
         let mut chip = ChipRecording::default();
