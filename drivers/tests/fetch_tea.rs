@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{Run, Wheeling, World, action, echo_ms, run, run_with, sensor};
+use common::{Run, Wheeling, World, action, echo_ms, run, run_config, run_with, sensor};
 use embassy_time::{Duration, Instant};
 use psmpa_core::{Config, ControlError, Outcome, SensorFault, TraceEvent, Value};
 use psmpa_drivers::hcsr04::{Hcsr04Error, PULSE_LIMIT, RISE_TIMEOUT, Range};
@@ -493,4 +493,45 @@ fn each_outcome_of_a_sonar_read_becomes_a_sample_a_lost_sample_or_a_fault() {
 fn the_robot_is_sync_so_its_runtime_can_serve_two_priorities() {
     fn sync<T: Sync>() {}
     sync::<common::TestRobot>();
+}
+
+/// Algorithm 2 at build time against Algorithm 2 at run time: the mission's plan as code and
+/// through the run-time FSM give the robot the same run, event by event, in worlds that take
+/// each of its edges (a clear path, a bump, a near obstacle, a silent sonar, a locked door).
+#[test]
+fn the_plan_as_code_and_through_the_run_time_fsm_run_alike() {
+    let worlds: [fn() -> World; 5] = [
+        World::clear,
+        || World {
+            bumper: [chatter(3_000, 11, false), chatter(4_000, 5, true)].concat(),
+            ..World::clear()
+        },
+        || World {
+            // Something within the clearance from 2 s to 3 s.
+            echo: std::sync::Arc::new(|at: Instant| {
+                let near = (2_000..3_000).contains(&at.as_millis());
+                Some(Duration::from_millis(if near { 1 } else { 6 }))
+            }),
+            ..World::clear()
+        },
+        || World {
+            echo: std::sync::Arc::new(|_| None),
+            ..World::clear()
+        },
+        || World {
+            unlocked: false,
+            ..World::clear()
+        },
+    ];
+    for (i, world) in worlds.iter().enumerate() {
+        let with = |plans| {
+            let mut config = psmpa_core::Config::default();
+            config.plans = plans;
+            let run = run_config(world(), Settings::DEFAULT, config);
+            (run.result, run.trace.events)
+        };
+        let compiled = with(psmpa_core::Plans::Compiled);
+        assert!(compiled.1.len() > 10, "world {i}: a run");
+        assert_eq!(compiled, with(psmpa_core::Plans::RunTime), "world {i}");
+    }
 }

@@ -11,7 +11,7 @@
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, Timer};
-use psmpa_core::{ControlError, DecidingSide, Report, TraceSink};
+use psmpa_core::{ControlError, DecidingSide, FactSet, Mission, Report, Runtime, TraceSink};
 
 use crate::robot::{self, Arch};
 use crate::scenario::Scenario;
@@ -53,12 +53,18 @@ pub struct Summary {
 /// the host's poll loop (`simulate_split`), or a task on the firmware's interrupt executor.
 /// The run starts at the current instant; the host and the firmware start it at tick 0 so
 /// their traces agree.
-pub async fn decide<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>, M: RawMutex>(
-    deciding: &mut DecidingSide<'_, robot::NaoRuntime<'_, '_, '_, L, T, M>>,
+pub async fn decide<Ms, L, T, M>(
+    deciding: &mut DecidingSide<'_, Runtime<'_, Ms, robot::Nao<'_, '_, L, M>, T>>,
     world: &World<'_, L, M>,
     scenario: &Scenario,
     space: &mut robot::PlannerSpace,
-) -> (Ending, u64) {
+) -> (Ending, u64)
+where
+    Ms: Mission<Facts = FactSet>,
+    L: WorldLog,
+    T: TraceSink<Ms>,
+    M: RawMutex,
+{
     let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
     let ending = match select(deciding.run_planning(&robot::PLANNER, space), deadline).await {
         Either::First(Ok(report)) => Ending::Goal(report),
@@ -73,12 +79,18 @@ pub async fn decide<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>, M: Raw
 
 /// The summary of a run under `arch` that ended with `ending` at `time_cost_ms`
 /// ([`decide`]), from its world and its runtime.
-pub fn summary<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>, M: RawMutex>(
+pub fn summary<Ms, L, T, M>(
     arch: Arch,
     world: &World<'_, L, M>,
-    runtime: &robot::NaoRuntime<'_, '_, '_, L, T, M>,
+    runtime: &Runtime<'_, Ms, robot::Nao<'_, '_, L, M>, T>,
     (ending, time_cost_ms): (Ending, u64),
-) -> Summary {
+) -> Summary
+where
+    Ms: Mission<Facts = FactSet>,
+    L: WorldLog,
+    T: TraceSink<Ms>,
+    M: RawMutex,
+{
     Summary {
         arch,
         tally: world.tally(),

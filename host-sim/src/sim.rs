@@ -147,3 +147,47 @@ pub fn run_recorded(scenario: &Scenario, arch: Arch) -> Result<Recorded, RunErro
         trace,
     })
 }
+
+/// Which of the runtime's paths a run takes through its plans ([`run_on`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlanPath {
+    /// The mission loaded from its file at run time, its plans through the run-time FSM (what
+    /// every other command runs).
+    Loaded,
+    /// The same file compiled in (the boards' `fetch_tea`), its plans as code: Algorithm 2 at
+    /// build time, each sensor's own sampler.
+    Compiled,
+    /// The same file compiled in, its plans through the run-time FSM.
+    CompiledRunTime,
+}
+
+/// Runs `scenario` under `arch` along `path`, with nothing recorded but the trace's hash: the
+/// three paths of one mission give one trace (`host-sim/tests/differential.rs`).
+pub fn run_on(scenario: &Scenario, arch: Arch, path: PlanPath) -> Result<Summary, RunError> {
+    use psmpa_drivers::robot::fetch_tea;
+    let plans = match path {
+        PlanPath::Loaded => return run_summary(scenario, arch),
+        PlanPath::Compiled => psmpa_core::Plans::Compiled,
+        PlanPath::CompiledRunTime => psmpa_core::Plans::RunTime,
+    };
+    let limit = Duration::from_millis(scenario.max_ms) + SLACK;
+    let robot = fetch_tea(scenario).map_err(RunError::Mission)?;
+    let mut space = robot::PlannerSpace::new();
+    let world: World<'_, ()> = World::new(scenario, ());
+    let nao = robot::Nao::new(&world, &robot);
+    let mut config = robot::config(scenario, arch);
+    config.plans = plans;
+    let mut runtime =
+        fetch_tea::Runtime::new(fetch_tea::FetchTea, &nao, psmpa_core::Hashing, config);
+    // The scenario's periods, as the loaded mission takes them.
+    for (sensor, ms) in [
+        (fetch_tea::Sensor::Sonar, scenario.sonar.period_ms),
+        (fetch_tea::Sensor::Bumper, scenario.bumper_period_ms),
+    ] {
+        runtime.set_period(sensor, Some(Duration::from_millis(ms)));
+    }
+    let (mut sensing, mut deciding) = runtime.split();
+    let decided = decide(&mut deciding, &world, scenario, &mut space);
+    let done = simulate_split(sensing.run(), decided, limit).map_err(RunError::Sim)?;
+    Ok(summary(arch, &world, &runtime, done.output))
+}

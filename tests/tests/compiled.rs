@@ -294,3 +294,41 @@ fn a_description_reaches_its_variant_and_loads_at_run_time() {
     > = psmpa_core::mission::load(json, &psmpa_core::mission::AnyBehaviour).unwrap();
     assert_eq!(loaded.mission.domain, described::TABLES.domain);
 }
+
+/// Algorithm 2 at build time against Algorithm 2 at run time, for the compiled missions of
+/// these tests: the plans as code and through the run-time FSM give one trace.
+#[test]
+fn the_plans_as_code_and_through_the_run_time_fsm_run_alike() {
+    fn both<M, P>(
+        mission: M,
+        platform: &P,
+    ) -> [Vec<(embassy_time::Instant, psmpa_core::TraceEvent)>; 2]
+    where
+        M: psmpa_core::Mission<Facts = psmpa_core::FactSet> + Copy,
+        P: psmpa_core::Platform + psmpa_core::Sensor<M> + psmpa_core::Actuator<M>,
+    {
+        [psmpa_core::Plans::Compiled, psmpa_core::Plans::RunTime].map(|plans| {
+            let mut config = psmpa_core::Config::default();
+            config.plans = plans;
+            let mut rt = psmpa_core::Runtime::new(
+                mission,
+                platform,
+                psmpa_testkit::Recorder::<M>::default(),
+                config,
+            );
+            let done = psmpa_testkit::simulate(
+                rt.run_with_sensing(),
+                embassy_time::Duration::from_secs(10),
+            )
+            .unwrap();
+            assert!(done.output.is_ok());
+            rt.into_sink().events
+        })
+    }
+    let [code, fsm] = both(dock::Dock, &DockOnly);
+    assert!(code.len() > 10);
+    assert_eq!(code, fsm);
+    let [code, fsm] = both(blind::Blind, &Blind);
+    assert!(code.len() > 3);
+    assert_eq!(code, fsm);
+}

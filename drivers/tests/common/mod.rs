@@ -256,6 +256,12 @@ pub fn run(world: World) -> Run {
 
 /// Runs the Fetch Tea mission on the robot in `world`, calibrated with `settings`.
 pub fn run_with(world: World, settings: Settings) -> Run {
+    run_config(world, settings, Config::default())
+}
+
+/// Runs the Fetch Tea mission on the robot in `world`, calibrated with `settings`, the
+/// runtime set up by `config`.
+pub fn run_config(world: World, settings: Settings, config: Config) -> Run {
     let trigger = RecordedPin::new();
     let bumper = ScriptedPin::new(true, &world.bumper);
     let (left, right, standby) = (Wheel::new(), Wheel::new(), RecordedPin::new());
@@ -273,12 +279,7 @@ pub fn run_with(world: World, settings: Settings) -> Run {
         },
         settings,
     );
-    let mut rt = FetchTeaRuntime::new(
-        fetch_tea::FetchTea,
-        &robot,
-        Recorder::default(),
-        Config::default(),
-    );
+    let mut rt = FetchTeaRuntime::new(fetch_tea::FetchTea, &robot, Recorder::default(), config);
     let (mut sensing, mut deciding) = rt.split();
     let done = simulate_split(sensing.run(), deciding.run(), LIMIT).expect("the run ends in time");
     Run {

@@ -143,3 +143,30 @@ fn each_state_runs_exactly_the_sensors_its_precondition_needs() {
         );
     }
 }
+
+/// Algorithm 2 at build time against Algorithm 2 at run time: the mission's plans as code and
+/// through the run-time FSM give the same run, event by event, in every yard of these tests.
+#[test]
+fn the_plans_as_code_and_through_the_run_time_fsm_run_alike() {
+    let yards: [fn() -> Yard; 4] = [
+        Yard::new,
+        || Yard::new().with_battery(20),
+        || Yard::new().with_box(2_000, 4_000),
+        || Yard::new().with_cliff(1_500),
+    ];
+    for (i, yard) in yards.iter().enumerate() {
+        let with = |plans| {
+            let yard = yard();
+            let dock = Dock { yard: &yard };
+            let mut config = Config::default();
+            config.plans = plans;
+            let mut rt =
+                DockRuntime::new(psmpa_dock::dock::Dock, &dock, Recorder::default(), config);
+            let done = simulate(rt.run_with_sensing(), LIMIT).unwrap();
+            (done.output, rt.into_sink().events)
+        };
+        let compiled = with(psmpa_core::Plans::Compiled);
+        assert!(compiled.1.len() > 10, "yard {i}: a run");
+        assert_eq!(compiled, with(psmpa_core::Plans::RunTime), "yard {i}");
+    }
+}

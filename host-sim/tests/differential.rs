@@ -1,0 +1,62 @@
+//! Algorithm 2 at build time against Algorithm 2 at run time: every shipped scenario, and a
+//! hundred random ones (`psmpa-sim sweep`'s), under both architectures, along the three paths
+//! of the Fetch Tea mission (the file loaded at run time with its run-time FSM, the file
+//! compiled in with its plans as code and a sampler per sensor, the file compiled in with its
+//! plans through the run-time FSM): the same trace, event by event (its hash), and the same
+//! outcome.
+
+mod common;
+
+use psmpa_sim::cli::sweep;
+use psmpa_sim::load::load;
+use psmpa_sim::robot::Arch;
+use psmpa_sim::sim::{PlanPath, run_on};
+use rayon::prelude::*;
+
+fn same_on_every_path(name: &str, scenario: &psmpa_sim::scenario::Scenario) {
+    for arch in Arch::ALL {
+        let loaded = run_on(scenario, arch, PlanPath::Loaded).unwrap();
+        for path in [PlanPath::Compiled, PlanPath::CompiledRunTime] {
+            let other = run_on(scenario, arch, path).unwrap();
+            assert_eq!(
+                (other.trace_hash, other.trace_events),
+                (loaded.trace_hash, loaded.trace_events),
+                "{name} {} along {path:?}: another trace than the loaded mission's",
+                arch.name()
+            );
+            assert_eq!(other, loaded, "{name} {} along {path:?}", arch.name());
+        }
+    }
+}
+
+#[test]
+fn every_shipped_scenario_runs_alike_on_the_three_paths() {
+    let names: Vec<String> = common::names_in(&common::repo("scenarios"))
+        .into_iter()
+        .filter(|n| n.ends_with(".json"))
+        .collect();
+    assert!(names.len() >= 15, "the shipped scenarios are missing");
+    names.par_iter().for_each(|name| {
+        let scenario = load(&common::repo("scenarios").join(name)).unwrap();
+        same_on_every_path(name, &scenario);
+    });
+}
+
+#[test]
+fn random_scenarios_run_alike_on_the_three_paths() {
+    (0..100u64).into_par_iter().for_each(|i| {
+        let scenario = sweep::scenario(55, i);
+        same_on_every_path(&format!("sweep scenario {i}"), &scenario);
+    });
+}
+
+/// The comparison can fail: another run (the sonar's period 50 ms longer) along the compiled
+/// path gives another trace.
+#[test]
+fn another_run_gives_another_trace() {
+    let mut scenario = load(&common::repo("scenarios/sonar-6.json")).unwrap();
+    let loaded = run_on(&scenario, Arch::PSmpa, PlanPath::Loaded).unwrap();
+    scenario.sonar.period_ms += 50;
+    let other = run_on(&scenario, Arch::PSmpa, PlanPath::Compiled).unwrap();
+    assert_ne!(other.trace_hash, loaded.trace_hash);
+}
