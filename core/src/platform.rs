@@ -28,7 +28,9 @@ pub struct Reading<const W: usize = 1> {
     /// The facts of `per(s)` that hold according to this sample; the facts of `per(s)` not in
     /// `holds` are false. Facts outside `per(s)` are ignored.
     pub holds: FactSetOf<W>,
-    pairs: [Option<(Key, Value)>; MAX_PAIRS],
+    /// The pairs, the first `len` of them.
+    pairs: [(Key, Value); MAX_PAIRS],
+    len: u8,
 }
 
 /// [`Reading::put`] found no room, or was given [`SAMPLE_KEY`]: the pair is handed back.
@@ -47,7 +49,8 @@ impl<const W: usize> Reading<W> {
         Self {
             value,
             holds,
-            pairs: [None; MAX_PAIRS],
+            pairs: [(SAMPLE_KEY, Value::NoEcho); MAX_PAIRS],
+            len: 0,
         }
     }
 
@@ -62,12 +65,14 @@ impl<const W: usize> Reading<W> {
         if key == SAMPLE_KEY {
             return Err(rejected);
         }
-        let slot = self
-            .pairs
-            .iter_mut()
-            .find(|p| p.is_none_or(|(k, _)| k == key))
-            .ok_or(rejected)?;
-        *slot = Some((key, value));
+        let len = usize::from(self.len);
+        if let Some(pair) = self.pairs.iter_mut().take(len).find(|(k, _)| *k == key) {
+            pair.1 = value;
+            return Ok(());
+        }
+        let slot = self.pairs.get_mut(len).ok_or(rejected)?;
+        *slot = (key, value);
+        self.len = self.len.saturating_add(1);
         Ok(())
     }
 
@@ -96,7 +101,7 @@ impl<const W: usize> Reading<W> {
 
     /// The pairs besides the main value, in the order they were added.
     pub fn pairs(&self) -> impl Iterator<Item = (Key, Value)> + '_ {
-        self.pairs.iter().flatten().copied()
+        self.pairs.iter().take(usize::from(self.len)).copied()
     }
 }
 

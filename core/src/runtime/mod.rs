@@ -409,7 +409,13 @@ where
     }
 
     fn violation(&self) -> Option<Violation<W>> {
-        self.shared().lock(|s| s.violation.get())
+        self.shared().lock(|s| {
+            if s.alert.get() {
+                s.violation.get()
+            } else {
+                None
+            }
+        })
     }
 
     fn version(&self) -> u32 {

@@ -370,7 +370,7 @@ where
 
     fn mark_ready(&self, sensor: SensorId, epoch: u32) {
         self.shared().lock(|s| {
-            let current = s.command.get().epoch == epoch && !s.ready.get().contains(sensor);
+            let current = s.epoch.get() == epoch && !s.ready.get().contains(sensor);
             if current {
                 s.ready.set(s.ready.get().with(sensor));
                 s.notify();
@@ -497,8 +497,8 @@ where
     /// pending or the command is over.
     fn report(&self, failure: Failure<W>, epoch: u32) {
         self.shared().lock(|s| {
-            if s.command.get().epoch == epoch && s.failure.get().is_none() {
-                s.failure.set(Some((epoch, failure)));
+            if s.epoch.get() == epoch && s.failure.get().is_none() {
+                s.set_failure(Some((epoch, failure)));
             }
             s.notify();
         });
@@ -586,7 +586,7 @@ fn check<const W: usize, S: AsRef<[PerSensor<FactSetOf<W>>]>>(
     s: &Shared<FactSetOf<W>, S>,
     table: &[SensorAction<'_, W>],
 ) -> Option<Change<W>> {
-    let (action, pre) = s.command.get().watch?;
+    let (action, pre) = s.watch.get()?;
     let missing = pre.difference(s.beliefs.get());
     // Nearly every sample: the precondition holds and held. Decided here, in the caller.
     if missing.is_empty() && s.violation.get().is_none() {
@@ -643,7 +643,7 @@ fn check_changed<const W: usize, S: AsRef<[PerSensor<FactSetOf<W>>]>>(
             })
         }
     };
-    s.violation.set(after);
+    s.set_violation(after);
     Some((action, before, after))
 }
 

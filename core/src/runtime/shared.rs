@@ -44,6 +44,10 @@ impl<const W: usize> Watch<FactSetOf<W>> {
             if register {
                 s.deciding.register(cx.waker());
             }
+            // Nearly every step: nothing wrong.
+            if !s.alert.get() {
+                return Ok(None);
+            }
             match s.failure.get() {
                 Some((e, failure)) if e == epoch => Err(failure),
                 _ => Ok(s.violation.get()),
@@ -52,7 +56,9 @@ impl<const W: usize> Watch<FactSetOf<W>> {
         let violation = match seen {
             Err(failure) => return Poll::Ready(failure),
             Ok(None) => {
-                self.alarm = None;
+                if self.alarm.is_some() {
+                    self.alarm = None;
+                }
                 return Poll::Pending;
             }
             Ok(Some(v)) => v,

@@ -96,12 +96,12 @@ where
                 epoch,
                 sensors,
                 mode,
-                watch,
                 start,
             });
+            s.watch.set(watch);
             s.epoch.set(epoch);
             s.ready.set(SensorSet::EMPTY);
-            s.failure.set(None);
+            s.set_failure(None);
             s.sensing.wake();
             epoch
         })
@@ -279,7 +279,7 @@ where
         });
         let result = self.run_action(state).await;
         self.shared().lock(|s| {
-            s.violation.set(None);
+            s.set_violation(None);
             s.requests.set(SensorSet::EMPTY);
         });
         let (outcome, result) = match result {

@@ -74,13 +74,11 @@ impl<Mx: RawMutex, const NS: usize, const NA: usize, const K: usize, const W: us
 
 /// What the deciding side asks of the sensing side: the sensors to run and how.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Command<F> {
+pub(crate) struct Command {
     /// Moves on with every command; a sampler serves one epoch at a time.
     pub(crate) epoch: u32,
     pub(crate) sensors: SensorSet,
     pub(crate) mode: Mode,
-    /// The running action and its precondition, checked after every sample.
-    pub(crate) watch: Option<(ActionId, F)>,
     /// Cyclic sensors are due at this instant first.
     pub(crate) start: Instant,
 }
@@ -146,9 +144,16 @@ pub struct Shared<F: Width, S> {
     /// Sensors that failed: out of service until [`Runtime::clear_faults`](crate::Runtime::clear_faults).
     pub(crate) faulty: Cell<SensorSet>,
     pub(crate) violation: Cell<Option<F::Violation>>,
+    /// Whether a violation or a failure is set ([`set_violation`](Self::set_violation),
+    /// [`set_failure`](Self::set_failure)): what the deciding side looks at first, at every
+    /// step, instead of copying either out.
+    pub(crate) alert: Cell<bool>,
     pub(crate) requests: Cell<SensorSet>,
     pub(crate) version: Cell<u32>,
-    pub(crate) command: Cell<Command<F>>,
+    pub(crate) command: Cell<Command>,
+    /// The running action and its precondition, checked after every sample (the command's,
+    /// apart: a sample reads it alone).
+    pub(crate) watch: Cell<Option<(ActionId, F)>>,
     /// The command's epoch, apart: samplers read it at every await.
     pub(crate) epoch: Cell<u32>,
     /// Sensors of the current command that are on and have taken the samples due at its start.
@@ -175,15 +180,16 @@ impl<const W: usize, S> Shared<FactSetOf<W>, S> {
             sensed: Cell::new(FactSetOf::EMPTY),
             faulty: Cell::new(SensorSet::EMPTY),
             violation: Cell::new(None),
+            alert: Cell::new(false),
             requests: Cell::new(SensorSet::EMPTY),
             version: Cell::new(0),
             command: Cell::new(Command {
                 epoch: 0,
                 sensors: SensorSet::EMPTY,
                 mode: Mode::Parallel,
-                watch: None,
                 start: Instant::from_ticks(0),
             }),
+            watch: Cell::new(None),
             epoch: Cell::new(0),
             ready: Cell::new(SensorSet::EMPTY),
             active: Cell::new(SensorSet::EMPTY),
@@ -196,6 +202,20 @@ impl<const W: usize, S> Shared<FactSetOf<W>, S> {
 }
 
 impl<F: Width, S> Shared<F, S> {
+    /// Sets the running action's violation.
+    pub(crate) fn set_violation(&self, violation: Option<F::Violation>) {
+        self.violation.set(violation);
+        self.alert
+            .set(violation.is_some() || self.failure.get().is_some());
+    }
+
+    /// Sets the failure the sensing side reports under a command.
+    pub(crate) fn set_failure(&self, failure: Option<(u32, F::Failure)>) {
+        self.failure.set(failure);
+        self.alert
+            .set(failure.is_some() || self.violation.get().is_some());
+    }
+
     /// Something the deciding side may wait for changed: bump the version and wake it.
     pub(crate) fn notify(&self) {
         self.version.set(self.version.get().wrapping_add(1));
