@@ -419,7 +419,7 @@ fn mission_type(module: &Ident) -> syn::Result<Ident> {
 }
 
 /// `join` of the futures `items` (each an expression of a future that never ends), nested in
-/// fours, as one expression whose output is a tuple (or tuples) of `Infallible`.
+/// fours, as one expression.
 fn join_tree(items: &[Tokens]) -> Tokens {
     match items {
         [] => quote!(::core::future::pending::<::core::convert::Infallible>()),
@@ -437,24 +437,6 @@ fn join_tree(items: &[Tokens]) -> Tokens {
             let chunk = items.len().div_ceil(4);
             let parts: Vec<Tokens> = items.chunks(chunk).map(join_tree).collect();
             join_tree(&parts)
-        }
-    }
-}
-
-/// The pattern that takes the first `Infallible` out of a [`join_tree`]'s output.
-fn first_never(n: usize) -> Tokens {
-    match n {
-        0 | 1 => quote!(never),
-        _ if n <= 4 => {
-            let rest = (1..n).map(|_| quote!(_));
-            quote!((never, #(#rest),*))
-        }
-        _ => {
-            let chunk = n.div_ceil(4);
-            let parts = n.div_ceil(chunk);
-            let first = first_never(chunk.min(n));
-            let rest = (1..parts).map(|_| quote!(_));
-            quote!((#first, #(#rest),*))
         }
     }
 }
@@ -829,54 +811,41 @@ fn generate(
         quote!(match io.action() { #(#typed_arms,)* })
     };
 
-    // Algorithm 2 at build time: a state type per action of each plan's body, its constants.
+    // Algorithm 2 at build time: each plan's states, constants (a state per action of its body,
+    // the sensors that serve its precondition, its effects).
     let mut state_types = Vec::new();
     let mut plan_arms = Vec::new();
     for (pi, p) in plans.iter().enumerate() {
-        let mut steps = Vec::new();
-        let last = p.body.len().saturating_sub(1);
-        for (si, a) in p.body.iter().enumerate() {
-            let Some(spec) = d.action(*a) else { continue };
-            let ty = format_ident!("P{pi}S{si}");
+        let ty = format_ident!("P{pi}");
+        let n = p.body.len();
+        let states = p.body.iter().enumerate().filter_map(|(si, a)| {
+            let spec = d.action(*a)?;
             let av = &action_v[a.index()];
             let sensors = d.sensors_serving(spec.pre).bits();
             let (pre, add, del) = (facts(spec.pre, w), facts(spec.add, w), facts(spec.del, w));
             let max_violation = max_violation_of(spec.max_violation);
             let index = u8::try_from(si).unwrap_or(u8::MAX);
-            let doc = format!(
-                "State {si} of plan `{}`: `{}`.",
-                p.name.replace('`', "'"),
-                spec.name.replace('`', "'")
-            );
-            state_types.push(quote! {
-                #[doc = #doc]
-                #[derive(Clone, Copy, Debug)]
-                pub struct #ty;
-
-                impl ::psmpa_core::spec::StateSpec<super::#mission> for #ty {
-                    #[inline(always)]
-                    fn index(self) -> u8 { #index }
-                    #[inline(always)]
-                    fn action(self) -> super::Action { super::Action::#av }
-                    #[inline(always)]
-                    fn sensors(self) -> ::psmpa_core::SensorSet { ::psmpa_core::SensorSet::from_bits(#sensors) }
-                    #[inline(always)]
-                    fn pre(self) -> ::psmpa_core::FactSetOf<#w> { #pre }
-                    #[inline(always)]
-                    fn add(self) -> ::psmpa_core::FactSetOf<#w> { #add }
-                    #[inline(always)]
-                    fn del(self) -> ::psmpa_core::FactSetOf<#w> { #del }
-                    #[inline(always)]
-                    fn max_violation(self) -> ::core::option::Option<::psmpa_core::embassy_time::Duration> { #max_violation }
+            Some(quote! {
+                ::psmpa_core::spec::State {
+                    index: #index,
+                    action: super::Action::#av,
+                    sensors: ::psmpa_core::SensorSet::from_bits(#sensors),
+                    pre: #pre,
+                    add: #add,
+                    del: #del,
+                    max_violation: #max_violation,
                 }
-            });
-            if si == last {
-                steps.push(quote!(deciding.state(__states::#ty).await));
-            } else {
-                steps.push(quote!(deciding.state(__states::#ty).await?;));
-            }
-        }
-        plan_arms.push(quote!(#pi => { #(#steps)* }));
+            })
+        });
+        let doc = format!(
+            "The states of plan `{}`, Algorithm 2 at build time.",
+            p.name.replace('`', "'")
+        );
+        state_types.push(quote! {
+            #[doc = #doc]
+            pub const #ty: [::psmpa_core::spec::State<super::#mission>; #n] = [#(#states),*];
+        });
+        plan_arms.push(quote!(#pi => ::core::option::Option::Some(&__states::#ty)));
     }
 
     let samplers: Vec<Tokens> = sensor_v
@@ -884,7 +853,6 @@ fn generate(
         .map(|v| quote!(sensing.sampler(sensor::#v)))
         .collect();
     let joined = join_tree(&samplers);
-    let never = first_never(samplers.len());
 
     let vis = &input.vis;
     let file = file.to_string_lossy().into_owned();
@@ -1042,22 +1010,21 @@ fn generate(
                 fn typed(io: ::psmpa_core::ActionIo<'_, Self, ::psmpa_core::Untyped>) -> Run<'_> {
                     #typed_body
                 }
-                async fn execute<E: ::psmpa_core::spec::Deciding<Mission = Self>>(
+                fn states(
                     &self,
-                    deciding: &E,
                     plan: ::psmpa_core::PlanId,
-                ) -> ::core::result::Result<(), ::psmpa_core::Failure<#w>> {
+                ) -> ::core::option::Option<&[::psmpa_core::spec::State<Self>]> {
                     match plan.index() {
-                        #(#plan_arms)*
-                        _ => deciding.run_time(plan).await,
+                        #(#plan_arms,)*
+                        _ => ::core::option::Option::None,
                     }
                 }
-                async fn sensing<E: ::psmpa_core::spec::Sensing<Mission = Self>>(
+                fn sensing<E: ::psmpa_core::spec::Sensing<Mission = Self>>(
                     &self,
                     sensing: &E,
-                ) -> ::core::convert::Infallible {
-                    let #never = #joined.await;
-                    never
+                ) -> impl ::core::future::Future<Output = ::core::convert::Infallible> {
+                    // Built here, not in the first poll.
+                    ::psmpa_core::spec::Samplers::new(#joined)
                 }
             }
         }

@@ -19,7 +19,7 @@ use crate::planner::{Planner, PlanningError, Search};
 use crate::platform::{Actuator, Platform, Sensor};
 use crate::runtime::Runtime;
 use crate::runtime::fsm::{Fsm, FsmError};
-use crate::runtime::state::{perception_of, sensors_serving};
+use crate::runtime::state::{Source, perception_of, sensors_serving};
 use crate::spec::storage::Mode;
 use crate::spec::{Body, Mission};
 use crate::trace::{TraceEvent, TraceSink};
@@ -378,7 +378,7 @@ where
             let executed = match &generated {
                 // Algorithm 2 at run time for the plan the planner made.
                 Some(body) => match Fsm::compile(plan, body.as_ref(), self.mission.actions()) {
-                    Ok(fsm) => self.execute_fsm(&fsm).await,
+                    Ok(fsm) => self.run_plan(Source::Fsm(fsm)).await,
                     Err(error) => return Err(ControlError::Compile { plan, error }),
                 },
                 None => self.execute(plan).await,

@@ -49,7 +49,7 @@ use crate::failure::{Evidence, Failure, SensorFault, Violation};
 use crate::platform::{Actuator, Platform, Reading, Sensor};
 use crate::runtime::{Runtime, SensorsOf};
 use crate::spec::storage::{Mode, PerSensor, Shared, poll_shared};
-use crate::spec::{DynSensor, Mission, Sensing, SensorOf, SensorSpec, Storage};
+use crate::spec::{DynSensor, Mission, Samplers, Sensing, SensorOf, SensorSpec, Storage};
 use crate::store::{Entry, SAMPLE_KEY, StoreAccess};
 use crate::trace::{TraceEvent, TraceSink};
 
@@ -98,28 +98,7 @@ where
 
     fn samplers<const N: usize>(&self) -> impl Future<Output = Infallible> {
         let samplers: [_; N] = core::array::from_fn(|index| self.table_sampler(index));
-        Samplers {
-            samplers: join_array(samplers),
-        }
-    }
-}
-
-pin_project! {
-    /// Samplers that never end, polled in place.
-    #[must_use = "futures do nothing unless polled"]
-    struct Samplers<F> {
-        #[pin]
-        samplers: F,
-    }
-}
-
-impl<F: Future> Future for Samplers<F> {
-    type Output = Infallible;
-
-    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Infallible> {
-        // Samplers never end.
-        let _ = self.project().samplers.poll(cx);
-        Poll::Pending
+        Samplers::new(join_array(samplers))
     }
 }
 
@@ -175,19 +154,9 @@ where
                 Ok(Err(fault)) => Some(fault),
                 Err(_) => Some(SensorFault::Timeout),
             };
-            if let Some(fault) = fault {
-                self.sensor_failed(sensor, fault, epoch);
-                self.shared().lock(|s| {
-                    s.active.set(s.active.get().without(sensor));
-                    s.notify();
-                });
+            if !self.switched_on(sensor, fault, epoch) {
                 continue;
             }
-            self.trace(TraceEvent::SensorOn { sensor });
-            self.shared().lock(|s| {
-                s.running.set(s.running.get().with(sensor));
-                s.fresh.set(s.fresh.get().without(sensor));
-            });
             // A cyclic sensor's period: the mission's, or the one the runtime was given.
             let cyclic = match spec.mode() {
                 SensorMode::Cyclic { period: own } => Some(period.unwrap_or(own).as_ticks()),
@@ -255,27 +224,7 @@ where
                 if last == Some(started) {
                     // Read and delivered at this instant under this command already.
                 } else if last.is_none() && self.read_at(sensor, started) {
-                    // A read that started at this instant was completed already (by the state or
-                    // sense phase that just ended, or the initial model): a sensor never takes
-                    // two samples of one instant. Its percept counts for this command too: the
-                    // beliefs may have been reset since (a new initial model).
-                    let table = self.mission.sensors();
-                    let per = spec.per();
-                    let change = self.shared().lock(|s| {
-                        let delivered = s
-                            .sensor(sensor)
-                            .and_then(|p| p.percept.get())
-                            .is_some_and(|e| e.at == started);
-                        if !delivered {
-                            return None;
-                        }
-                        let holds = s.sensor(sensor).map_or(FactSetOf::EMPTY, |p| p.holds.get());
-                        fuse(s, table, sensor, per, holds);
-                        let change = check(s, table);
-                        s.notify();
-                        change
-                    });
-                    self.trace_change(change);
+                    self.read_again(sensor, spec.per(), started);
                 } else {
                     let limit = started.saturating_add(timeout);
                     let read = match self
@@ -310,25 +259,75 @@ where
                     _ => None,
                 };
             }
-            // A sensor that does not answer is traced and counted off: it is not used again
-            // until it is switched on.
-            if with_timeout(timeout, self.platform.switch_off(name))
-                .await
-                .is_err()
-            {
-                self.trace(TraceEvent::SensorFailed {
-                    sensor,
-                    fault: SensorFault::Timeout,
-                });
-            }
-            self.trace(TraceEvent::SensorOff { sensor });
+            let answered = with_timeout(timeout, self.platform.switch_off(name)).await;
+            self.switched_off(sensor, answered.is_ok());
+        }
+    }
+
+    // The samplers' steps that await nothing, out of line: one copy for every sensor's
+    // sampler, which keeps only its own waits and reads.
+
+    /// The sensor's switch-on ended with `fault` (if any): it runs (`true`), or it failed and
+    /// is reported.
+    #[inline(never)]
+    fn switched_on(&self, sensor: SensorId, fault: Option<SensorFault>, epoch: u32) -> bool {
+        if let Some(fault) = fault {
+            self.sensor_failed(sensor, fault, epoch);
             self.shared().lock(|s| {
-                s.running.set(s.running.get().without(sensor));
-                s.fresh.set(s.fresh.get().without(sensor));
                 s.active.set(s.active.get().without(sensor));
                 s.notify();
             });
+            return false;
         }
+        self.trace(TraceEvent::SensorOn { sensor });
+        self.shared().lock(|s| {
+            s.running.set(s.running.get().with(sensor));
+            s.fresh.set(s.fresh.get().without(sensor));
+        });
+        true
+    }
+
+    /// A read of `sensor` that started at `started` was completed already (by the state or
+    /// sense phase that just ended, or the initial model): a sensor never takes two samples of
+    /// one instant. Its percept counts for this command too: the beliefs may have been reset
+    /// since (a new initial model).
+    #[inline(never)]
+    fn read_again(&self, sensor: SensorId, per: FactSetOf<W>, started: Instant) {
+        let table = self.mission.sensors();
+        let change = self.shared().lock(|s| {
+            let delivered = s
+                .sensor(sensor)
+                .and_then(|p| p.percept.get())
+                .is_some_and(|e| e.at == started);
+            if !delivered {
+                return None;
+            }
+            let holds = s.sensor(sensor).map_or(FactSetOf::EMPTY, |p| p.holds.get());
+            fuse(s, table, sensor, per, holds);
+            let change = check(s, table);
+            s.notify();
+            change
+        });
+        self.trace_change(change);
+    }
+
+    /// The sensor's switch-off ended (`answered`, or timed out): it is off. A sensor that does
+    /// not answer is traced and counted off: it is not used again until it is switched on.
+    #[inline(never)]
+    fn switched_off(&self, sensor: SensorId, answered: bool) {
+        if !answered {
+            self.trace(TraceEvent::SensorFailed {
+                sensor,
+                fault: SensorFault::Timeout,
+            });
+        }
+        self.trace(TraceEvent::SensorOff { sensor });
+        self.shared().lock(|s| {
+            s.running.set(s.running.get().without(sensor));
+            s.fresh.set(s.fresh.get().without(sensor));
+            s.active.set(s.active.get().without(sensor));
+            s.notify();
+        });
     }
 
     /// Awaits `inner` unless the command of `epoch` ends first, or `deadline` passes: every

@@ -38,7 +38,7 @@ use crate::runtime::shared::Watch;
 use crate::runtime::{Plans, Policy, Runtime};
 use crate::spec::storage::{Command, Mode};
 use crate::spec::{Act, ActionIo};
-use crate::spec::{ActionOf, Deciding, DynState, Mission, StateSpec, Storage};
+use crate::spec::{ActionOf, Mission, State, Storage};
 use crate::store::MutualStore;
 use crate::trace::{Phase, TraceEvent, TraceSink};
 
@@ -159,11 +159,11 @@ where
 
     /// The watch of the running action under command `epoch`
     /// ([`Watch`](crate::runtime::shared::Watch)).
-    fn watch<S: StateSpec<M>>(&self, epoch: u32, state: S) -> Watch<FactSetOf<W>> {
+    fn watch(&self, epoch: u32, state: State<M>) -> Watch<FactSetOf<W>> {
         Watch {
             epoch,
-            action: state.action().id(),
-            max: state.max_violation().unwrap_or(self.config.max_violation),
+            action: state.action.id(),
+            max: state.max_violation.unwrap_or(self.config.max_violation),
             alarm: None,
             registered: false,
             _facts: PhantomData,
@@ -171,14 +171,14 @@ where
     }
 
     /// P-SMPA: `δ'_i = δ_i ∥ {s_k}`; the sensors end when the action ends.
-    async fn run_parallel<S: StateSpec<M>>(
+    async fn run_parallel(
         &self,
-        state: S,
+        state: State<M>,
         io: ActionIo<'_, M>,
     ) -> Result<Outcome, Failure<W>> {
-        let sensors = state.sensors();
-        let action = state.action();
-        let epoch = self.command(sensors, Mode::Parallel, Some((action.id(), state.pre())));
+        let sensors = state.sensors;
+        let action = state.action;
+        let epoch = self.command(sensors, Mode::Parallel, Some((action.id(), state.pre)));
         let result = async {
             // Fresh percepts before the behaviour starts, checked against its precondition.
             self.ready(epoch, sensors).await?;
@@ -204,14 +204,14 @@ where
     }
 
     /// One SMPA sense phase: sensors on, actuators idle, samples until `until`, sensors off.
-    async fn sense_phase<S: StateSpec<M>>(
+    async fn sense_phase(
         &self,
-        state: S,
+        state: State<M>,
         until: Instant,
         first: bool,
     ) -> Result<(), Failure<W>> {
-        let sensors = state.sensors();
-        let watch = Some((state.action().id(), state.pre()));
+        let sensors = state.sensors;
+        let watch = Some((state.action.id(), state.pre));
         let epoch = self.command(sensors, Mode::Phase { first }, watch);
         let result = async {
             self.ready(epoch, sensors).await?;
@@ -229,13 +229,13 @@ where
     }
 
     /// SMPA: sense phase, act phase, sense phase, ... until the behaviour ends.
-    async fn run_alternating<S: StateSpec<M>>(
+    async fn run_alternating(
         &self,
-        state: S,
+        state: State<M>,
         io: ActionIo<'_, M>,
         (sense, act): (Duration, Duration),
     ) -> Result<Outcome, Failure<W>> {
-        let action = state.action();
+        let action = state.action;
         // A phase of no time would alternate forever at one instant.
         let (sense, act) = (
             sense.max(Duration::from_ticks(1)),
@@ -269,11 +269,11 @@ where
     }
 
     /// Runs one behaviour state to its end and applies the action's effects on success.
-    async fn run_state<S: StateSpec<M>>(&self, state: S) -> Result<(), Failure<W>> {
-        let action = state.action().id();
-        let sensors = state.sensors();
+    async fn run_state(&self, state: State<M>) -> Result<(), Failure<W>> {
+        let action = state.action.id();
+        let sensors = state.sensors;
         self.trace(TraceEvent::StateEntered {
-            state: state.index(),
+            state: state.index,
             action,
             sensors,
         });
@@ -287,7 +287,7 @@ where
             Err(failure) => (None, Err(failure)),
         };
         if result.is_ok() {
-            let (add, del) = (state.add(), state.del());
+            let (add, del) = (state.add, state.del);
             // The effects are known, as a sample's percepts are: a percept fact an action
             // deleted is known false, not unknown.
             let beliefs = self.shared().lock(|s| {
@@ -300,16 +300,16 @@ where
             self.trace(TraceEvent::EffectsApplied { action, beliefs });
         }
         self.trace(TraceEvent::StateLeft {
-            state: state.index(),
+            state: state.index,
             action,
             outcome,
         });
         result
     }
 
-    async fn run_action<S: StateSpec<M>>(&self, state: S) -> Result<Outcome, Failure<W>> {
-        let action = state.action().id();
-        let sensors = state.sensors();
+    async fn run_action(&self, state: State<M>) -> Result<Outcome, Failure<W>> {
+        let action = state.action.id();
+        let sensors = state.sensors;
         let table = self.mission.sensors();
         let (beliefs, faulty) = self.shared().lock(|s| (s.beliefs.get(), s.faulty.get()));
         // A sensor out of service cannot watch the action: fail before moving anything.
@@ -318,7 +318,7 @@ where
         }
         // Facts of pre(a) that no running sensor decides must already hold.
         let missing = state
-            .pre()
+            .pre
             .difference(perception_of(table, sensors))
             .difference(beliefs);
         if !missing.is_empty() {
@@ -337,7 +337,7 @@ where
             .get(action.index())
             .ok_or(Failure::ActionFailed { action })?;
         let io = ActionIo {
-            action: state.action(),
+            action: state.action,
             store: MutualStore::link(own, self.storage.sensor_table(), sensors),
             monitor: self,
             typed: PhantomData,
@@ -356,81 +356,92 @@ where
         }
     }
 
-    /// `executePlans` for a plan of the run-time FSM: runs `fsm` from its initial state along
-    /// the transition rules `T` until [`Target::Done`] or [`Target::Failed`]. Between two
-    /// states the work is bounded: the transition is O(1), switching sensors off and on
-    /// O(NS), the effects O(1).
-    pub(crate) async fn execute_fsm(&self, fsm: &Fsm<'_>) -> Result<(), Failure<W>> {
-        let table = self.mission.actions();
-        let sensors = self.mission.sensors();
+    /// `executePlans` for one plan: runs its FSM `f(Λ, T)` (its states from `source`) from its
+    /// initial state along the transition rules `T` until [`Target::Done`] or
+    /// [`Target::Failed`]. Between two states the work is bounded: the transition is O(1),
+    /// switching sensors off and on O(NS), the effects O(1).
+    pub(crate) async fn run_plan(&self, source: Source<'_, M>) -> Result<(), Failure<W>> {
         let mut index = 0u8;
         loop {
-            let state = fsm
-                .state(index, table, sensors)
-                .ok_or(Failure::InvalidFsm { state: index })?;
-            let spec = table
-                .get(state.action.index())
-                .ok_or(Failure::ActionFailed {
-                    action: state.action,
-                })?;
-            let action = M::Action::from_id(state.action).ok_or(Failure::ActionFailed {
-                action: state.action,
-            })?;
-            let result = self
-                .run_state(DynState::<M> {
-                    index,
-                    action,
-                    sensors: state.sensors,
-                    pre: spec.pre,
-                    add: spec.add,
-                    del: spec.del,
-                    max_violation: spec.max_violation,
-                })
-                .await;
-            let edge = if result.is_ok() {
-                Edge::Success
-            } else {
-                Edge::Failure
+            let (state, next) = match &source {
+                Source::Compiled(states) => {
+                    let state = *states
+                        .get(usize::from(index))
+                        .ok_or(Failure::InvalidFsm { state: index })?;
+                    let last = usize::from(index).saturating_add(1) >= states.len();
+                    let next = if last {
+                        Target::Done
+                    } else {
+                        Target::State(index.saturating_add(1))
+                    };
+                    (state, (next, Target::Failed))
+                }
+                Source::Fsm(fsm) => {
+                    let table = self.mission.actions();
+                    let state = fsm
+                        .state(index, table, self.mission.sensors())
+                        .ok_or(Failure::InvalidFsm { state: index })?;
+                    let spec = table
+                        .get(state.action.index())
+                        .ok_or(Failure::ActionFailed {
+                            action: state.action,
+                        })?;
+                    let action = M::Action::from_id(state.action).ok_or(Failure::ActionFailed {
+                        action: state.action,
+                    })?;
+                    let next = (state.next(Edge::Success), state.next(Edge::Failure));
+                    let state = State {
+                        index,
+                        action,
+                        sensors: state.sensors,
+                        pre: spec.pre,
+                        add: spec.add,
+                        del: spec.del,
+                        max_violation: spec.max_violation,
+                    };
+                    (state, next)
+                }
             };
-            match state.next(edge) {
+            let result = self.run_state(state).await;
+            let target = if result.is_ok() { next.0 } else { next.1 };
+            match target {
                 Target::State(next) => index = next,
                 Target::Done => return result,
-                // Compiled machines only fail on the failure edge; anything else is a broken FSM.
+                // Machines only fail on the failure edge; anything else is a broken FSM.
                 Target::Failed => return result.and(Err(Failure::InvalidFsm { state: index })),
             }
         }
     }
 
-    /// Runs the library's plan `plan`: its code (a compiled mission's, unless the
-    /// [`Config::plans`](crate::Config::plans) say otherwise), or the run-time FSM.
+    /// Runs the library's plan `plan`: its states computed when the mission was compiled
+    /// (unless the [`Config::plans`](crate::Config::plans) say otherwise), or the run-time
+    /// FSM.
     pub(crate) async fn execute(&self, plan: PlanId) -> Result<(), Failure<W>> {
-        match self.config.plans {
-            Plans::Compiled => self.mission.execute(self, plan).await,
-            Plans::RunTime => self.run_time(plan).await,
-        }
+        let compiled = match self.config.plans {
+            Plans::Compiled => self.mission.states(plan),
+            Plans::RunTime => None,
+        };
+        let source = match compiled {
+            Some(states) => Source::Compiled(states),
+            None => {
+                let Some(p) = self.mission.plan(plan) else {
+                    return Err(Failure::InvalidFsm { state: 0 });
+                };
+                let fsm = Fsm::compile(plan, p.body, self.mission.actions())
+                    .map_err(|_| Failure::InvalidFsm { state: 0 })?;
+                Source::Fsm(fsm)
+            }
+        };
+        self.run_plan(source).await
     }
 }
 
-impl<M, P, T, const W: usize> Deciding for Runtime<'_, M, P, T>
-where
-    M: Mission<Facts = FactSetOf<W>>,
-    P: Platform + Sensor<M> + Actuator<M>,
-    T: TraceSink<M>,
-{
-    type Mission = M;
-
-    fn state<S: StateSpec<M>>(&self, state: S) -> impl Future<Output = Result<(), Failure<W>>> {
-        self.run_state(state)
-    }
-
-    async fn run_time(&self, plan: PlanId) -> Result<(), Failure<W>> {
-        let Some(p) = self.mission.plan(plan) else {
-            return Err(Failure::InvalidFsm { state: 0 });
-        };
-        let fsm = Fsm::compile(plan, p.body, self.mission.actions())
-            .map_err(|_| Failure::InvalidFsm { state: 0 })?;
-        self.execute_fsm(&fsm).await
-    }
+/// Where a plan's states come from.
+pub(crate) enum Source<'a, M: Mission> {
+    /// Computed when the mission was compiled ([`Mission::states`]).
+    Compiled(&'a [State<M>]),
+    /// Computed from the tables as the run-time FSM reaches them.
+    Fsm(Fsm<'a>),
 }
 
 pin_project! {

@@ -4,8 +4,8 @@
 //! A mission known when the robot is built is a type (`include_mission!` generates it: a unit
 //! struct such as `fetch_tea::FetchTea`), and everything of it is code or constants: its names
 //! ([`Mission::Sensor`], [`Mission::Action`], ...), its storage ([`Mission::Storage`], every
-//! capacity in it), its plans (Algorithm 2 at build time: [`Mission::execute`]), a sampler per
-//! sensor ([`Mission::sensing`]) and a typed I/O per action ([`Mission::Run`]). The platform's
+//! capacity in it), its plans' states (Algorithm 2 at build time: [`Mission::states`]), a
+//! sampler per sensor ([`Mission::sensing`]) and a typed I/O per action ([`Mission::Run`]). The platform's
 //! traits are written for a mission ([`Sensor<M>`](crate::Sensor),
 //! [`Actuator<M>`](crate::Actuator)), so a platform, a trace or a description of another
 //! mission does not compile.
@@ -23,7 +23,6 @@ use embassy_time::Duration;
 use crate::action::{ActionId, ActuatorAction, SensorAction, SensorId, SensorMode, SensorSet};
 use crate::domain::EventId;
 use crate::facts::{FactId, FactSetOf};
-use crate::failure::Failure;
 use crate::mission::Tables;
 use crate::model::Task;
 use crate::plan::PlanId;
@@ -236,90 +235,50 @@ pub trait Mission: Sized {
     /// receives.
     fn typed(io: ActionIo<'_, Self, Untyped>) -> Self::Run<'_>;
 
-    /// Algorithm 2 for the library's plan `plan`, then its execution: a compiled mission's
-    /// plans are code (a state per action, constant sensor sets); a run-time mission's are
-    /// compiled into an [`Fsm`](crate::Fsm) when selected ([`Deciding::run_time`]).
-    fn execute<E: Deciding<Mission = Self>>(
-        &self,
-        deciding: &E,
-        plan: PlanId,
-    ) -> impl Future<Output = Result<(), FailureOf<Self>>>;
+    /// Algorithm 2 at build time: the states of the library's plan `plan`, computed when the
+    /// mission was compiled (a state per action of its body, the sensors that run beside each,
+    /// its effects, as constants in flash); `None` where the runtime compiles the plan itself
+    /// when it is selected (a mission loaded at run time: [`Fsm`](crate::Fsm)).
+    fn states(&self, plan: PlanId) -> Option<&[State<Self>]>;
 
     /// The sensing side: one sampler per sensor, concurrent, never ending. A compiled
-    /// mission's samplers are each specialised for their sensor ([`SensorSpec`]).
+    /// mission's samplers are each specialised for their sensor ([`SensorSpec`]). The samplers
+    /// are built when this is called, not in the future's first poll: the temporaries of
+    /// building them stay off the stack of whatever polls the sensing side (an interrupt on a
+    /// microcontroller, on top of the deciding side's stack).
     fn sensing<E: Sensing<Mission = Self>>(&self, sensing: &E) -> impl Future<Output = Infallible>;
 }
 
-/// One behaviour state `δ_i` (or `δ'_i`) of a plan's FSM, as its plan's code runs it: a
-/// compiled mission generates one type per state, whose answers are constants; the run-time
-/// FSM gives a [`DynState`].
-pub trait StateSpec<M: Mission>: Copy {
-    /// Index of the state in its FSM.
-    fn index(self) -> u8;
-    /// The action `a_i` it runs.
-    fn action(self) -> M::Action;
-    /// `{s_k | per(s_k) ⊆ pre(a_i)}`: the sensors that run beside it.
-    fn sensors(self) -> SensorSet;
-    /// `pre(a_i)`.
-    fn pre(self) -> M::Facts;
-    /// `add(a_i)`.
-    fn add(self) -> M::Facts;
-    /// `del(a_i)`.
-    fn del(self) -> M::Facts;
-    /// The action's own tolerance of a violated precondition, if any.
-    fn max_violation(self) -> Option<Duration>;
-}
-
-/// A state of the run-time FSM ([`StateSpec`]).
+/// A behaviour state `δ_i` of a plan's FSM `f(Λ, T)`, or the parallel state `δ'_i` when
+/// `sensors` is not empty (Algorithm 2): its action, the sensors that run beside it, and what
+/// running it needs and does. Its transition rules are its place in the plan: success leads to
+/// the next state (the last to done), failure to failed. A compiled mission's are constants
+/// ([`Mission::states`]); the run-time FSM makes them from the tables.
 #[derive(Debug)]
-pub struct DynState<M: Mission> {
+pub struct State<M: Mission> {
     /// Index of the state in its FSM.
     pub index: u8,
-    /// The action.
+    /// The action `a_i` it runs.
     pub action: M::Action,
-    /// The sensors beside it.
+    /// `{s_k | per(s_k) ⊆ pre(a_i)}`: the sensors that run beside it.
     pub sensors: SensorSet,
-    /// `pre(a)`, `add(a)`, `del(a)`.
+    /// `pre(a_i)`.
     pub pre: M::Facts,
-    /// `add(a)`.
+    /// `add(a_i)`.
     pub add: M::Facts,
-    /// `del(a)`.
+    /// `del(a_i)`.
     pub del: M::Facts,
-    /// The action's own tolerance.
+    /// The action's own tolerance of a violated precondition, if any.
     pub max_violation: Option<Duration>,
 }
 
-impl<M: Mission> Clone for DynState<M> {
+impl<M: Mission> Clone for State<M> {
     fn clone(&self) -> Self {
         *self
     }
 }
 
-impl<M: Mission> Copy for DynState<M> {}
-
-impl<M: Mission> StateSpec<M> for DynState<M> {
-    fn index(self) -> u8 {
-        self.index
-    }
-    fn action(self) -> M::Action {
-        self.action
-    }
-    fn sensors(self) -> SensorSet {
-        self.sensors
-    }
-    fn pre(self) -> M::Facts {
-        self.pre
-    }
-    fn add(self) -> M::Facts {
-        self.add
-    }
-    fn del(self) -> M::Facts {
-        self.del
-    }
-    fn max_violation(self) -> Option<Duration> {
-        self.max_violation
-    }
-}
+impl<M: Mission> Copy for State<M> {}
 
 /// One sensor as its sampler runs it: a compiled mission generates one type per sensor, whose
 /// answers are constants, so each sensor's sampler is its own machine code with no branch for
@@ -379,18 +338,35 @@ impl<M: Mission> SensorSpec<M> for DynSensor<M> {
     }
 }
 
-/// The deciding side, as a mission's plan code drives it ([`Mission::execute`]).
-pub trait Deciding {
-    /// The mission.
-    type Mission: Mission;
-    /// Runs one behaviour state to its end; `Err` takes the failure edge.
-    fn state<S: StateSpec<Self::Mission>>(
-        &self,
-        state: S,
-    ) -> impl Future<Output = Result<(), FailureOf<Self::Mission>>>;
-    /// Algorithm 2 at run time for the library's plan `plan`: compiles it into an
-    /// [`Fsm`](crate::Fsm) and runs it.
-    fn run_time(&self, plan: PlanId) -> impl Future<Output = Result<(), FailureOf<Self::Mission>>>;
+pin_project_lite::pin_project! {
+    /// Samplers that never end, joined and polled in place: what [`Mission::sensing`] gives
+    /// (a future of its own, not an `async` block around the join, which would hold the
+    /// samplers twice: once before its first poll, once across its await).
+    #[must_use = "futures do nothing unless polled"]
+    pub struct Samplers<F> {
+        #[pin]
+        samplers: F,
+    }
+}
+
+impl<F> Samplers<F> {
+    /// The joined samplers `samplers`.
+    pub const fn new(samplers: F) -> Self {
+        Self { samplers }
+    }
+}
+
+impl<F: Future> Future for Samplers<F> {
+    type Output = Infallible;
+
+    fn poll(
+        self: core::pin::Pin<&mut Self>,
+        cx: &mut core::task::Context<'_>,
+    ) -> core::task::Poll<Infallible> {
+        // Samplers never end.
+        let _ = self.project().samplers.poll(cx);
+        core::task::Poll::Pending
+    }
 }
 
 /// The sensing side, as a mission's samplers run on it ([`Mission::sensing`]).
@@ -468,14 +444,11 @@ impl<
     fn typed(io: ActionIo<'_, Self, Untyped>) -> ActionIo<'_, Self, Untyped> {
         io
     }
-    async fn execute<E: Deciding<Mission = Self>>(
-        &self,
-        deciding: &E,
-        plan: PlanId,
-    ) -> Result<(), Failure<W>> {
-        deciding.run_time(plan).await
+    fn states(&self, _: PlanId) -> Option<&[State<Self>]> {
+        None
     }
-    async fn sensing<E: Sensing<Mission = Self>>(&self, sensing: &E) -> Infallible {
-        sensing.samplers::<NS>().await
+    fn sensing<E: Sensing<Mission = Self>>(&self, sensing: &E) -> impl Future<Output = Infallible> {
+        // Built here, not in the first poll (as an `async fn` would): see `Mission::sensing`.
+        sensing.samplers::<NS>()
     }
 }
