@@ -498,6 +498,22 @@ fn generate(
     let key_refs: Vec<&str> = key_names.iter().map(String::as_str).collect();
     let key_v = variants("keys", &key_refs, span)?;
     let key_of = |name: &str| key_names.iter().position(|k| k == name);
+    // `impl TRAIT for key::K` for each key behaviour `i` of `declared` declares.
+    let key_impls = |declared: &[Vec<String>], i: usize, of: Tokens| -> Vec<Tokens> {
+        let names = declared.get(i).into_iter().flatten();
+        names
+            .filter_map(|k| {
+                let kv = key_v.get(key_of(k)?)?;
+                Some(quote! {
+                    impl #of for super::key::#kv {
+                        fn key(self) -> ::psmpa_core::Key {
+                            ::psmpa_core::Key::from(self)
+                        }
+                    }
+                })
+            })
+            .collect()
+    };
     // Keys a data store holds: a sensor's sample and its keys, an action's keys; or `keys = N`.
     let most = descriptions
         .sensor_keys
@@ -667,21 +683,11 @@ fn generate(
         let mode = mode_of(s.mode);
         let timeout = millis(s.timeout);
         let per = facts(s.per, w);
-        let keys = descriptions
-            .sensor_keys
-            .get(i)
-            .into_iter()
-            .flatten()
-            .filter_map(|k| {
-                let kv = key_v.get(key_of(k)?)?;
-                Some(quote! {
-                    impl ::psmpa_core::KeyOf<#v> for super::key::#kv {
-                        fn key(self) -> ::psmpa_core::Key {
-                            ::psmpa_core::Key::from(self)
-                        }
-                    }
-                })
-            });
+        let keys = key_impls(
+            &descriptions.sensor_keys,
+            i,
+            quote!(::psmpa_core::KeyOf<#v>),
+        );
         quote! {
             #[doc = #doc]
             #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -744,21 +750,11 @@ fn generate(
                 format!("the sensors {}", names.join(", "))
             }
         );
-        let keys = descriptions
-            .action_keys
-            .get(i)
-            .into_iter()
-            .flatten()
-            .filter_map(|k| {
-                let kv = key_v.get(key_of(k)?)?;
-                Some(quote! {
-                    impl ::psmpa_core::OwnKey<#v> for super::key::#kv {
-                        fn key(self) -> ::psmpa_core::Key {
-                            ::psmpa_core::Key::from(self)
-                        }
-                    }
-                })
-            });
+        let keys = key_impls(
+            &descriptions.action_keys,
+            i,
+            quote!(::psmpa_core::OwnKey<#v>),
+        );
         quote! {
             #[doc = #doc]
             #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]

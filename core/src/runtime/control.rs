@@ -375,13 +375,17 @@ where
             });
             report.plans_started = report.plans_started.saturating_add(1);
             // executePlans and updateModel (percepts and effects are applied as they happen).
-            let executed = match &generated {
+            let source = match &generated {
                 // Algorithm 2 at run time for the plan the planner made.
                 Some(body) => match Fsm::compile(plan, body.as_ref(), self.mission.actions()) {
-                    Ok(fsm) => self.run_plan(Source::Fsm(fsm)).await,
+                    Ok(fsm) => Ok(Source::Fsm(fsm)),
                     Err(error) => return Err(ControlError::Compile { plan, error }),
                 },
-                None => self.execute(plan).await,
+                None => self.source(plan),
+            };
+            let executed = match source {
+                Ok(source) => self.run_plan(source).await,
+                Err(failure) => Err(failure),
             };
             match executed {
                 Ok(()) => self.trace(TraceEvent::PlanSucceeded { plan }),

@@ -170,39 +170,6 @@ where
         }
     }
 
-    /// P-SMPA: `δ'_i = δ_i ∥ {s_k}`; the sensors end when the action ends.
-    async fn run_parallel(
-        &self,
-        state: State<M>,
-        io: ActionIo<'_, M>,
-    ) -> Result<Outcome, Failure<W>> {
-        let sensors = state.sensors;
-        let action = state.action;
-        let epoch = self.command(sensors, Mode::Parallel, Some((action.id(), state.pre)));
-        let result = async {
-            // Fresh percepts before the behaviour starts, checked against its precondition.
-            self.ready(epoch, sensors).await?;
-            self.check_precondition();
-            // The watch first, in one future with the behaviour: a failure reported at this
-            // instant stops the behaviour before it takes another step.
-            let parallel = Parallel {
-                watch: self.watch(epoch, state),
-                runtime: self,
-                behaviour: self.platform.run(Act::new(io)),
-            };
-            match parallel.await {
-                Either::First(failure) => {
-                    self.platform.halt(action);
-                    Err(failure)
-                }
-                Either::Second(outcome) => Ok(outcome),
-            }
-        }
-        .await;
-        let stopped = self.stop().await;
-        result.and_then(|outcome| stopped.map(|()| outcome))
-    }
-
     /// One SMPA sense phase: sensors on, actuators idle, samples until `until`, sensors off.
     async fn sense_phase(
         &self,
@@ -268,16 +235,168 @@ where
         }
     }
 
-    /// Runs one behaviour state to its end and applies the action's effects on success.
-    async fn run_state(&self, state: State<M>) -> Result<(), Failure<W>> {
+    /// What a state needs before it starts: its sensors in service, the facts of `pre(a)`
+    /// that none of them decides already believed, each sensor's `pre(s)`; then the
+    /// behaviour's I/O.
+    fn prepare(&self, state: State<M>) -> Result<ActionIo<'_, M>, Failure<W>> {
         let action = state.action.id();
         let sensors = state.sensors;
-        self.trace(TraceEvent::StateEntered {
-            state: state.index,
-            action,
-            sensors,
-        });
-        let result = self.run_action(state).await;
+        let table = self.mission.sensors();
+        let (beliefs, faulty) = self.shared().lock(|s| (s.beliefs.get(), s.faulty.get()));
+        // A sensor out of service cannot watch the action: fail before moving anything.
+        if let Some(sensor) = sensors.iter().find(|s| faulty.contains(*s)) {
+            return Err(Failure::SensorUnavailable { sensor });
+        }
+        // Facts of pre(a) that no running sensor decides must already hold.
+        let missing = state
+            .pre
+            .difference(perception_of(table, sensors))
+            .difference(beliefs);
+        if !missing.is_empty() {
+            return Err(Failure::PreconditionUnmet { action, missing });
+        }
+        if let Some(sensor) = sensors.iter().find(|s| {
+            table
+                .get(s.index())
+                .is_none_or(|spec| !spec.pre.is_subset(beliefs))
+        }) {
+            return Err(Failure::SensorUnavailable { sensor });
+        }
+        let own = self
+            .storage
+            .action_stores()
+            .get(action.index())
+            .ok_or(Failure::ActionFailed { action })?;
+        debug!(
+            "action {} starts with sensors {:?}",
+            action.index(),
+            sensors.bits()
+        );
+        Ok(ActionIo {
+            action: state.action,
+            store: MutualStore::link(own, self.storage.sensor_table(), sensors),
+            monitor: self,
+            typed: PhantomData,
+        })
+    }
+
+    /// `executePlans` for one plan: runs its FSM `f(Λ, T)` (its states from `source`) from its
+    /// initial state along the transition rules `T` until [`Target::Done`] or
+    /// [`Target::Failed`]. Between two states the work is bounded: the transition is O(1),
+    /// switching sensors off and on O(NS), the effects O(1).
+    pub(crate) async fn run_plan(&self, source: Source<'_, M>) -> Result<(), Failure<W>> {
+        let mut index = 0u8;
+        loop {
+            let (state, next) = self.state_of(&source, index)?;
+            // The state, from its start to its end, in this one future (the P-SMPA path in
+            // it, the SMPA one apart): a behaviour's step is polled through as few futures as
+            // can be.
+            let action = state.action.id();
+            let sensors = state.sensors;
+            self.trace(TraceEvent::StateEntered {
+                state: state.index,
+                action,
+                sensors,
+            });
+            let result = match (self.prepare(state), self.config.policy) {
+                (Err(failure), _) => Err(failure),
+                (Ok(io), _) if sensors.is_empty() => Ok(self.platform.run(Act::new(io)).await),
+                // P-SMPA: `δ'_i = δ_i ∥ {s_k}`; the sensors end when the action ends.
+                (Ok(io), Policy::PSmpa) => {
+                    let epoch = self.command(sensors, Mode::Parallel, Some((action, state.pre)));
+                    // Fresh percepts before the behaviour starts, checked against its
+                    // precondition.
+                    let result = match self.ready(epoch, sensors).await {
+                        Err(failure) => Err(failure),
+                        Ok(()) => {
+                            self.check_precondition();
+                            // The watch first, in one future with the behaviour: a failure
+                            // reported at this instant stops the behaviour before it takes
+                            // another step.
+                            let parallel = Parallel {
+                                watch: self.watch(epoch, state),
+                                runtime: self,
+                                behaviour: self.platform.run(Act::new(io)),
+                            };
+                            match parallel.await {
+                                Either::First(failure) => {
+                                    self.platform.halt(state.action);
+                                    Err(failure)
+                                }
+                                Either::Second(outcome) => Ok(outcome),
+                            }
+                        }
+                    };
+                    let stopped = self.stop().await;
+                    result.and_then(|outcome| stopped.map(|()| outcome))
+                }
+                (Ok(io), Policy::Smpa { sense, act }) => {
+                    self.run_alternating(state, io, (sense, act)).await
+                }
+            };
+            let result = self.state_ended(state, result);
+            let target = if result.is_ok() { next.0 } else { next.1 };
+            match target {
+                Target::State(next) => index = next,
+                Target::Done => return result,
+                // Machines only fail on the failure edge; anything else is a broken FSM.
+                Target::Failed => return result.and(Err(Failure::InvalidFsm { state: index })),
+            }
+        }
+    }
+
+    /// State `index` of `source` and its transition rules (success, failure).
+    fn state_of(
+        &self,
+        source: &Source<'_, M>,
+        index: u8,
+    ) -> Result<(State<M>, (Target, Target)), Failure<W>> {
+        match source {
+            Source::Compiled(states) => {
+                let state = *states
+                    .get(usize::from(index))
+                    .ok_or(Failure::InvalidFsm { state: index })?;
+                let last = usize::from(index).saturating_add(1) >= states.len();
+                let next = if last {
+                    Target::Done
+                } else {
+                    Target::State(index.saturating_add(1))
+                };
+                Ok((state, (next, Target::Failed)))
+            }
+            Source::Fsm(fsm) => {
+                let table = self.mission.actions();
+                let state = fsm
+                    .state(index, table, self.mission.sensors())
+                    .ok_or(Failure::InvalidFsm { state: index })?;
+                let unknown = Failure::ActionFailed {
+                    action: state.action,
+                };
+                let spec = table.get(state.action.index()).ok_or(unknown)?;
+                let action = M::Action::from_id(state.action).ok_or(unknown)?;
+                let next = (state.next(Edge::Success), state.next(Edge::Failure));
+                let state = State {
+                    index,
+                    action,
+                    sensors: state.sensors,
+                    pre: spec.pre,
+                    add: spec.add,
+                    del: spec.del,
+                    max_violation: spec.max_violation,
+                };
+                Ok((state, next))
+            }
+        }
+    }
+
+    /// State `state` ended with `result`: the violation and requests cleared, the action's
+    /// effects applied on success, the end traced.
+    fn state_ended(
+        &self,
+        state: State<M>,
+        result: Result<Outcome, Failure<W>>,
+    ) -> Result<(), Failure<W>> {
+        let action = state.action.id();
         self.shared().lock(|s| {
             s.set_violation(None);
             s.requests.set(SensorSet::EMPTY);
@@ -307,132 +426,24 @@ where
         result
     }
 
-    async fn run_action(&self, state: State<M>) -> Result<Outcome, Failure<W>> {
-        let action = state.action.id();
-        let sensors = state.sensors;
-        let table = self.mission.sensors();
-        let (beliefs, faulty) = self.shared().lock(|s| (s.beliefs.get(), s.faulty.get()));
-        // A sensor out of service cannot watch the action: fail before moving anything.
-        if let Some(sensor) = sensors.iter().find(|s| faulty.contains(*s)) {
-            return Err(Failure::SensorUnavailable { sensor });
-        }
-        // Facts of pre(a) that no running sensor decides must already hold.
-        let missing = state
-            .pre
-            .difference(perception_of(table, sensors))
-            .difference(beliefs);
-        if !missing.is_empty() {
-            return Err(Failure::PreconditionUnmet { action, missing });
-        }
-        if let Some(sensor) = sensors.iter().find(|s| {
-            table
-                .get(s.index())
-                .is_none_or(|spec| !spec.pre.is_subset(beliefs))
-        }) {
-            return Err(Failure::SensorUnavailable { sensor });
-        }
-        let own = self
-            .storage
-            .action_stores()
-            .get(action.index())
-            .ok_or(Failure::ActionFailed { action })?;
-        let io = ActionIo {
-            action: state.action,
-            store: MutualStore::link(own, self.storage.sensor_table(), sensors),
-            monitor: self,
-            typed: PhantomData,
-        };
-        debug!(
-            "action {} starts with sensors {:?}",
-            action.index(),
-            sensors.bits()
-        );
-        if sensors.is_empty() {
-            return Ok(self.platform.run(Act::new(io)).await);
-        }
-        match self.config.policy {
-            Policy::PSmpa => self.run_parallel(state, io).await,
-            Policy::Smpa { sense, act } => self.run_alternating(state, io, (sense, act)).await,
-        }
-    }
-
-    /// `executePlans` for one plan: runs its FSM `f(Λ, T)` (its states from `source`) from its
-    /// initial state along the transition rules `T` until [`Target::Done`] or
-    /// [`Target::Failed`]. Between two states the work is bounded: the transition is O(1),
-    /// switching sensors off and on O(NS), the effects O(1).
-    pub(crate) async fn run_plan(&self, source: Source<'_, M>) -> Result<(), Failure<W>> {
-        let mut index = 0u8;
-        loop {
-            let (state, next) = match &source {
-                Source::Compiled(states) => {
-                    let state = *states
-                        .get(usize::from(index))
-                        .ok_or(Failure::InvalidFsm { state: index })?;
-                    let last = usize::from(index).saturating_add(1) >= states.len();
-                    let next = if last {
-                        Target::Done
-                    } else {
-                        Target::State(index.saturating_add(1))
-                    };
-                    (state, (next, Target::Failed))
-                }
-                Source::Fsm(fsm) => {
-                    let table = self.mission.actions();
-                    let state = fsm
-                        .state(index, table, self.mission.sensors())
-                        .ok_or(Failure::InvalidFsm { state: index })?;
-                    let spec = table
-                        .get(state.action.index())
-                        .ok_or(Failure::ActionFailed {
-                            action: state.action,
-                        })?;
-                    let action = M::Action::from_id(state.action).ok_or(Failure::ActionFailed {
-                        action: state.action,
-                    })?;
-                    let next = (state.next(Edge::Success), state.next(Edge::Failure));
-                    let state = State {
-                        index,
-                        action,
-                        sensors: state.sensors,
-                        pre: spec.pre,
-                        add: spec.add,
-                        del: spec.del,
-                        max_violation: spec.max_violation,
-                    };
-                    (state, next)
-                }
-            };
-            let result = self.run_state(state).await;
-            let target = if result.is_ok() { next.0 } else { next.1 };
-            match target {
-                Target::State(next) => index = next,
-                Target::Done => return result,
-                // Machines only fail on the failure edge; anything else is a broken FSM.
-                Target::Failed => return result.and(Err(Failure::InvalidFsm { state: index })),
-            }
-        }
-    }
-
-    /// Runs the library's plan `plan`: its states computed when the mission was compiled
-    /// (unless the [`Config::plans`](crate::Config::plans) say otherwise), or the run-time
-    /// FSM.
-    pub(crate) async fn execute(&self, plan: PlanId) -> Result<(), Failure<W>> {
+    /// Where the library's plan `plan`'s states come from: computed when the mission was
+    /// compiled (unless the [`Config::plans`](crate::Config::plans) say otherwise), or the
+    /// run-time FSM.
+    pub(crate) fn source(&self, plan: PlanId) -> Result<Source<'_, M>, Failure<W>> {
         let compiled = match self.config.plans {
             Plans::Compiled => self.mission.states(plan),
             Plans::RunTime => None,
         };
-        let source = match compiled {
-            Some(states) => Source::Compiled(states),
-            None => {
-                let Some(p) = self.mission.plan(plan) else {
-                    return Err(Failure::InvalidFsm { state: 0 });
-                };
-                let fsm = Fsm::compile(plan, p.body, self.mission.actions())
-                    .map_err(|_| Failure::InvalidFsm { state: 0 })?;
-                Source::Fsm(fsm)
-            }
-        };
-        self.run_plan(source).await
+        if let Some(states) = compiled {
+            return Ok(Source::Compiled(states));
+        }
+        let p = self
+            .mission
+            .plan(plan)
+            .ok_or(Failure::InvalidFsm { state: 0 })?;
+        let fsm = Fsm::compile(plan, p.body, self.mission.actions())
+            .map_err(|_| Failure::InvalidFsm { state: 0 })?;
+        Ok(Source::Fsm(fsm))
     }
 }
 
