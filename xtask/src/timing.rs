@@ -78,7 +78,8 @@ const HOST_STEPS: &[(&str, &str)] = &[
     ),
     (
         "behaviour step (one poll)",
-        "as psmpa_core::platform::Actuator>::run::{{closure}}",
+        // The simulated NAO's, for any mission (`Ms`).
+        "as psmpa_core::platform::Actuator<Ms>>::run::{{closure}}",
     ),
     (
         "store read, a sample",
@@ -90,8 +91,9 @@ const HOST_STEPS: &[(&str, &str)] = &[
         "psmpa_core::trace::TraceHash::words",
     ),
     (
+        // The scenarios' missions are loaded at run time: their plans through the FSM.
         "Algorithm 2: compile a plan",
-        "psmpa_core::runtime::fsm::Fsm<_>::compile",
+        "psmpa_core::runtime::fsm::Fsm::compile",
     ),
 ];
 

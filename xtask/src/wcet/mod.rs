@@ -167,6 +167,11 @@ pub struct Annotation {
     /// different bound in each.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub jobs: Vec<String>,
+    /// Other functions the debug information may say the same loop is written in: where a
+    /// loop of an inlined function shares the caller's glue (a spill, a state store), one
+    /// build puts it in the caller and the next in the callee.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub also: Vec<String>,
     /// A function the loop must be inlined into for the annotation to hold (a busy wait the
     /// design declares, and no other use of the same helper).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -626,7 +631,7 @@ impl cfg::Image for Job<'_> {
         }
         let (function, chain) = self.loop_function(site)?;
         let (i, found) = self.annotations.loops.iter().enumerate().find(|(_, a)| {
-            a.function == function
+            (a.function == function || a.also.contains(&function))
                 && a.applies_to(self.job)
                 && a.within.as_ref().is_none_or(|w| chain.contains(w))
         })?;
