@@ -82,16 +82,23 @@ impl Parse for Input {
 /// * enums `Sensor`, `Action`, `Fact`, `Event`, `Plan`: one variant a name, in UpperCamelCase
 ///   (`go to door` is `GoToDoor`), with `name()`, `id()`, `from_id()`, `ALL`, `Display` and,
 ///   with psmpa-core's `defmt` feature, `defmt::Format` (the original names);
-/// * `Caps`, the runtime's capacities from the mission (`keys = N` sets the keys each data
-///   store holds; by default a sensor's reading and all its pairs);
-/// * `Mission`, its type, and `MISSION`, a `static` built at compile time;
-/// * `Runtime<'r, P, T = ()>`, the runtime of platform `P` for this mission, a type with its
-///   constructor: `dock::Runtime::new(&dock::MISSION, &robot, (), config)`.
+/// * the mission as a type, named as the module in UpperCamelCase (`dock::Dock`), which
+///   implements `psmpa_core::Mission`: its storage, its plans' states as constant tables
+///   (Algorithm 2 at build time) and a sampler per sensor, specialised for its mode;
+/// * `Runtime<'r, P, T = ()>`, the runtime of platform `P` for this mission:
+///   `dock::Runtime::new(dock::Dock, &robot, (), config)`;
+/// * `Run<'io>`, the action to run with its typed I/O (`match act.typed() { .. }`), and the
+///   types it reads by: `sensor::Sonar`, `action::GoToDoor` (which sensors run beside it) and
+///   `key::EchoUs` (the keys the mission declares, `"keys"` of a sensor or an action);
+/// * `TABLES`, the mission's tables as a `static`, for tools that print names or plans;
+/// * the capacities `NS`, `NA`, `NP`, `L`, `W`, `NF` and `K`, the keys each data store holds
+///   (by default a sensor's sample and its declared keys, or an action's; `keys = N` gives
+///   more room).
 ///
-/// A robot names its sensors and actions by the enums (`type Id = dock::Sensor;` in its
-/// `Sensor` implementation, `type Id = dock::Action;` in its `Actuator`), so its `match` is
-/// checked to be exhaustive. Attributes before `mod` (`///` documentation, a `#[cfg(..)]`)
-/// go on the module.
+/// A robot implements `Sensor<dock::Dock>` and `Actuator<dock::Dock>`, matching on the
+/// enums, so its `match` is checked to be exhaustive and a platform for another mission does
+/// not compile. Attributes before `mod` (`///` documentation, a `#[cfg(..)]`) go on the
+/// module.
 #[proc_macro]
 pub fn include_mission(input: TokenStream) -> TokenStream {
     let input = syn::parse_macro_input!(input as Input);
@@ -526,11 +533,10 @@ fn generate(
     let k = keys_option.unwrap_or(most);
     if k < most {
         return Err(syn::Error::new(
-            span,
+            input.keys.as_ref().map_or(span, syn::LitInt::span),
             format!(
-                "keys = {k}: a behaviour of the mission declares {} keys, so a data store needs \
-                 room for {most}",
-                most.saturating_sub(1)
+                "keys = {k}: a data store of the mission needs room for {most} keys (a \
+                 sensor's sample and its declared keys, or an action's declared keys)"
             ),
         ));
     }
