@@ -20,7 +20,7 @@ cargo clippy --workspace --all-targets -- -D warnings
 # Before anything writes files: a clean tree packages.
 step "the library crates package and build as published (psmpa-model, -macros, -core, -testkit, -drivers)"
 # Cargo keeps a dry run's unpacked crates by version and never unpacks the same version again:
-# a 0.3.0-dev packaged earlier from other sources would be built instead of this one.
+# a version packaged earlier from other sources would be built instead of this one.
 rm -rf "${CARGO_HOME:-$HOME/.cargo}"/registry/src/-*/psmpa-*
 cargo publish --workspace --dry-run
 
@@ -84,7 +84,8 @@ ln -s "$PWD" "$own/psmpa"
 sed -n '/<!-- own-robot:start -->/,/<!-- own-robot:end -->/p' docs/guide.md | sed '/^```/d;/^<!--/d' > "$own/steps.sh"
 # Built beside the crate outside the workspace, whose crates it shares where features agree.
 outside_target="$PWD/target/outside"
-(cd "$own" && CARGO_TARGET_DIR="$outside_target" bash -eu -o pipefail steps.sh)
+# `cargo doc --open` runs $BROWSER on the page: `true` opens nothing on a machine without one.
+(cd "$own" && BROWSER=true CARGO_TARGET_DIR="$outside_target" bash -eu -o pipefail steps.sh)
 
 # The measuring commands below write their figures into these pages (size from its snapshot,
 # the QEMU timing, the bench, the stack and the static timing): they must come out as

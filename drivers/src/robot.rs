@@ -87,8 +87,8 @@ use crate::switch::Switch;
 // `missions/fetch-tea.json` here is a link to the project's, so that the published crate
 // carries the file.
 psmpa_core::include_mission!(
-    /// The Fetch Tea mission, compiled in: checked when the crate builds, a `static` with
-    /// no parsing at boot. 4 keys per data store (a reading and its pairs).
+    /// The Fetch Tea mission, compiled in: checked when the crate builds, a type with no
+    /// parsing at boot. 4 keys per data store (a reading and its pairs).
     pub mod fetch_tea = "missions/fetch-tea.json",
     keys = 4
 );

@@ -93,9 +93,10 @@ impl core::fmt::Display for FsmError {
 impl core::error::Error for FsmError {}
 
 /// A finite state machine `f(Λ, T)` compiled from a plan at run time: a plan the planner made,
-/// or a library plan of a mission loaded at run time (a compiled mission's plans are code,
-/// [`Mission::execute`](crate::Mission::execute)). It borrows the plan's body and computes a
-/// state `δ_i` from the domain's tables when asked, so it needs no room of its own.
+/// or a library plan of a mission loaded at run time (a compiled mission's plans are
+/// build-time state tables, [`Mission::states`](crate::Mission::states)). It borrows the plan's
+/// body and computes a state `δ_i` from the domain's tables when asked, so it needs no room of
+/// its own.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Fsm<'p> {
     plan: PlanId,

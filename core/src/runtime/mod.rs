@@ -12,7 +12,7 @@
 //!   woken ([`sensing`]).
 //! * **Deciding** ([`DecidingSide`](crate::DecidingSide), the deliberative controller): the
 //!   control loop (Algorithm 1, [`control`]), the plans' states (Algorithm 2: a compiled
-//!   mission's plans are code, [`Mission::execute`]; others run through the [`fsm`]) and the
+//!   mission's plans are build-time state tables, [`Mission::states`]; others run through the [`fsm`]) and the
 //!   actuator behaviours. It switches sensors on and off by telling the sensing side which
 //!   sensors the running state needs (least commitment).
 //!
@@ -92,7 +92,7 @@ pub enum Policy {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum Plans {
-    /// As their code ([`Mission::execute`]): Algorithm 2 at build time.
+    /// From their build-time state tables ([`Mission::states`]): Algorithm 2 at build time.
     Compiled,
     /// Through the run-time FSM, as a plan the planner made: the same trace, for a check that
     /// the two paths agree.
