@@ -1,5 +1,5 @@
 //! Runs the psmpa plan workload many times, for a profiler:
-//! `valgrind --tool=callgrind target/release/examples/profile_plan 1000` (its plan as code), or
+//! `valgrind --tool=callgrind target/release/examples/profile_plan 1000` (its plan's constant states), or
 //! `profile_plan run-time 1000` (through the run-time FSM).
 
 use psmpa_core::Plans;

@@ -105,8 +105,8 @@ impl Actuator<bench::Bench> for Platform {
 /// The runtime of the workload.
 pub type BenchRuntime<'r> = bench::Runtime<'r, Platform>;
 
-/// Runs the plan once on `platform`, its plans as `plans` says (compiled: as code; run-time:
-/// through the run-time FSM); returns the action steps it ran.
+/// Runs the plan once on `platform`, its plans as `plans` says (compiled: from its constant
+/// states; run-time: through the run-time FSM); returns the action steps it ran.
 pub fn run_plan_with(mission: &bench::Bench, platform: &Platform, plans: Plans) -> u32 {
     let mut config = Config::default();
     config.max_violation = Duration::from_ticks(0);
@@ -122,8 +122,8 @@ pub fn run_plan_with(mission: &bench::Bench, platform: &Platform, plans: Plans) 
     }
 }
 
-/// Runs the plan once on `platform`, from `mission`, its plan as code; returns the action
-/// steps it ran.
+/// Runs the plan once on `platform`, from `mission`, from its constant states; returns the
+/// action steps it ran.
 pub fn run_plan_on(mission: &bench::Bench, platform: &Platform) -> u32 {
     run_plan_with(mission, platform, Plans::Compiled)
 }

@@ -495,8 +495,8 @@ fn the_robot_is_sync_so_its_runtime_can_serve_two_priorities() {
     sync::<common::TestRobot>();
 }
 
-/// Algorithm 2 at build time against Algorithm 2 at run time: the mission's plan as code and
-/// through the run-time FSM give the robot the same run, event by event, in worlds that take
+/// Algorithm 2 at build time against Algorithm 2 at run time: the mission's plan from its
+/// constant states and through the run-time FSM give the robot the same run, event by event, in worlds that take
 /// each of its edges (a clear path, a bump, a near obstacle, a silent sonar, a locked door).
 #[test]
 fn the_plan_as_code_and_through_the_run_time_fsm_run_alike() {

@@ -518,7 +518,7 @@ mod firmware {
     ) {
         let ended = psmpa_sim::run::decide(&mut deciding, world, scenario, space).await;
         STOP.signal(());
-        let s = psmpa_sim::run::summary(arch, world, deciding.engine(), ended);
+        let s = psmpa_sim::run::summary(arch, world, deciding.runtime(), ended);
         let worst = world.with_log(|reactions| reactions.worst);
         finish_recording();
         let (ticks, reference) = (

@@ -154,8 +154,8 @@ pub enum PlanPath {
     /// The mission loaded from its file at run time, its plans through the run-time FSM (what
     /// every other command runs).
     Loaded,
-    /// The same file compiled in (the boards' `fetch_tea`), its plans as code: Algorithm 2 at
-    /// build time, each sensor's own sampler.
+    /// The same file compiled in (the boards' `fetch_tea`), its plans' states as constants:
+    /// Algorithm 2 at build time, each sensor's own sampler.
     Compiled,
     /// The same file compiled in, its plans through the run-time FSM.
     CompiledRunTime,

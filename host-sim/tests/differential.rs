@@ -1,7 +1,7 @@
 //! Algorithm 2 at build time against Algorithm 2 at run time: every shipped scenario, and a
 //! hundred random ones (`psmpa-sim sweep`'s), under both architectures, along the three paths
 //! of the Fetch Tea mission (the file loaded at run time with its run-time FSM, the file
-//! compiled in with its plans as code and a sampler per sensor, the file compiled in with its
+//! compiled in with its plans' states as constants and a sampler per sensor, the file compiled in with its
 //! plans through the run-time FSM): the same trace, event by event (its hash), and the same
 //! outcome.
 

@@ -2,9 +2,9 @@
 //!
 //! [`include_mission!`] reads a mission file when the robot is built, checks it as
 //! `psmpa-sim check` does (the same code: `psmpa_model::check`), and generates a module with
-//! the mission's names as enums, its capacities, its runtime's type and the mission itself, a
-//! `static` built at compile time: nothing is parsed when the robot boots, and a mistake in the
-//! file is a compile error. Use it through `psmpa_core::include_mission!`, which re-exports it.
+//! the mission as a type (`dock::Dock`), its names as enums, its capacities, its runtime's type
+//! and its tables, a `static` built at compile time (`TABLES`): nothing is parsed when the
+//! robot boots, and a mistake in the file is a compile error. Use it through `psmpa_core::include_mission!`, which re-exports it.
 
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
@@ -77,7 +77,7 @@ impl Parse for Input {
 /// `PATH` is relative to the including crate's `CARGO_MANIFEST_DIR`. The file is checked as
 /// `psmpa-sim check` checks one (strict JSON, every name resolved, capacities, a reachable
 /// goal), with up to 256 facts; an error is a compile error that names the field and the name
-/// at fault (`mission.json: plans[0].body: unknown action "fly"`). Module `NAME` then holds:
+/// at fault (``mission.json: plans[0].body: unknown action `fly` (not in `actions`)``). Module `NAME` then holds:
 ///
 /// * enums `Sensor`, `Action`, `Fact`, `Event`, `Plan`: one variant a name, in UpperCamelCase
 ///   (`go to door` is `GoToDoor`), with `name()`, `id()`, `from_id()`, `ALL`, `Display` and,
@@ -860,7 +860,7 @@ fn generate(
     let file = file.to_string_lossy().into_owned();
     let doc = format!(
         "The mission `{}` of `{}`, compiled in: its type [`{mission}`], its names as enums and \
-         types, its plans as code and a sampler per sensor ({nf} facts, {} events, {ns} sensors, \
+         types, its plans' states as constants and a sampler per sensor ({nf} facts, {} events, {ns} sensors, \
          {na} actions, {np} plans).",
         mission_name.replace('`', "'"),
         input.path.value(),

@@ -6,7 +6,7 @@ use psmpa_testkit::{Recorder, simulate};
 
 // One sensor (a bumper, every 20 ms), one action that needs what it senses, one plan: checked
 // when this file compiles, and turned into a mission type (`hello::Hello`), its names, its
-// plan as code and the bumper's sampler.
+// plan's states as constants and the bumper's sampler.
 psmpa_core::include_mission!(mod hello = "tests/hello.json");
 
 struct Robot;

@@ -296,7 +296,8 @@ fn a_description_reaches_its_variant_and_loads_at_run_time() {
 }
 
 /// Algorithm 2 at build time against Algorithm 2 at run time, for the compiled missions of
-/// these tests: the plans as code and through the run-time FSM give one trace.
+/// these tests: the plans from their constant states and through the run-time FSM give one
+/// trace.
 #[test]
 fn the_plans_as_code_and_through_the_run_time_fsm_run_alike() {
     fn both<M, P>(

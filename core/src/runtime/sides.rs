@@ -49,37 +49,37 @@ use crate::trace::TraceSink;
 /// Place its [`run`](SensingSide::run) on an executor of higher priority than the deciding
 /// side, or beside it on one executor ([`Runtime::run_with_sensing`]). Dereferences to the
 /// runtime for what it knows (beliefs, stores, faults).
-pub struct SensingSide<'a, E>(&'a E);
+pub struct SensingSide<'a, R>(&'a R);
 
 /// The deciding side of a runtime ([`Runtime::split`]): Algorithm 1's control loop, the FSM,
 /// the behaviours. Its runs take it mutably: one control loop at a time (run again once one
 /// ended). Dereferences to the runtime for what it knows (beliefs, stores, faults).
-pub struct DecidingSide<'a, E>(&'a E);
+pub struct DecidingSide<'a, R>(&'a R);
 
-impl<'a, E> SensingSide<'a, E> {
+impl<'a, R> SensingSide<'a, R> {
     /// The runtime, for the life of the side: what another task may read while it runs.
-    pub fn engine(&self) -> &'a E {
+    pub fn runtime(&self) -> &'a R {
         self.0
     }
 }
 
-impl<'a, E> DecidingSide<'a, E> {
+impl<'a, R> DecidingSide<'a, R> {
     /// The runtime, for the life of the side: what another task may read while it runs.
-    pub fn engine(&self) -> &'a E {
+    pub fn runtime(&self) -> &'a R {
         self.0
     }
 }
 
-impl<E> Deref for SensingSide<'_, E> {
-    type Target = E;
-    fn deref(&self) -> &E {
+impl<R> Deref for SensingSide<'_, R> {
+    type Target = R;
+    fn deref(&self) -> &R {
         self.0
     }
 }
 
-impl<E> Deref for DecidingSide<'_, E> {
-    type Target = E;
-    fn deref(&self) -> &E {
+impl<R> Deref for DecidingSide<'_, R> {
+    type Target = R;
+    fn deref(&self) -> &R {
         self.0
     }
 }

@@ -1,7 +1,8 @@
 //! The deciding side's states: one behaviour state `δ_i` (or parallel state `δ'_i`) from its
-//! start to its end, under either policy. A compiled mission's plan code calls
-//! [`Deciding::state`] once a state with constants ([`StateSpec`]); the run-time FSM calls it
-//! with a state read from the tables.
+//! start to its end, under either policy. One future runs a plan's states in turn
+//! (`run_plan`): a compiled mission's from its constant states
+//! ([`Mission::states`](crate::Mission::states)), a plan of the run-time FSM from states read
+//! from the tables.
 //!
 //! * [`Policy::PSmpa`]: a parallel state `δ'_i` has its sensors switched on and sampled once,
 //!   then runs the actuator behaviour while they keep sampling. When the beliefs make

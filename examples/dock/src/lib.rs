@@ -22,7 +22,7 @@ use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::{Act, Actuator, Beside, Outcome, Platform, Reading, Sensor, SensorFault, Value};
 
 // The mission, checked and built when the crate builds: its type (`dock::Dock`), its sensors,
-// actions and plans as enums and types, its plans as code, a sampler per sensor.
+// actions and plans as enums and types, its plans' states as constants, a sampler per sensor.
 psmpa_core::include_mission!(pub mod dock = "mission.json");
 
 /// The dock robot's runtime, tracing into `T`.
