@@ -496,8 +496,8 @@ mod decision_tests {
 /// The functions the harness times, by their demangled names (without the hash): each
 /// decision is one call, or a search's start and its slices. Out of line in the core for this.
 const TIMED: [&str; 4] = [
-    "psmpa_core::runtime::control::<impl psmpa_core::runtime::engine::Engine<P,T,_,_,_,_,_,_,_>>::select",
-    "psmpa_core::runtime::fsm::Fsm<_>::compile",
+    "psmpa_core::runtime::control::<impl psmpa_core::runtime::Runtime<M,P,T>>::select",
+    "psmpa_core::runtime::fsm::Fsm::compile",
     "as psmpa_core::runtime::control::Fallback<_>>::start",
     "as psmpa_core::runtime::control::Fallback<_>>::step",
 ];
@@ -507,11 +507,13 @@ const PLAN_START: usize = 2;
 const PLAN_STEP: usize = 3;
 
 /// The entry of each of [`TIMED`] in `file`, 0 where the image has none (a library plan
-/// only image has no planner); more than one is an error (the timing would be ambiguous).
+/// only image has no planner); more than one is an error (the timing would be ambiguous), and
+/// so is no selection: every image selects plans, so its name changed.
 fn timed_entries(file: &object::File<'_>) -> Result<Vec<u32>, String> {
     TIMED
         .iter()
-        .map(|pattern| {
+        .enumerate()
+        .map(|(i, pattern)| {
             let found: Vec<u32> = file
                 .symbols()
                 .filter(|s| s.kind() == object::SymbolKind::Text)
@@ -526,6 +528,9 @@ fn timed_entries(file: &object::File<'_>) -> Result<Vec<u32>, String> {
                 .map(|s| u32::try_from(s.address()).unwrap_or(0) & !1)
                 .collect();
             match found[..] {
+                [] if i == SELECT => Err(format!(
+                    "the image has no function `{pattern}`: renamed? (the decisions' timing needs it)"
+                )),
                 [] => Ok(0),
                 [at] => Ok(at),
                 _ => Err(format!(
@@ -1857,7 +1862,10 @@ fn decisions_table(reports: &[(Report, PinLog)]) -> String {
             "plan selection (BDI: trigger, context, applicable plans)",
             |d| d.select,
         ),
-        ("one FSM compilation (Algorithm 2)", |d| d.compile),
+        (
+            "one FSM compilation (Algorithm 2 at run time: a plan the planner made)",
+            |d| d.compile,
+        ),
         ("one planner search, every slice", |d| d.plan),
     ];
     for (what, of) in rows {
