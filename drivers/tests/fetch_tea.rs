@@ -499,7 +499,7 @@ fn the_robot_is_sync_so_its_runtime_can_serve_two_priorities() {
 /// constant states and through the run-time FSM give the robot the same run, event by event, in worlds that take
 /// each of its edges (a clear path, a bump, a near obstacle, a silent sonar, a locked door).
 #[test]
-fn the_plan_as_code_and_through_the_run_time_fsm_run_alike() {
+fn the_constant_states_and_the_run_time_fsm_run_alike() {
     let worlds: [fn() -> World; 5] = [
         World::clear,
         || World {

@@ -790,11 +790,8 @@ fn generate(
         }
     });
 
-    let run_variants = action_v.iter().map(|v| {
-        let doc = format!(
-            "Run `{}` with its I/O.",
-            action_names[action_v.iter().position(|x| x == v).unwrap_or(0)].replace('`', "'")
-        );
+    let run_variants = action_v.iter().zip(&action_names).map(|(v, name)| {
+        let doc = format!("Run `{}` with its I/O.", name.replace('`', "'"));
         quote!(#[doc = #doc] #v(Io<'io, action::#v>))
     });
     // An enum of no action still uses its lifetime.
@@ -998,13 +995,7 @@ fn generate(
                     &self,
                     id: ::psmpa_core::PlanId,
                 ) -> ::core::option::Option<::psmpa_core::spec::PlanRef<'_, ::psmpa_core::FactSetOf<#w>>> {
-                    TABLES.library.get(id).map(|p| ::psmpa_core::spec::PlanRef {
-                        name: p.name,
-                        trigger: p.trigger,
-                        context: p.context,
-                        context_not: p.context_not,
-                        body: &p.body,
-                    })
+                    TABLES.library.get(id).map(::psmpa_core::spec::PlanRef::from)
                 }
                 fn task(&self) -> ::psmpa_core::Task<#w> {
                     TABLES.task

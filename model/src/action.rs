@@ -255,6 +255,33 @@ impl<'a, const W: usize> SensorAction<'a, W> {
     }
 }
 
+/// Algorithm 2 line 11 over a table of sensors by id: the sensors `s` with `per(s) ⊆ pre`
+/// (and `per(s) ≠ ∅`). O(NS).
+#[inline]
+pub fn sensors_serving<const W: usize>(
+    sensors: &[SensorAction<'_, W>],
+    pre: FactSetOf<W>,
+) -> SensorSet {
+    sensors
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.serves(pre))
+        .filter_map(|(i, _)| SensorId::new(i))
+        .collect()
+}
+
+/// `∪ per(s)` over the sensors `set` of a table of sensors by id: the facts they decide while
+/// running. O(NS).
+#[inline]
+pub fn perception_of<const W: usize>(
+    sensors: &[SensorAction<'_, W>],
+    set: SensorSet,
+) -> FactSetOf<W> {
+    set.iter()
+        .filter_map(|s| sensors.get(s.index()))
+        .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per))
+}
+
 /// An actuator-based action `a = <pre(a), add(a), del(a)>`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

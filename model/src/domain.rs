@@ -487,12 +487,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
     /// O(NS).
     #[inline]
     pub fn sensors_serving(&self, pre: FactSetOf<W>) -> SensorSet {
-        self.sensors
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.serves(pre))
-            .filter_map(|(i, _)| SensorId::new(i))
-            .collect()
+        crate::action::sensors_serving(&self.sensors, pre)
     }
 
     /// `∪ per(s)` over a set of sensors: the facts they decide while running.
@@ -500,10 +495,7 @@ impl<'a, const NS: usize, const NA: usize, const W: usize, const NF: usize>
     /// O(NS).
     #[inline]
     pub fn perception_of(&self, sensors: SensorSet) -> FactSetOf<W> {
-        sensors
-            .iter()
-            .filter_map(|s| self.sensor(s))
-            .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per))
+        crate::action::perception_of(&self.sensors, sensors)
     }
 }
 

@@ -205,10 +205,23 @@ impl<'a, const L: usize, const W: usize> Plan<'a, L, W> {
     /// Whether the plan is applicable: `t(p) = event`, `c(p) ⊆ beliefs` and no fact of
     /// [`context_not`](Self::context_not) holds. O(1).
     pub fn applicable(&self, event: EventId, beliefs: FactSetOf<W>) -> bool {
-        self.trigger == event
-            && self.context.is_subset(beliefs)
-            && !self.context_not.intersects(beliefs)
+        applicable(
+            (self.trigger, self.context, self.context_not),
+            event,
+            beliefs,
+        )
     }
+}
+
+/// Whether a plan of trigger `t(p)`, context `c(p)` and negative context (`trigger, context,
+/// context_not`) is applicable to `event` under `beliefs`: `t(p) = event`, `c(p) ⊆ beliefs`
+/// and no fact of the negative context holds. O(1).
+pub fn applicable<const W: usize>(
+    (trigger, context, context_not): (EventId, FactSetOf<W>, FactSetOf<W>),
+    event: EventId,
+    beliefs: FactSetOf<W>,
+) -> bool {
+    trigger == event && context.is_subset(beliefs) && !context_not.intersects(beliefs)
 }
 
 /// The plan library `P`: at most `NP` plans of at most `L` actions each.

@@ -299,7 +299,7 @@ fn a_description_reaches_its_variant_and_loads_at_run_time() {
 /// these tests: the plans from their constant states and through the run-time FSM give one
 /// trace.
 #[test]
-fn the_plans_as_code_and_through_the_run_time_fsm_run_alike() {
+fn the_constant_states_and_the_run_time_fsm_run_alike() {
     fn both<M, P>(
         mission: M,
         platform: &P,
@@ -326,10 +326,10 @@ fn the_plans_as_code_and_through_the_run_time_fsm_run_alike() {
             rt.into_sink().events
         })
     }
-    let [code, fsm] = both(dock::Dock, &DockOnly);
-    assert!(code.len() > 10);
-    assert_eq!(code, fsm);
-    let [code, fsm] = both(blind::Blind, &Blind);
-    assert!(code.len() > 3);
-    assert_eq!(code, fsm);
+    let [constant, fsm] = both(dock::Dock, &DockOnly);
+    assert!(constant.len() > 10);
+    assert_eq!(constant, fsm);
+    let [constant, fsm] = both(blind::Blind, &Blind);
+    assert!(constant.len() > 3);
+    assert_eq!(constant, fsm);
 }

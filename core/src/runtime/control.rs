@@ -10,6 +10,7 @@
 //! ```
 
 use crate::action::{ActuatorAction, SensorId, SensorMode, SensorSet};
+use crate::action::{perception_of, sensors_serving};
 use crate::domain::EventId;
 use crate::facts::FactSetOf;
 use crate::failure::Failure;
@@ -19,7 +20,7 @@ use crate::planner::{Planner, PlanningError, Search};
 use crate::platform::{Actuator, Platform, Sensor};
 use crate::runtime::Runtime;
 use crate::runtime::fsm::{Fsm, FsmError};
-use crate::runtime::state::{Source, perception_of, sensors_serving};
+use crate::runtime::state::Source;
 use crate::spec::storage::Mode;
 use crate::spec::{Body, Mission};
 use crate::trace::{TraceEvent, TraceSink};
@@ -240,10 +241,7 @@ where
             let Some(plan) = self.mission.plan(id) else {
                 break;
             };
-            let applicable = plan.trigger == task.event
-                && plan.context.is_subset(beliefs)
-                && !plan.context_not.intersects(beliefs);
-            if !applicable {
+            if !plan.applicable(task.event, beliefs) {
                 continue;
             }
             let first_false = plan

@@ -158,7 +158,7 @@ impl<'p> Fsm<'p> {
         };
         Some(BehaviourState {
             action,
-            sensors: crate::runtime::state::sensors_serving(sensors, a.pre),
+            sensors: crate::action::sensors_serving(sensors, a.pre),
             on_success,
             on_failure: Target::Failed,
         })
@@ -252,8 +252,6 @@ mod tests {
                 FactSet::EMPTY,
             ))
             .unwrap();
-        let ev = d.add_event("e").unwrap();
-        let _ = ev;
         let body = [go, open, rest];
         let fsm = Fsm::compile(PlanId::new(0).unwrap(), &body, d.actions()).unwrap();
 

@@ -169,13 +169,7 @@ pub(crate) type SensorsOf<M, P> =
     <StorageOf<M, P> as Storage<<P as Platform>::Mutex, <M as Mission>::Facts>>::Sensors;
 
 /// The shared state of a runtime of mission `M` on platform `P`.
-type SharedOf<M, P> = Shared<
-    <M as Mission>::Facts,
-    <<M as Mission>::Storage<<P as Platform>::Mutex> as Storage<
-        <P as Platform>::Mutex,
-        <M as Mission>::Facts,
-    >>::Sensors,
->;
+type SharedOf<M, P> = Shared<<M as Mission>::Facts, SensorsOf<M, P>>;
 
 /// The P-SMPA runtime of one robot: mission `M` (a compiled mission's type, or `&Tables` of
 /// one loaded at run time), platform `P`, trace sink `T` (none by default). Everything lives

@@ -611,7 +611,7 @@ fn check_changed<const W: usize, S: AsRef<[PerSensor<FactSetOf<W>>]>>(
     let running = s.running.get();
     let ready = running.intersection(s.ready.get().union(s.fresh.get()));
     let waiting = running.intersection(SensorSet::from_bits(!ready.bits()));
-    let perception = |set: SensorSet| crate::runtime::state::perception_of(table, set);
+    let perception = |set: SensorSet| crate::action::perception_of(table, set);
     let unread = perception(waiting).difference(perception(ready));
     let missing = missing.difference(unread);
     let before = s.violation.get();

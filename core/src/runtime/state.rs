@@ -28,7 +28,7 @@ use embassy_futures::select::{Either, select};
 use embassy_time::{Duration, Instant, Timer};
 use pin_project_lite::pin_project;
 
-use crate::action::{SensorId, SensorSet};
+use crate::action::{SensorSet, perception_of};
 use crate::facts::FactSetOf;
 use crate::failure::Failure;
 use crate::fmt::debug;
@@ -42,29 +42,6 @@ use crate::spec::{Act, ActionIo};
 use crate::spec::{ActionOf, Mission, State, Storage};
 use crate::store::MutualStore;
 use crate::trace::{Phase, TraceEvent, TraceSink};
-
-/// The facts the sensors `set` perceive, by `sensors`' table. O(NS).
-pub(crate) fn perception_of<const W: usize>(
-    sensors: &[crate::action::SensorAction<'_, W>],
-    set: SensorSet,
-) -> FactSetOf<W> {
-    set.iter()
-        .filter_map(|s| sensors.get(s.index()))
-        .fold(FactSetOf::EMPTY, |acc, s| acc.union(s.per))
-}
-
-/// `{s_k | per(s_k) ⊆ pre}`: the sensors that serve a precondition (Algorithm 2 line 11).
-pub(crate) fn sensors_serving<const W: usize>(
-    sensors: &[crate::action::SensorAction<'_, W>],
-    pre: FactSetOf<W>,
-) -> SensorSet {
-    sensors
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| !s.per.is_empty() && s.per.is_subset(pre))
-        .filter_map(|(i, _)| SensorId::new(i))
-        .collect()
-}
 
 fn outcome_result<const W: usize>(
     action: crate::action::ActionId,

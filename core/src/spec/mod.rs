@@ -25,7 +25,7 @@ use crate::domain::EventId;
 use crate::facts::{FactId, FactSetOf};
 use crate::mission::Tables;
 use crate::model::Task;
-use crate::plan::PlanId;
+use crate::plan::{Plan, PlanId};
 use crate::planner::{PlanningError, Search};
 
 pub mod io;
@@ -179,6 +179,29 @@ pub struct PlanRef<'p, F> {
     pub context_not: F,
     /// `bd(p)`: its actions, in order.
     pub body: &'p [ActionId],
+}
+
+impl<'p, const W: usize> PlanRef<'p, FactSetOf<W>> {
+    /// Whether it is applicable to `event` under `beliefs` ([`Plan::applicable`]'s rule). O(1).
+    pub fn applicable(&self, event: EventId, beliefs: FactSetOf<W>) -> bool {
+        crate::plan::applicable(
+            (self.trigger, self.context, self.context_not),
+            event,
+            beliefs,
+        )
+    }
+}
+
+impl<'p, const L: usize, const W: usize> From<&'p Plan<'p, L, W>> for PlanRef<'p, FactSetOf<W>> {
+    fn from(p: &'p Plan<'p, L, W>) -> Self {
+        Self {
+            name: p.name,
+            trigger: p.trigger,
+            context: p.context,
+            context_not: p.context_not,
+            body: &p.body,
+        }
+    }
 }
 
 /// A mission, as a type: its names, storage, tables, plans and samplers. `include_mission!`
@@ -430,13 +453,7 @@ impl<
         self.library.plans().len()
     }
     fn plan(&self, id: PlanId) -> Option<PlanRef<'_, FactSetOf<W>>> {
-        self.library.get(id).map(|p| PlanRef {
-            name: p.name,
-            trigger: p.trigger,
-            context: p.context,
-            context_not: p.context_not,
-            body: &p.body,
-        })
+        self.library.get(id).map(PlanRef::from)
     }
     fn task(&self) -> Task<W> {
         self.task

@@ -1,8 +1,8 @@
 //! The runtime's storage for a mission: every data store, and the state the sensing and
 //! deciding sides share behind one mutex (the command the deciding side gives, the beliefs
 //! and their version, the violation, each sensor's latest percept, and each side's waker).
-//! A mission's type names it ([`Mission::Storage`](crate::Mission::Storage)(crate::Mission::Storage)), every capacity in
-//! it, and the runtime reads it through [`Storage`], as slices.
+//! A mission's type names it ([`Mission::Storage`](crate::Mission::Storage)), every capacity
+//! in it, and the runtime reads it through [`Storage`], as slices.
 
 use core::cell::{Cell, RefCell};
 use core::task::{Context, Poll, Waker};
@@ -17,8 +17,8 @@ use crate::spec::Width;
 use crate::store::{DataStore, Entry, SensorStores, StoreAccess};
 
 /// A runtime's data stores and shared state for a mission, every capacity in the type:
-/// [`Store`] (a mission's [`Mission::Storage`](crate::Mission::Storage)). The runtime reads it through this trait, as
-/// slices, so that no capacity is a parameter of the runtime.
+/// [`Store`] (a mission's [`Mission::Storage`](crate::Mission::Storage)). The runtime reads it
+/// through this trait, as slices, so that no capacity is a parameter of the runtime.
 pub trait Storage<Mx: RawMutex, F: Width>: Sized {
     /// A data store.
     type Store: StoreAccess;

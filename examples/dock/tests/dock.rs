@@ -147,7 +147,7 @@ fn each_state_runs_exactly_the_sensors_its_precondition_needs() {
 /// Algorithm 2 at build time against Algorithm 2 at run time: the mission's plans from their
 /// constant states and through the run-time FSM give the same run, event by event, in every yard of these tests.
 #[test]
-fn the_plans_as_code_and_through_the_run_time_fsm_run_alike() {
+fn the_constant_states_and_the_run_time_fsm_run_alike() {
     let yards: [fn() -> Yard; 4] = [
         Yard::new,
         || Yard::new().with_battery(20),
