@@ -48,10 +48,10 @@ cargo build -p psmpa-sim --no-default-features --target thumbv7em-none-eabihf --
 step "the dock example builds for a microcontroller"
 cargo build -p psmpa-dock --target thumbv7em-none-eabihf --release
 
-step "the drivers build for microcontrollers (Cortex-M4F; Cortex-M33 as on the RP2350)"
+step "the drivers and the Fetch Tea robot build for microcontrollers (Cortex-M4F; Cortex-M33 as on the RP2350)"
 for target in thumbv7em-none-eabihf thumbv8m.main-none-eabihf; do
-  cargo build -p psmpa-drivers --target "$target" --release
-  cargo build -p psmpa-drivers --target "$target" --release --features defmt
+  cargo build -p psmpa-drivers -p psmpa-fetch-tea --target "$target" --release
+  cargo build -p psmpa-drivers -p psmpa-fetch-tea --target "$target" --release --features defmt
 done
 
 step "the boards (Pico 2, Pico): formatted, clippy-clean and built as their READMEs say (cargo build --release in boards/pico2, boards/pico)"

@@ -1,4 +1,4 @@
-//! # psmpa-drivers: devices on `embedded-hal` 1.0, and a robot built from them
+//! # psmpa-drivers: devices on `embedded-hal` 1.0
 //!
 //! The drivers a small psmpa robot needs, each generic over the `embedded-hal` /
 //! `embedded-hal-async` traits (never a HAL's own types), so that a board crate hands in its
@@ -10,15 +10,12 @@
 //! | [`switch`] | debounced switch (bumper, limit switch) | `InputPin + Wait` |
 //! | [`marker`] | IR reflectance sensor (TCRT5000-class) | `InputPin` |
 //! | [`hbridge`] | TB6612FNG motor channel, differential drive | `OutputPin`, `SetDutyCycle` |
-//! | [`robot`] | the Fetch Tea robot of `missions/fetch-tea.json` | psmpa-core's `Sensor`, `Actuator`, `Platform` |
 //!
 //! Time comes from `embassy-time` only (`Timer`, `Instant`, `with_timeout`): every wait is an
 //! await, nothing spins, and the crate picks no tick rate (the board's time driver does). No
 //! allocation, no panics: device errors are `Err` values that say what went wrong.
 //!
-//! [`robot`] is the file to copy for a robot of your own: a registry of the mission's names,
-//! the sensors' readings, the behaviours, each device behind its own mutex so that sensing can
-//! run on an interrupt executor above deciding.
+//! The Fetch Tea robot built from them is the crate `psmpa-fetch-tea`.
 #![no_std]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
@@ -39,7 +36,6 @@
 pub mod hbridge;
 pub mod hcsr04;
 pub mod marker;
-pub mod robot;
 pub mod switch;
 
 /// A pin or PWM channel reported an error. (The HALs' GPIO errors say little more; most are

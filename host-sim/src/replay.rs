@@ -24,7 +24,7 @@ use psmpa_core::{
 };
 use serde::Serialize;
 
-use psmpa_drivers::robot::{RECORD_WORDS, Settings, fetch_tea};
+use psmpa_fetch_tea::{RECORD_WORDS, Settings, fetch_tea};
 
 use crate::backend::simulate_split;
 use crate::cli::files::Output;
@@ -141,7 +141,7 @@ pub enum Source {
         /// The architecture.
         arch: Arch,
     },
-    /// The Fetch Tea robot on a board (`psmpa-drivers`, the mission compiled in): its
+    /// The Fetch Tea robot on a board (`psmpa-fetch-tea`, the mission compiled in): its
     /// calibration record, which sets the sensors' periods.
     Board {
         /// The calibration.
@@ -713,9 +713,9 @@ pub fn replay(
             let end =
                 Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);
             // The board's control loop: the same planner, where no library plan applies.
-            let mut space = psmpa_drivers::robot::PlannerSpace::new();
+            let mut space = psmpa_fetch_tea::PlannerSpace::new();
             let (mut sensing, mut deciding) = runtime.split();
-            let decided = deciding.run_planning(&psmpa_drivers::robot::PLANNER, &mut space);
+            let decided = deciding.run_planning(&psmpa_fetch_tea::PLANNER, &mut space);
             let ran_to = drive(sensing.run(), decided, start, end)?;
             finish(runtime.into_sink(), ran_to)
         }

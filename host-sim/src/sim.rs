@@ -164,7 +164,7 @@ pub enum PlanPath {
 /// Runs `scenario` under `arch` along `path`, with nothing recorded but the trace's hash: the
 /// three paths of one mission give one trace (`host-sim/tests/differential.rs`).
 pub fn run_on(scenario: &Scenario, arch: Arch, path: PlanPath) -> Result<Summary, RunError> {
-    use psmpa_drivers::robot::fetch_tea;
+    use psmpa_fetch_tea::fetch_tea;
     let plans = match path {
         PlanPath::Loaded => return run_summary(scenario, arch),
         PlanPath::Compiled => psmpa_core::Plans::Compiled,

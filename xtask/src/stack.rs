@@ -230,7 +230,7 @@ const PICO2_MAIN_TASK: Task = Task {
     calls: &[
         "psmpa_board_rp::____embassy_main_task",
         "psmpa_board_rp::__control_task",
-        " as psmpa_core::platform::Actuator<psmpa_drivers::robot::fetch_tea::FetchTea>>::run",
+        " as psmpa_core::platform::Actuator<psmpa_fetch_tea::fetch_tea::FetchTea>>::run",
     ],
 };
 

@@ -8,7 +8,7 @@
 //! firmware runs with [`Settings::DEFAULT`]. The bench in the loop (`cargo xtask hil`) writes
 //! the record of each scenario's robot into the emulated flash before it boots the chip.
 
-use psmpa_drivers::robot::{RECORD_WORDS, RecordError, Settings};
+use psmpa_fetch_tea::{RECORD_WORDS, RecordError, Settings};
 
 unsafe extern "C" {
     /// The start of the `SETTINGS` region (`memory.x`): execute-in-place flash, readable as

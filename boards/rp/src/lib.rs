@@ -50,10 +50,10 @@ use psmpa_drivers::Active;
 use psmpa_drivers::hbridge::{Channel, Drive};
 use psmpa_drivers::hcsr04::Hcsr04;
 use psmpa_drivers::marker::Marker;
-use psmpa_drivers::robot::{
+use psmpa_drivers::switch::{DEBOUNCE, Switch};
+use psmpa_fetch_tea::{
     Compute, Devices, FetchTea, FetchTeaRuntime, PLANNER, PlannerSpace, Settings, fetch_tea,
 };
-use psmpa_drivers::switch::{DEBOUNCE, Switch};
 use static_cell::StaticCell;
 
 use crate::log::Log;
@@ -70,7 +70,7 @@ type Robot = FetchTea<
     Busy,
 >;
 
-/// The walk's path planning ([`Settings::plan`](psmpa_drivers::robot::Settings::plan)) is
+/// The walk's path planning ([`Settings::plan`](psmpa_fetch_tea::Settings::plan)) is
 /// processor time: a busy wait on the deciding side, which sensing preempts.
 struct Busy;
 

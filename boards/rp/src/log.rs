@@ -26,7 +26,7 @@ use psmpa_core::plan::{MAX_PLANS, PlanSet};
 use psmpa_core::{
     ActionId, ControlError, Failure, PlanId, SensorId, SensorSet, TraceEvent, TraceSink, Value,
 };
-use psmpa_drivers::robot::fetch_tea;
+use psmpa_fetch_tea::fetch_tea;
 
 /// Sensors whose health is kept: the mission's.
 pub const SENSORS: usize = fetch_tea::NS;

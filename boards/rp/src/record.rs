@@ -30,7 +30,7 @@ use heapless::Deque;
 use portable_atomic::Ordering;
 use psmpa_core::TraceEvent;
 use psmpa_core::record::{self, Frame, Header, MAX_FRAME, RecordOut, Recorder, Ring};
-use psmpa_drivers::robot::{Settings, fetch_tea};
+use psmpa_fetch_tea::{Settings, fetch_tea};
 
 /// Bytes of the ring: about 140 one-word frames.
 pub const RING_BYTES: usize = 4096;
@@ -144,7 +144,7 @@ pub fn start(settings: &Settings, after_reset: bool) {
 /// A recording's header and prologue into `out`: the calibration record's bytes, kind
 /// [`BOARD`].
 fn begin(out: &mut impl RecordOut, settings: &Settings) {
-    let mut body = [0u8; 4 * psmpa_drivers::robot::RECORD_WORDS];
+    let mut body = [0u8; 4 * psmpa_fetch_tea::RECORD_WORDS];
     for (slot, byte) in body
         .iter_mut()
         .zip(settings.to_record().iter().flat_map(|w| w.to_le_bytes()))

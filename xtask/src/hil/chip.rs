@@ -108,7 +108,7 @@ mod tests {
             } else {
                 TraceEvent::SensorOff { sensor: sonar }
             };
-            TraceSink::<psmpa_drivers::robot::fetch_tea::FetchTea>::record(
+            TraceSink::<psmpa_fetch_tea::fetch_tea::FetchTea>::record(
                 &mut rec,
                 Instant::from_micros(us),
                 &e,

@@ -67,7 +67,7 @@ pub fn unshipped(seed: u64) -> String {
     )
 }
 
-/// The walk's brake when its precondition turns false (`drivers/src/robot.rs`).
+/// The walk's brake when its precondition turns false (`fetch-tea/src/lib.rs`).
 const BRAKE: &str = "                } else {
                     // The precondition turned false: brake at once.
                     self.wheels(Drive::brake)
@@ -103,7 +103,7 @@ const MUTANTS: &[Mutant] = &[
     Mutant {
         name: "busy-brake",
         what: "the walk computes for 20 ms before it brakes",
-        file: "drivers/src/robot.rs",
+        file: "fetch-tea/src/lib.rs",
         find: BRAKE,
         replace: "                } else {
                     embassy_time::block_for(Duration::from_millis(20));
@@ -115,7 +115,7 @@ const MUTANTS: &[Mutant] = &[
     Mutant {
         name: "sleepy-brake",
         what: "the walk sleeps 20 ms before it brakes",
-        file: "drivers/src/robot.rs",
+        file: "fetch-tea/src/lib.rs",
         find: BRAKE,
         replace: "                } else {
                     Timer::after(Duration::from_millis(20)).await;
@@ -181,7 +181,7 @@ const MUTANTS: &[Mutant] = &[
     Mutant {
         name: "bumper-ignored",
         what: "a pressed bumper still says the path is clear",
-        file: "drivers/src/robot.rs",
+        file: "fetch-tea/src/lib.rs",
         find: "Reading::of(Value::Bool(pressed), !pressed)",
         replace: "Reading::of(Value::Bool(pressed), true)",
         plays: &["scenarios/bumper-4.json"],
@@ -199,7 +199,7 @@ const MUTANTS: &[Mutant] = &[
     Mutant {
         name: "no-entry",
         what: "entering the kitchen succeeds without driving: the chip says its goal is reached where its wheels never carried it through",
-        file: "drivers/src/robot.rs",
+        file: "fetch-tea/src/lib.rs",
         find: "                let s = &self.settings;
                 self.timed(s.enter_permille, s.enter).await",
         replace: "                Outcome::Success",

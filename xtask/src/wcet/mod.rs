@@ -1129,7 +1129,7 @@ impl Report {
 
 /// The mission's sampling periods of the sonar and the bumper, ms.
 fn periods_ms() -> Result<[u64; 2], String> {
-    use psmpa_drivers::robot::fetch_tea::{Sensor, TABLES as MISSION};
+    use psmpa_fetch_tea::fetch_tea::{Sensor, TABLES as MISSION};
     let period = |s: Sensor| match MISSION.domain.sensor(s.id()).map(|a| a.mode) {
         Some(psmpa_core::SensorMode::Cyclic { period }) => Ok(period.as_millis()),
         _ => Err(format!("the mission's {s:?} is not cyclic")),

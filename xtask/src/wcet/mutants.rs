@@ -56,7 +56,7 @@ const MUTANTS: &[Mutant] = &[
     Mutant {
         name: "busy-halt",
         what: "the safety stop waits 1 ms on the clock before it brakes",
-        file: "drivers/src/robot.rs",
+        file: "fetch-tea/src/lib.rs",
         find: "        // Nothing more to do if even braking fails.
         let _ = self.wheels(Drive::brake);",
         replace: "        embassy_time::block_for(Duration::from_millis(1));

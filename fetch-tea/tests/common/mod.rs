@@ -17,8 +17,8 @@ use psmpa_drivers::Active;
 use psmpa_drivers::hbridge::{Channel, Drive};
 use psmpa_drivers::hcsr04::Hcsr04;
 use psmpa_drivers::marker::Marker;
-use psmpa_drivers::robot::{Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
 use psmpa_drivers::switch::{DEBOUNCE, Switch};
+use psmpa_fetch_tea::{Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
 use psmpa_testkit::pins::{RecordedPin, RecordedPwm, ScriptedPin};
 use psmpa_testkit::{Recorder, simulate_split};
 

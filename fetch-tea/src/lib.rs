@@ -1,7 +1,10 @@
-//! The Fetch Tea robot of `missions/fetch-tea.json` (compiled in as [`fetch_tea`]), on the
-//! drivers of this crate: the file to copy for a robot of your own. Its sensors and behaviours
-//! are a `match` on the mission's [`fetch_tea::Sensor`] and [`fetch_tea::Action`]: a mission
-//! that gains one does not compile until this file handles it.
+//! # psmpa-fetch-tea: the Fetch Tea robot
+//!
+//! The robot of the paper's experiment, `missions/fetch-tea.json` (compiled in as
+//! [`fetch_tea`]), on the drivers of `psmpa-drivers`: the file to copy for a robot of your own.
+//! Its sensors and behaviours are a `match` on the mission's [`fetch_tea::Sensor`] and
+//! [`fetch_tea::Action`]: a mission that gains one does not compile until this file handles
+//! it.
 //!
 //! * `sonar` ([`Hcsr04`], cyclic, 100 ms): [`Value::Mm`] to the nearest obstacle, or
 //!   [`Value::NoEcho`] when nothing is in range; `path_clear` when nothing is within
@@ -44,7 +47,7 @@
 //! use psmpa_drivers::hbridge::{Channel, Drive};
 //! use psmpa_drivers::hcsr04::Hcsr04;
 //! use psmpa_drivers::marker::Marker;
-//! use psmpa_drivers::robot::{Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
+//! use psmpa_fetch_tea::{Devices, FetchTea, FetchTeaRuntime, Settings, fetch_tea};
 //! use psmpa_drivers::switch::{DEBOUNCE, Switch};
 //! // On a Pico 2: embassy-rp's `Output`, `Input` and `PwmOutput`.
 //! use psmpa_testkit::pins::{RecordedPin as Output, RecordedPwm as Pwm, ScriptedPin as Input};
@@ -67,6 +70,23 @@
 //! # let _ = (sensing, deciding);
 //! ```
 
+#![no_std]
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented,
+        clippy::arithmetic_side_effects
+    )
+)]
+
 use core::cell::RefCell;
 
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
@@ -78,11 +98,11 @@ use embedded_hal_async::digital::Wait;
 use psmpa_core::planner::{Planner, Search, Strategy};
 use psmpa_core::{Act, Actuator, Beside, Outcome, Platform, Reading, Sensor, SensorFault, Value};
 
-use crate::PinError;
-use crate::hbridge::{Drive, FULL, Motor};
-use crate::hcsr04::{Hcsr04, Hcsr04Error, Range};
-use crate::marker::Marker;
-use crate::switch::Switch;
+use psmpa_drivers::PinError;
+use psmpa_drivers::hbridge::{Drive, FULL, Motor};
+use psmpa_drivers::hcsr04::{Hcsr04, Hcsr04Error, Range};
+use psmpa_drivers::marker::Marker;
+use psmpa_drivers::switch::Switch;
 
 // `missions/fetch-tea.json` here is a link to the project's, so that the published crate
 // carries the file.
@@ -108,7 +128,8 @@ pub type PlannerSpace = Search<32>;
 /// After a side step, switch readings taken this soon still show the obstacle it went around
 /// (a bump switch reads open within two debounce times; its bounces end within one): the walk
 /// takes them for that one. A sonar reading that comes after the step sees what is there.
-pub const STEP_SETTLE: Duration = Duration::from_ticks(crate::switch::DEBOUNCE.as_ticks() * 2);
+pub const STEP_SETTLE: Duration =
+    Duration::from_ticks(psmpa_drivers::switch::DEBOUNCE.as_ticks() * 2);
 
 /// [`SensorFault::Device`] code: a pin reported an error.
 pub const PIN_FAULT: u8 = 1;
@@ -148,7 +169,7 @@ pub struct Settings {
     /// the path to clear.
     pub avoid: Duration,
     /// The longest the sonar's module may take to raise its echo after a trigger, if longer
-    /// than its driver's [`RISE_TIMEOUT`](crate::hcsr04::RISE_TIMEOUT) (a module that answers
+    /// than its driver's [`RISE_TIMEOUT`](psmpa_drivers::hcsr04::RISE_TIMEOUT) (a module that answers
     /// later); 0: that.
     pub sonar_rise: Duration,
     /// The walk from the kitchen door on to the back door, mm: "go to back door", past a

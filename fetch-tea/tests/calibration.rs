@@ -1,9 +1,7 @@
 //! The calibration record a board keeps its `Settings` in: what it takes, and what it refuses.
 
 use embassy_time::Duration;
-use psmpa_drivers::robot::{
-    RECORD_MAGIC, RECORD_VERSION, RECORD_WORDS, RecordError, Settings, crc32,
-};
+use psmpa_fetch_tea::{RECORD_MAGIC, RECORD_VERSION, RECORD_WORDS, RecordError, Settings, crc32};
 
 /// A record with word `i` set to `value` and its checksum made good again.
 fn with(mut record: [u32; RECORD_WORDS], i: usize, value: u32) -> [u32; RECORD_WORDS] {

@@ -1,4 +1,4 @@
-//! The whole Fetch Tea mission on the robot of `psmpa_drivers::robot`, its drivers on scripted
+//! The whole Fetch Tea mission on the robot of `psmpa_fetch_tea`, its drivers on scripted
 //! and recorded pins, sensing beside deciding in virtual time (`simulate_split`).
 //!
 //! 1 kHz ticks: echo widths and edges are whole milliseconds; a 6 ms echo is 1,029 mm.
@@ -9,8 +9,8 @@ use common::{Run, Wheeling, World, action, echo_ms, run, run_config, run_with, s
 use embassy_time::{Duration, Instant};
 use psmpa_core::{Config, ControlError, Outcome, SensorFault, TraceEvent, Value};
 use psmpa_drivers::hcsr04::{Hcsr04Error, PULSE_LIMIT, RISE_TIMEOUT, Range};
-use psmpa_drivers::robot::{PIN_FAULT, Settings, sonar_reading};
 use psmpa_drivers::switch::DEBOUNCE;
+use psmpa_fetch_tea::{PIN_FAULT, Settings, sonar_reading};
 
 const BUMPER_PERIOD_MS: u64 = 20;
 const SONAR_PERIOD_MS: u64 = 100;
@@ -415,7 +415,7 @@ fn a_stuck_echo_line_is_the_drivers_stuck_fault_within_the_sonars_timeout() {
         .collect();
     assert_eq!(faults.first(), Some(&SensorFault::Stuck), "{faults:?}");
     // Trigger (one 1 ms tick here), the module's delay, the pulse limit: inside the timeout.
-    let timeout = psmpa_drivers::robot::fetch_tea::TABLES
+    let timeout = psmpa_fetch_tea::fetch_tea::TABLES
         .domain
         .sensor(sonar)
         .map(|s| s.timeout);
