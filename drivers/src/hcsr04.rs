@@ -67,6 +67,15 @@ pub enum Hcsr04Error {
     Pin,
 }
 
+/// A ranger that measures like an HC-SR04: one read gives a [`Range`] or an [`Hcsr04Error`].
+/// [`Hcsr04`] is one on its two pins; a simulator's module, whose echo is timed in its
+/// world rather than by a 1 µs clock, is another. A robot written on this trait runs on both.
+#[allow(async_fn_in_trait)] // Runs on single-threaded executors: no `Send` bound wanted.
+pub trait Ranger {
+    /// Takes one measurement ([`Hcsr04::measure`]).
+    async fn measure(&mut self) -> Result<Range, Hcsr04Error>;
+}
+
 /// Millimetres to an obstacle whose echo pulse is `width_us` wide: sound at 343 m/s (dry air
 /// at 20 °C) travels 0.343 mm/µs, there and back, so `width_us · 343 / 2000`. About 0.2 %
 /// more per °C above 20, less below. Saturates instead of overflowing.
@@ -150,5 +159,11 @@ impl<T: OutputPin, E: InputPin + Wait> Hcsr04<T, E> {
     /// The pins back.
     pub fn release(self) -> (T, E) {
         (self.trigger, self.echo)
+    }
+}
+
+impl<T: OutputPin, E: InputPin + Wait> Ranger for Hcsr04<T, E> {
+    async fn measure(&mut self) -> Result<Range, Hcsr04Error> {
+        Hcsr04::measure(self).await
     }
 }

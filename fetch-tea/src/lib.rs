@@ -6,7 +6,8 @@
 //! [`fetch_tea::Action`]: a mission that gains one does not compile until this file handles
 //! it.
 //!
-//! * `sonar` ([`Hcsr04`], cyclic, 100 ms): [`Value::Mm`] to the nearest obstacle, or
+//! * `sonar` (a [`Ranger`]: an [`Hcsr04`] on a board, a simulated module in `psmpa-sim`;
+//!   cyclic, 100 ms): [`Value::Mm`] to the nearest obstacle, or
 //!   [`Value::NoEcho`] when nothing is in range; `path_clear` when nothing is within
 //!   [`Settings::clearance_mm`]. How each outcome of a read becomes a sample, a lost sample or
 //!   a fault: [`sonar_reading`].
@@ -100,7 +101,9 @@ use psmpa_core::{Act, Actuator, Beside, Outcome, Platform, Reading, Sensor, Sens
 
 use psmpa_drivers::PinError;
 use psmpa_drivers::hbridge::{Drive, FULL, Motor};
-use psmpa_drivers::hcsr04::{Hcsr04, Hcsr04Error, Range};
+#[cfg(doc)]
+use psmpa_drivers::hcsr04::Hcsr04;
+use psmpa_drivers::hcsr04::{Hcsr04Error, Range, Ranger};
 use psmpa_drivers::marker::Marker;
 use psmpa_drivers::switch::Switch;
 
@@ -424,7 +427,7 @@ pub fn sonar_reading(
 /// The robot's devices, for [`FetchTea::new`].
 #[derive(Debug)]
 pub struct Devices<So, Bu, Ca, Ha, Wh> {
-    /// The ultrasonic ranger ([`Hcsr04`]).
+    /// The ultrasonic ranger (a [`Ranger`]: an [`Hcsr04`]).
     pub sonar: So,
     /// The bump switch ([`Switch`]).
     pub bumper: Bu,
@@ -438,7 +441,8 @@ pub struct Devices<So, Bu, Ca, Ha, Wh> {
 
 /// The Fetch Tea robot: its devices. Implements [`Sensor`],
 /// [`Actuator`] and [`Platform`] when the devices are this crate's drivers:
-/// `FetchTea<Hcsr04<_, _>, Switch<_>, Marker<_>, Switch<_>, Drive<_, _, _>>`.
+/// `FetchTea<impl Ranger, Switch<_>, Marker<_>, Switch<_>, Drive<_, _, _>>` (the sonar an
+/// [`Hcsr04`] on a board).
 pub struct FetchTea<So, Bu, Ca, Ha, Wh, Pc = ()> {
     settings: Settings,
     sonar: Mutex<CriticalSectionRawMutex, So>,
@@ -508,11 +512,10 @@ impl<So, Bu, Ca, Ha, Wh, Pc> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
     }
 }
 
-impl<T, E, B, C, H, Wh, Pc> Sensor<fetch_tea::FetchTea>
-    for FetchTea<Hcsr04<T, E>, Switch<B>, Marker<C>, Switch<H>, Wh, Pc>
+impl<So, B, C, H, Wh, Pc> Sensor<fetch_tea::FetchTea>
+    for FetchTea<So, Switch<B>, Marker<C>, Switch<H>, Wh, Pc>
 where
-    T: OutputPin,
-    E: InputPin + Wait,
+    So: Ranger,
     B: InputPin + Wait,
     C: InputPin,
     H: InputPin + Wait,

@@ -9,6 +9,7 @@
 
 #[cfg(feature = "std")]
 pub use psmpa_testkit::sim as backend;
+pub mod body;
 #[cfg(feature = "std")]
 pub mod cli;
 #[cfg(feature = "std")]
