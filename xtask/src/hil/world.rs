@@ -19,9 +19,9 @@ use psmpa_sim::body::{Body, Effects, SonarSample};
 use psmpa_sim::scenario::{Scenario, to_mm};
 use psmpa_sim::world::{World, WorldEvent, WorldLog};
 
-pub use psmpa_sim::body::{PinFault, SLOTS, Set, pin};
 #[cfg(test)]
 use psmpa_sim::body::{ECHO_DELAY_NS, echo_ns};
+pub use psmpa_sim::body::{PinFault, SLOTS, Set, pin};
 
 /// Cycles of the RP2040's 125 MHz clock a nanosecond: 8 ns a cycle.
 pub const NS_PER_CYCLE: u64 = 8;
