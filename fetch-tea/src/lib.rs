@@ -88,7 +88,7 @@
     )
 )]
 
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -450,8 +450,22 @@ pub struct FetchTea<So, Bu, Ca, Ha, Wh, Pc = ()> {
     camera: Mutex<CriticalSectionRawMutex, Ca>,
     handle: Mutex<CriticalSectionRawMutex, Ha>,
     wheels: BlockingMutex<CriticalSectionRawMutex, RefCell<Wh>>,
+    /// What the wheels were told, and the time SMPA's sense phases held them.
+    pause: BlockingMutex<CriticalSectionRawMutex, Cell<Pause>>,
     /// Spends [`Settings::plan`] of processor time.
     compute: Pc,
+}
+
+/// The wheels' last drive command, and the sense phases that held them (SMPA only: under
+/// P-SMPA nothing holds the robot).
+#[derive(Clone, Copy, Debug, Default)]
+struct Pause {
+    /// The wheels' drive command (left, right) while they drive.
+    driving: Option<(i16, i16)>,
+    /// When the current hold began.
+    since: Option<Instant>,
+    /// Ticks held in all, the current hold's aside.
+    total: u64,
 }
 
 /// Processor work: what a walk's planning costs ([`Settings::plan`]). `()` does none (on the
@@ -484,6 +498,11 @@ impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
             camera: Mutex::new(camera),
             handle: Mutex::new(handle),
             wheels: BlockingMutex::new(RefCell::new(wheels)),
+            pause: BlockingMutex::new(Cell::new(Pause {
+                driving: None,
+                since: None,
+                total: 0,
+            })),
             compute: (),
         }
     }
@@ -500,6 +519,7 @@ impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
             camera: self.camera,
             handle: self.handle,
             wheels: self.wheels,
+            pause: self.pause,
             compute,
         }
     }
@@ -575,9 +595,58 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         })
     }
 
+    /// Drives the wheels at `left` and `right` (thousandths), unless a sense phase holds
+    /// them (then they drive once it ends).
+    fn drive(&self, left: i16, right: i16) -> Result<(), PinError> {
+        let held = self.pause.lock(|p| {
+            let mut pause = p.get();
+            pause.driving = Some((left, right));
+            p.set(pause);
+            pause.since.is_some()
+        });
+        if held {
+            return Ok(());
+        }
+        self.wheels(|w| w.drive(left, right))
+    }
+
+    /// Brakes the wheels.
+    fn brake(&self) -> Result<(), PinError> {
+        self.pause.lock(|p| {
+            let mut pause = p.get();
+            pause.driving = None;
+            p.set(pause);
+        });
+        self.wheels(Drive::brake)
+    }
+
+    /// The time SMPA's sense phases have held the robot so far (0 under P-SMPA).
+    fn paused(&self) -> Duration {
+        let pause = self.pause.lock(Cell::get);
+        let now = pause.since.map_or(0, |s| {
+            Instant::now().saturating_duration_since(s).as_ticks()
+        });
+        Duration::from_ticks(pause.total.saturating_add(now))
+    }
+
+    /// Waits until the wheels have had `time` to drive: a sense phase that holds them
+    /// meanwhile does not count.
+    async fn drive_for(&self, time: Duration) {
+        let mut left = time;
+        while left.as_ticks() > 0 {
+            let (start, paused) = (Instant::now(), self.paused());
+            Timer::after(left).await;
+            let ran = Instant::now()
+                .saturating_duration_since(start)
+                .checked_sub(self.paused().checked_sub(paused).unwrap_or_default())
+                .unwrap_or_default();
+            left = left.checked_sub(ran).unwrap_or(Duration::from_ticks(0));
+        }
+    }
+
     /// Brakes, and ends with `outcome` (a failure if the brake failed).
     fn stop(&self, outcome: Outcome) -> Outcome {
-        match self.wheels(Drive::brake) {
+        match self.brake() {
             Ok(()) => outcome,
             Err(PinError) => Outcome::Failure,
         }
@@ -585,10 +654,10 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
 
     /// Drives straight at `permille` for `time`, then brakes.
     async fn timed(&self, permille: i16, time: Duration) -> Outcome {
-        if self.wheels(|w| w.drive(permille, permille)).is_err() {
+        if self.drive(permille, permille).is_err() {
             return self.stop(Outcome::Failure);
         }
-        Timer::after(time).await;
+        self.drive_for(time).await;
         self.stop(Outcome::Success)
     }
 
@@ -603,10 +672,10 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         let turn = all.checked_div(4).unwrap_or(0);
         let pass = all.saturating_sub(turn.saturating_mul(2));
         for (left, right, ticks) in [(back, d, turn), (d, d, pass), (d, back, turn)] {
-            self.wheels(|w| w.drive(left, right))?;
-            Timer::after(Duration::from_ticks(ticks)).await;
+            self.drive(left, right)?;
+            self.drive_for(Duration::from_ticks(ticks)).await;
         }
-        self.wheels(Drive::brake)
+        self.brake()
     }
 
     /// Drives for `time` (a walk's, `None` for a speed of 0), braking while the precondition
@@ -646,10 +715,10 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                     if self.settings.plan.as_ticks() > 0 {
                         self.compute.compute(self.settings.plan);
                     }
-                    self.wheels(|w| w.drive(duty, duty))
+                    self.drive(duty, duty)
                 } else {
                     // The precondition turned false: brake at once.
-                    self.wheels(Drive::brake)
+                    self.brake()
                 };
                 if set.is_err() {
                     return self.stop(Outcome::Failure);
@@ -665,7 +734,7 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                 version = io.version();
                 continue;
             }
-            let since = Instant::now();
+            let (since, paused) = (Instant::now(), self.paused());
             let arrival = go.then(|| since.saturating_add(left));
             let changed = io.changed_until(version, arrival).await;
             if go {
@@ -676,7 +745,11 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                     .filter(|e| e.value == Value::Bool(true) && e.at >= since)
                     .map(|e| e.at);
                 let until = held.unwrap_or_else(Instant::now);
-                let driven = until.saturating_duration_since(since);
+                // Nor does a sense phase that held it (SMPA).
+                let driven = until
+                    .saturating_duration_since(since)
+                    .checked_sub(self.paused().checked_sub(paused).unwrap_or_default())
+                    .unwrap_or_default();
                 left = left.checked_sub(driven).unwrap_or(Duration::from_ticks(0));
             }
             if left.as_ticks() == 0 {
@@ -730,9 +803,39 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator<fet
         }
     }
 
+    /// SMPA's sense phase: the wheels brake while it lasts and drive on as they were told
+    /// when it ends; the time it held them does not count as driven.
+    fn hold(&self, _: fetch_tea::Action, held: bool) {
+        let resume = self.pause.lock(|p| {
+            let mut pause = p.get();
+            let now = Instant::now();
+            match (held, pause.since) {
+                (true, None) => pause.since = Some(now),
+                (false, Some(since)) => {
+                    pause.since = None;
+                    let ticks = now.saturating_duration_since(since).as_ticks();
+                    pause.total = pause.total.saturating_add(ticks);
+                }
+                _ => return None,
+            }
+            p.set(pause);
+            Some(pause.driving)
+        });
+        // Nothing more to do if a pin fails: the next command reports it.
+        match (held, resume) {
+            (true, Some(Some(_))) => {
+                let _ = self.wheels(Drive::brake);
+            }
+            (false, Some(Some((left, right)))) => {
+                let _ = self.wheels(|w| w.drive(left, right));
+            }
+            _ => {}
+        }
+    }
+
     fn halt(&self, _: fetch_tea::Action) {
         // Nothing more to do if even braking fails.
-        let _ = self.wheels(Drive::brake);
+        let _ = self.brake();
     }
 }
 

@@ -20,6 +20,7 @@ pub mod load;
 pub mod planning;
 #[cfg(feature = "std")]
 pub mod replay;
+pub mod rig;
 pub mod robot;
 pub mod run;
 pub mod scenario;

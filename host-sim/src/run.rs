@@ -11,7 +11,10 @@
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, Timer};
-use psmpa_core::{ControlError, DecidingSide, FactSet, Mission, Report, Runtime, TraceSink};
+use psmpa_core::{
+    Actuator, ControlError, DecidingSide, FactSet, Mission, Platform, Report, Runtime, Sensor,
+    TraceSink,
+};
 
 use crate::robot::{self, Arch};
 use crate::scenario::Scenario;
@@ -65,12 +68,27 @@ where
     T: TraceSink<Ms>,
     M: RawMutex,
 {
+    decide_on(deciding, scenario, space, || world.halt()).await
+}
+
+/// [`decide`] for any robot `P`, calling `halt` when `max_ms` passes.
+pub async fn decide_on<Ms, P, T>(
+    deciding: &mut DecidingSide<'_, Runtime<'_, Ms, P, T>>,
+    scenario: &Scenario,
+    space: &mut robot::PlannerSpace,
+    halt: impl FnOnce(),
+) -> (Ending, u64)
+where
+    Ms: Mission<Facts = FactSet>,
+    P: Platform + Sensor<Ms> + Actuator<Ms>,
+    T: TraceSink<Ms>,
+{
     let deadline = Timer::at(Instant::from_millis(scenario.max_ms));
     let ending = match select(deciding.run_planning(&robot::PLANNER, space), deadline).await {
         Either::First(Ok(report)) => Ending::Goal(report),
         Either::First(Err(error)) => Ending::Error(error),
         Either::Second(()) => {
-            world.halt();
+            halt();
             Ending::TimeLimit
         }
     };
@@ -79,15 +97,16 @@ where
 
 /// The summary of a run under `arch` that ended with `ending` at `time_cost_ms`
 /// ([`decide`]), from its world and its runtime.
-pub fn summary<Ms, L, T, M>(
+pub fn summary<Ms, L, P, T, M>(
     arch: Arch,
     world: &World<'_, L, M>,
-    runtime: &Runtime<'_, Ms, robot::Nao<'_, '_, L, M>, T>,
+    runtime: &Runtime<'_, Ms, P, T>,
     (ending, time_cost_ms): (Ending, u64),
 ) -> Summary
 where
     Ms: Mission<Facts = FactSet>,
     L: WorldLog,
+    P: Platform + Sensor<Ms> + Actuator<Ms>,
     T: TraceSink<Ms>,
     M: RawMutex,
 {

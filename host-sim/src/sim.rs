@@ -6,10 +6,12 @@ use psmpa_core::{TraceEvent, TraceSink};
 use std::cell::OnceCell;
 
 use crate::backend::{SimError, simulate_split};
+use crate::rig::{self, Chassis, Observed, Rig};
 use crate::robot::{self, Arch, MissionError, Robot};
-use crate::run::{Summary, decide, summary};
+use crate::run::{Summary, decide, decide_on, summary};
 use crate::scenario::Scenario;
 use crate::world::{World, WorldEvent, WorldLog};
+use psmpa_fetch_tea::fetch_tea;
 
 /// Every world event with its time (ms) and the robot's position (µm).
 #[derive(Debug, Default, Clone)]
@@ -40,6 +42,8 @@ pub enum RunError {
     Sim(SimError),
     /// The caller's `stop` said so ([`run_logged_until`]): an output failed.
     Stopped,
+    /// The simulated devices were asked to schedule more input changes than they hold.
+    Rig,
 }
 
 impl std::fmt::Display for RunError {
@@ -48,6 +52,11 @@ impl std::fmt::Display for RunError {
             Self::Mission(e) => write!(f, "the mission could not be built: {e:?}"),
             Self::Sim(e) => write!(f, "simulation failed: {e}"),
             Self::Stopped => write!(f, "the run was stopped"),
+            Self::Rig => write!(
+                f,
+                "the simulated devices scheduled more than {} input changes at once",
+                rig::PENDING
+            ),
         }
     }
 }
@@ -190,4 +199,93 @@ pub fn run_on(scenario: &Scenario, arch: Arch, path: PlanPath) -> Result<Summary
     let decided = decide(&mut deciding, &world, scenario, &mut space);
     let done = simulate_split(sensing.run(), decided, limit).map_err(RunError::Sim)?;
     Ok(summary(arch, &world, &runtime, done.output))
+}
+
+/// How a run is set up beyond its scenario.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Setup {
+    /// The architecture.
+    pub arch: Arch,
+    /// The body the robot drives.
+    pub chassis: Chassis,
+}
+
+impl Setup {
+    /// `arch` on the paper's NAO.
+    pub const fn new(arch: Arch) -> Self {
+        Self {
+            arch,
+            chassis: Chassis::Nao,
+        }
+    }
+}
+
+/// Runs `scenario` on `chassis` under `arch`, with nothing recorded: the one robot's outcome
+/// on that body (the bench compares the chip's with it on [`Chassis::Wheeled`]).
+pub fn run_chassis(scenario: &Scenario, arch: Arch, chassis: Chassis) -> Result<Summary, RunError> {
+    let setup = Setup {
+        chassis,
+        ..Setup::new(arch)
+    };
+    run_with(scenario, setup, (), psmpa_core::Hashing, || false).map(|(s, (), _)| s)
+}
+
+/// Runs `scenario` as `setup` says: the Fetch Tea robot of `psmpa-fetch-tea`, calibrated for
+/// the scenario and its chassis ([`rig::settings_for`]), on the simulated devices of its body
+/// in the world ([`rig::Rig`]), logging the world into `log` and tracing the runtime into
+/// `sink`; `stop` as [`run_logged_until`]'s.
+pub fn run_with<L: WorldLog, T: TraceSink<fetch_tea::FetchTea>>(
+    scenario: &Scenario,
+    setup: Setup,
+    log: L,
+    sink: T,
+    stop: impl Fn() -> bool,
+) -> Result<(Summary, L, T), RunError> {
+    use embassy_futures::join::join;
+    let limit = Duration::from_millis(scenario.max_ms) + SLACK;
+    let settings = rig::settings_for(scenario, setup.chassis);
+    let rig: Rig<'_, L> = Rig::new(
+        scenario,
+        log,
+        settings.walk_permille.unsigned_abs(),
+        rig::sensor_ids(),
+    );
+    let robot = rig.robot(settings);
+    let mut space = robot::PlannerSpace::new();
+    let config = robot::config(scenario, setup.arch);
+    let mut runtime = fetch_tea::Runtime::new(
+        fetch_tea::FetchTea,
+        &robot,
+        Observed::new(&rig, sink),
+        config,
+    );
+    for (sensor, period) in [
+        (fetch_tea::Sensor::Sonar, settings.sonar_period),
+        (fetch_tea::Sensor::Bumper, settings.bumper_period),
+    ] {
+        runtime.set_period(sensor, period);
+    }
+    let (mut sensing, mut deciding) = runtime.split();
+    let decided = async {
+        let mut run = core::pin::pin!(decide_on(&mut deciding, scenario, &mut space, || {
+            rig.halt()
+        }));
+        core::future::poll_fn(|cx| {
+            if stop() {
+                return core::task::Poll::Ready(None);
+            }
+            run.as_mut().poll(cx).map(Some)
+        })
+        .await
+    };
+    let done =
+        simulate_split(join(sensing.run(), rig.pump()), decided, limit).map_err(RunError::Sim)?;
+    let ended = done.output.ok_or(RunError::Stopped)?;
+    if rig.overflowed() {
+        return Err(RunError::Rig);
+    }
+    let summary = rig.world(|w| summary(setup.arch, w, &runtime, ended));
+    let sink = runtime.into_sink().into_inner();
+    drop(robot);
+    Ok((summary, rig.into_world().into_log(), sink))
 }

@@ -2,8 +2,8 @@
 //! the project's world.
 //!
 //! It builds the board's image for the RP2040 (`boards/pico`, as its README says), writes the
-//! robot's calibration record for each scenario into the image's flash ([`settings_for`]),
-//! and plays the scenario in rp2040js ([`harness`]) against psmpa-sim's world of it
+//! robot's calibration record for each scenario into the image's flash ([`settings_for`] on
+//! the wheeled chassis), and plays the scenario in rp2040js ([`harness`]) against psmpa-sim's world of it
 //! ([`world`]): the firmware's motor pins move the robot, the world answers its sonar's
 //! triggers with echoes, closes its bump switch, shows it the door's marker. The firmware's
 //! defmt log comes off the chip's RTT buffer and is decoded with its own table.
@@ -39,9 +39,10 @@ use psmpa_core::TraceHash;
 use psmpa_drivers::switch::DEBOUNCE;
 use psmpa_fetch_tea::fetch_tea::Sensor::{Bumper, Camera, Handle, Sonar};
 use psmpa_fetch_tea::{RECORD_WORDS, Settings};
+use psmpa_sim::rig::{Chassis, settings_for};
 use psmpa_sim::robot::Arch;
-use psmpa_sim::scenario::{FaultKind, Scenario, to_mm};
-use psmpa_sim::sim::run_summary;
+use psmpa_sim::scenario::{Scenario, to_mm};
+use psmpa_sim::sim::run_chassis;
 use psmpa_sim::world::{Fate, ObstacleReport, Tally};
 use serde::Serialize;
 
@@ -195,33 +196,6 @@ fn json_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
         .collect();
     files.sort();
     Ok(files)
-}
-
-/// The robot's settings for `sc`: the walk to its door (and on to the back door) at its speed,
-/// the sonar's threshold as the clearance (the robot stops for a reading below it, as the world
-/// registers one), its sensors' periods, the walk's planning time and its side step, and the
-/// time its sonar may take to answer. The rest as the board's defaults.
-pub fn settings_for(sc: &Scenario) -> Settings {
-    let ms = Duration::from_millis;
-    Settings {
-        clearance_mm: u16::try_from(sc.sonar.threshold_mm() - 1).unwrap_or(u16::MAX),
-        walk_mm: u32::try_from(to_mm(sc.door_um)).unwrap_or(u32::MAX),
-        back_door_mm: u32::try_from(to_mm(sc.back_door_um)).unwrap_or(u32::MAX),
-        // µm a ms is mm a s.
-        walk_mm_s: u32::try_from(sc.speed_um_per_ms).unwrap_or(u32::MAX).max(1),
-        plan: Duration::from_micros(u64::from(sc.plan_us)),
-        sonar_period: Some(ms(sc.sonar.period_ms)),
-        bumper_period: Some(ms(sc.bumper_period_ms)),
-        // The side step the scenario gives its robot.
-        avoid: ms(sc.avoid_ms),
-        // A sonar that answers after a read latency raises its echo that much later.
-        sonar_rise: if sc.sonar.latency_ms > 0 {
-            ms(sc.sonar.latency_ms) + psmpa_drivers::hcsr04::RISE_TIMEOUT
-        } else {
-            Duration::from_ticks(0)
-        },
-        ..Settings::DEFAULT
-    }
 }
 
 /// The firmware image and what the bench needs of it.
@@ -407,9 +381,6 @@ pub struct Report {
     pub pin_log_hash: String,
     /// The checks that failed (none: passed).
     pub failures: Vec<String>,
-    /// Where the bench differs from psmpa-sim for a reason of the robot's body (see
-    /// `compare_with_host`).
-    pub differences: Vec<String>,
     /// The flight recording the firmware streamed, replayed on the host.
     pub recording: Option<BenchRecording>,
     /// The firmware's log.
@@ -680,7 +651,7 @@ fn play(
     out: &Path,
 ) -> Result<(Report, PinLog), String> {
     let sc = &play.scenario;
-    let settings = settings_for(sc);
+    let settings = settings_for(sc, Chassis::Wheeled);
     let image = out.join(format!("{}.bin", play.stem()));
     std::fs::write(&image, fw.image(&settings)).map_err(|e| format!("{}: {e}", image.display()))?;
     let inputs: BTreeMap<u8, Option<u8>> = BenchWorld::initial_inputs()
@@ -1214,41 +1185,17 @@ fn report(
         stack_bytes: 0,
         pin_log_hash: format!("{:016x}", c.pins.hash()),
         failures,
-        differences: Vec::new(),
         recording: None,
         log: c.log,
     };
     (report, c.pins)
 }
 
-/// Where the bench's wheeled robot differs from psmpa-sim's NAO, each with its reason: the
-/// one place they are listed. None changes an outcome: the mission, each obstacle's fate and
-/// the sensor that detected it must be equal ([`compare_with_host`]).
-///
-/// * A scenario's sonar fault reaches the robot as its HC-SR04 shows it on its pins. One out
-///   of range, which the NAO reads beyond its range, is an echo below the module's 20 mm
-///   minimum (beyond its range is what the module means by nothing in range).
-/// * The side step: the NAO steps sideways; the wheeled robot turns away, passes and turns
-///   back (a pivot starts the world's step, which takes the scenario's `avoid_s` for both).
-/// * No wheel odometry and no inertia: the wheeled robot's position is its dead reckoning of
-///   the walking duty, and it stops when its wheels do; it counts as at the door within
-///   20 mm.
-fn body_difference(kind: FaultKind) -> String {
-    let how = match kind {
-        FaultKind::Silent => "a silent sonar: no echo at all, on both",
-        FaultKind::OutOfRange => {
-            "a sonar out of range: the NAO reads beyond its range, the HC-SR04 an echo below its 20 mm minimum"
-        }
-        FaultKind::Stuck => "a stuck sonar: the same echo again and again, on both",
-    };
-    format!("the scenario's sonar fault as each body's sonar shows it: {how}")
-}
-
 /// psmpa-sim's outcome of the same scenario beside the bench's: reaching the door, and
 /// obstacle by obstacle its fate and the sensor that detected it, all equal; and reaching the
 /// goal (a difference there is never put down to timing).
 fn compare_with_host(sc: &Scenario, r: &mut Report, bench: &[ObstacleReport]) {
-    let s = match run_summary(sc, Arch::PSmpa) {
+    let s = match run_chassis(sc, Arch::PSmpa, Chassis::Wheeled) {
         Ok(s) => s,
         Err(e) => return r.failures.push(format!("mission: psmpa-sim: {e}")),
     };
@@ -1259,9 +1206,6 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, bench: &[ObstacleReport]) {
         reached_door: s.tally.reached_door,
         mission_succeeded: host_succeeded,
     });
-    if let Some((kind, _)) = sc.fault {
-        r.differences.push(body_difference(kind));
-    }
     let mut differ = Vec::new();
     if s.tally.reached_door != r.reached_door {
         differ.push((
@@ -1273,8 +1217,8 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, bench: &[ObstacleReport]) {
         ));
     }
     if host_succeeded != r.mission_succeeded {
-        // The body makes no difference here: both robots plan the same way past a locked
-        // door, so no timing explains it either.
+        // The same robot on the same body plans the same way past a locked door: no timing
+        // explains a difference here.
         r.failures.push(format!(
             "mission: psmpa-sim's robot reached its goal: {host_succeeded}; the bench's: {}",
             r.mission_succeeded
@@ -1298,55 +1242,10 @@ fn compare_with_host(sc: &Scenario, r: &mut Report, bench: &[ObstacleReport]) {
             ),
         ));
     }
-    if differ.is_empty() {
-        return;
+    // The same robot on the same body: any difference is a failure, none is excused.
+    for (check, what) in differ {
+        r.failures.push(format!("{check}: {what}"));
     }
-    let fates: Vec<Fate> = bench.iter().map(|o| o.fate).collect();
-    match timing_explains(sc, &fates, r.reached_door) {
-        Some(shift) => {
-            for (_, what) in differ {
-                r.differences.push(format!(
-                    "{what}: timing, not the body: psmpa-sim's robot does all the bench's does when the scenario's events come {} ms {} (within the {JITTER_MS} ms by which the bench's start-up and the HC-SR04's reads move a robot's instants)",
-                    shift.unsigned_abs(),
-                    if shift < 0 { "earlier" } else { "later" }
-                ));
-            }
-        }
-        None => {
-            for (check, what) in differ {
-                r.failures.push(format!("{check}: {what}"));
-            }
-        }
-    }
-}
-
-/// How far the bench's instants may lie from psmpa-sim's, ms: the chip boots and establishes
-/// its model (42 ms) before it walks, and its HC-SR04 takes up to 38 ms a read where the NAO's
-/// sonar reads at once; the two robots' samples fall at other instants. An obstacle whose
-/// fate turns on a sample's instant may go either way.
-pub const JITTER_MS: i64 = 100;
-
-/// The smallest shift of every event of `sc` (within [`JITTER_MS`], by 10 ms) under which
-/// psmpa-sim's robot does all the bench's robot did: reaches the door as `door`, meets every
-/// obstacle as `fates`. `None`: no such shift; the bodies or the firmware differ.
-fn timing_explains(sc: &Scenario, fates: &[Fate], door: bool) -> Option<i64> {
-    let mut shifts: Vec<i64> = (1..=JITTER_MS / 10)
-        .flat_map(|k| [-10 * k, 10 * k])
-        .collect();
-    shifts.sort_by_key(|d| d.abs());
-    shifts.into_iter().find(|&d| {
-        let mut moved = sc.clone();
-        for x in &mut moved.interferences {
-            x.at_ms = u32::try_from(i64::from(x.at_ms) + d).unwrap_or(0);
-        }
-        if let Some((_, at)) = &mut moved.fault {
-            *at = u32::try_from(i64::from(*at) + d).unwrap_or(0);
-        }
-        run_summary(&moved, Arch::PSmpa).is_ok_and(|s| {
-            s.tally.reached_door == door
-                && s.obstacles.iter().map(|o| o.fate).eq(fates.iter().copied())
-        })
-    })
 }
 
 /// An obstacle's fate in words.
@@ -1926,7 +1825,6 @@ fn figures(reports: &[(Report, PinLog)]) -> (String, String) {
         .iter()
         .map(|(r, _)| r.recording.as_ref().map_or(0, |x| x.frames))
         .sum();
-    let differences: usize = plain.iter().map(|r| r.differences.len()).sum();
     let n = |c: u64| thousands(c);
     let md = format!(
         "\n{} runs ({} scenarios, {} fault runs), every check held; {} frames of flight recording judged. \
@@ -1934,7 +1832,7 @@ Sonar reactions at most {} cycles ({:.1} µs) against budgeted bounds of {} to {
 where a scenario declares planning time); bumper reactions, which include its 5 ms debounce, at most \
 {} cycles ({:.2} ms) against {} to {}. The sonar triggered at most {trigger:.3} ms apart and the \
 bumper's samples came at most {:.3} ms apart (the sonar's up to {:.3} ms: a sample is delivered when \
-its echo ends, a lost one not at all). {differences} named differences from psmpa-sim.\n",
+its echo ends, a lost one not at all). Every outcome equal to psmpa-sim's, running the same robot.\n",
         reports.len(),
         plain.len(),
         reports.len() - plain.len(),
@@ -2133,9 +2031,6 @@ fn text(r: &Report) -> String {
                 "; after the reset the RAM ring gave back its last {n}"
             ))
         );
-    }
-    for d in &r.differences {
-        let _ = writeln!(s, "  differs (the body): {d}");
     }
     if r.failures.is_empty() {
         let _ = writeln!(s, "  checks held");
@@ -2366,7 +2261,7 @@ mod tests {
                  "interferences": []}"#,
         )
         .unwrap();
-        let s = settings_for(&sc);
+        let s = settings_for(&sc, Chassis::Wheeled);
         // It stops for a reading below the threshold, as the world registers one.
         assert_eq!(s.clearance_mm, 399);
         assert_eq!((s.walk_mm, s.walk_mm_s), (1_500, 150));

@@ -70,7 +70,7 @@ pub fn unshipped(seed: u64) -> String {
 /// The walk's brake when its precondition turns false (`fetch-tea/src/lib.rs`).
 const BRAKE: &str = "                } else {
                     // The precondition turned false: brake at once.
-                    self.wheels(Drive::brake)
+                    self.brake()
                 };";
 
 /// The panic handler's first lines (`boards/rp/src/lib.rs`).
@@ -107,7 +107,7 @@ const MUTANTS: &[Mutant] = &[
         find: BRAKE,
         replace: "                } else {
                     embassy_time::block_for(Duration::from_millis(20));
-                    self.wheels(Drive::brake)
+                    self.brake()
                 };",
         plays: &["scenarios/sonar-6.json", "scenarios/bumper-4.json"],
         everywhere: true,
@@ -119,7 +119,7 @@ const MUTANTS: &[Mutant] = &[
         find: BRAKE,
         replace: "                } else {
                     Timer::after(Duration::from_millis(20)).await;
-                    self.wheels(Drive::brake)
+                    self.brake()
                 };",
         plays: &["scenarios/sonar-6.json", "scenarios/bumper-4.json"],
         // The bumper's bound holds its period and a debounce time: a sleep of 20 ms fits in
