@@ -290,3 +290,38 @@ fn a_clean_world_and_its_faulty_twin_differ_only_in_the_faults() {
     }
     assert!(faulty > 150, "faults drawn in most worlds: {faulty} of 200");
 }
+
+/// One run shows no spread: its means come without an interval (`lo` and `hi` null, `[1 run]`
+/// in the text), never a zero-width 95 % interval.
+#[test]
+fn one_run_gives_means_without_an_interval() {
+    fn walk(v: &Value, found: &mut usize) {
+        match v {
+            Value::Object(o) => {
+                if o.get("n").and_then(Value::as_u64) == Some(1) {
+                    assert!(o["lo"].is_null() && o["hi"].is_null(), "{v}");
+                    assert!(o["mean"].is_f64(), "{v}");
+                    *found += 1;
+                }
+                o.values().for_each(|x| walk(x, found));
+            }
+            Value::Array(a) => a.iter().for_each(|x| walk(x, found)),
+            _ => {}
+        }
+    }
+    let (j, _) = study(&["--runs", "1", "--seed", "3", "--json"], None);
+    let mut found = 0;
+    walk(&j, &mut found);
+    assert!(found > 0, "{j}");
+    let (_, text) = study(&["--runs", "1", "--seed", "3"], None);
+    assert!(text.contains("[1 run]"), "{text}");
+    // With two runs, intervals again.
+    let (j, _) = study(&["--runs", "2", "--seed", "3", "--json"], None);
+    let mut found = 0;
+    walk(&j, &mut found);
+    let text = j.to_string();
+    assert!(
+        text.contains("\"lo\":0") || text.contains("\"lo\":1"),
+        "{text}"
+    );
+}

@@ -272,8 +272,9 @@ impl Moments {
     }
 }
 
-/// A mean with its 95 % confidence interval.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// A mean with its 95 % confidence interval. In JSON, `lo` and `hi` are `null` for a mean of
+/// one run: one run shows no spread, so there is no interval.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Interval {
     /// The mean over the runs.
     pub mean: f64,
@@ -283,6 +284,26 @@ pub struct Interval {
     pub hi: f64,
     /// Runs the mean is over.
     pub n: u64,
+}
+
+impl Interval {
+    /// Its bounds; `None` for a mean of one run, which has no interval.
+    pub fn bounds(&self) -> Option<(f64, f64)> {
+        (self.n > 1).then_some((self.lo, self.hi))
+    }
+}
+
+impl Serialize for Interval {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct as _;
+        let bounds = self.bounds();
+        let mut st = s.serialize_struct("Interval", 4)?;
+        st.serialize_field("mean", &self.mean)?;
+        st.serialize_field("lo", &bounds.map(|b| b.0))?;
+        st.serialize_field("hi", &bounds.map(|b| b.1))?;
+        st.serialize_field("n", &self.n)?;
+        st.end()
+    }
 }
 
 /// What one architecture amounted to in one cell (or, for P-SMPA, in every cell).
@@ -601,19 +622,21 @@ pub const PAPER_FRACTION_PCT: u64 = 50;
 pub const TABLE1_CYCLE_MS: u64 = 3_000;
 
 fn pct(i: Option<Interval>) -> String {
-    i.map_or("-".to_owned(), |i| {
-        format!(
+    i.map_or("-".to_owned(), |i| match i.bounds() {
+        Some((lo, hi)) => format!(
             "{:.1} [{:.1}, {:.1}]",
             100.0 * i.mean,
-            100.0 * i.lo,
-            100.0 * i.hi
-        )
+            100.0 * lo,
+            100.0 * hi
+        ),
+        None => format!("{:.1} [1 run]", 100.0 * i.mean),
     })
 }
 
 fn num(i: Option<Interval>) -> String {
-    i.map_or("-".to_owned(), |i| {
-        format!("{:.2} [{:.2}, {:.2}]", i.mean, i.lo, i.hi)
+    i.map_or("-".to_owned(), |i| match i.bounds() {
+        Some((lo, hi)) => format!("{:.2} [{:.2}, {:.2}]", i.mean, lo, hi),
+        None => format!("{:.2} [1 run]", i.mean),
     })
 }
 
