@@ -243,9 +243,10 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<Recording, String> {
             let scenario = if scenario_json.first() == Some(&b'[') {
                 // A firmware's recording: the canonical form it embeds.
                 let mut s = Scenario::empty();
-                s.read_canonical(&scenario_json).map_err(|e| {
+                s.read_canonical(&scenario_json).map_err(|_| {
                     fail(format!(
-                        "its scenario, in canonical form, does not read: {e}"
+                        "its scenario, in canonical form, does not read: {}",
+                        crate::scenario::canonical_problem(&scenario_json)
                     ))
                 })?;
                 // Made from a validated file, it holds only values a file may: checked as one.

@@ -476,6 +476,114 @@ impl Serialize for Rows<'_> {
 /// Elements of the canonical array.
 const CANONICAL_FIELDS: usize = 18;
 
+/// The canonical form's fields, in order: what an error in one is named by.
+#[cfg(feature = "std")]
+const CANONICAL_NAMES: [&str; CANONICAL_FIELDS] = [
+    "name",
+    "seed",
+    "door_um",
+    "max_ms",
+    "speed_um_per_ms",
+    "avoid_ms",
+    "slow_um",
+    "plan_us",
+    "sonar [period_ms, min_um, max_um, threshold_um, noise_um, dropout, latency_ms, height_um, cone_slope_ppm]",
+    "bumper_period_ms",
+    "bumper_latency_ms",
+    "bumper_min_contact_ms",
+    "sense_ms",
+    "act_ms",
+    "door_locked",
+    "back_door_um",
+    "fault [kind 0-2, at_ms] or null",
+    "interferences [[kind 0-1, at_ms, ahead_um, hold_ms, speed_um_per_ms, height_um], ...]",
+];
+
+/// Why `json` is not a canonical scenario, naming the field (its place in the array) and the
+/// problem, for a form [`Scenario::read_canonical`] refused (serde-json-core's errors name
+/// neither).
+#[cfg(feature = "std")]
+pub fn canonical_problem(json: &[u8]) -> std::string::String {
+    use std::borrow::ToOwned as _;
+    use std::format;
+    use std::string::ToString as _;
+    fn field<T: serde::de::DeserializeOwned>(
+        items: &[serde_json::Value],
+        i: usize,
+    ) -> Result<T, std::string::String> {
+        let name = CANONICAL_NAMES.get(i).copied().unwrap_or("?");
+        let v = items.get(i).ok_or_else(|| {
+            format!(
+                "field {i} ({name}): missing: the array ends after {} fields",
+                items.len()
+            )
+        })?;
+        serde_json::from_value(v.clone()).map_err(|e| format!("field {i} ({name}): {e}"))
+    }
+    let value: serde_json::Value = match serde_json::from_slice(json) {
+        Ok(v) => v,
+        Err(e) => return format!("not JSON: {e}"),
+    };
+    let Some(items) = value.as_array() else {
+        return format!("not an array of its {CANONICAL_FIELDS} fields");
+    };
+    let checked = (|| -> Result<(), std::string::String> {
+        let name: std::string::String = field(items, 0)?;
+        if name.len() > MAX_NAME {
+            return Err(format!(
+                "field 0 (name): {} bytes, more than {MAX_NAME}",
+                name.len()
+            ));
+        }
+        field::<u64>(items, 1)?;
+        field::<i64>(items, 2)?;
+        field::<u64>(items, 3)?;
+        field::<i64>(items, 4)?;
+        field::<u64>(items, 5)?;
+        field::<i64>(items, 6)?;
+        field::<u32>(items, 7)?;
+        field::<SonarRow>(items, 8)?;
+        for i in 9..=13 {
+            field::<u64>(items, i)?;
+        }
+        field::<bool>(items, 14)?;
+        field::<i64>(items, 15)?;
+        if let Some((code, _)) = field::<Option<(u8, u32)>>(items, 16)?
+            && FaultKind::from_code(code).is_none()
+        {
+            return Err(format!(
+                "field 16 ({}): kind {code}: 0, 1 or 2",
+                CANONICAL_NAMES[16]
+            ));
+        }
+        let rows: std::vec::Vec<InterferenceRow> = field(items, 17)?;
+        if rows.len() > MAX_INTERFERENCES {
+            return Err(format!(
+                "field 17 (interferences): {}, more than {MAX_INTERFERENCES}",
+                rows.len()
+            ));
+        }
+        if let Some(k) = rows.iter().position(|r| r.0 > 1) {
+            return Err(format!(
+                "field 17 (interferences): interference {k}: kind {}: 0 (a box) or 1 (a ball)",
+                rows[k].0
+            ));
+        }
+        if items.len() > CANONICAL_FIELDS {
+            return Err(format!(
+                "{} fields: a canonical scenario has {CANONICAL_FIELDS}",
+                items.len()
+            ));
+        }
+        Ok(())
+    })();
+    match checked {
+        Err(e) => e,
+        Ok(()) => "refused by the reader, though each field reads".to_owned(),
+    }
+    .to_string()
+}
+
 /// Fills a scenario from its canonical form, element by element.
 struct Fill<'s>(&'s mut Scenario);
 
@@ -1547,6 +1655,61 @@ mod tests {
         let mut buf = [0u8; 4096];
         let len = s.to_canonical(&mut buf).unwrap();
         assert_eq!(Scenario::from_canonical(&buf[..len]).unwrap(), s);
+    }
+
+    #[test]
+    fn a_canonical_form_that_does_not_read_is_named_by_field_and_problem() {
+        let s = Scenario::parse(br#"{"name": "c", "interferences": [{"kind": "box", "at_s": 1, "ahead_m": 0.4, "hold_s": 1}]}"#)
+            .unwrap();
+        let mut buf = [0u8; 4096];
+        let len = s.to_canonical(&mut buf).unwrap();
+        let good = core::str::from_utf8(&buf[..len]).unwrap().to_owned();
+        assert_eq!(
+            canonical_problem(good.as_bytes()),
+            "refused by the reader, though each field reads"
+        );
+        let fields: std::vec::Vec<serde_json::Value> = serde_json::from_str(&good).unwrap();
+        let with = |i: usize, v: serde_json::Value| {
+            let mut f = fields.clone();
+            f[i] = v;
+            serde_json::to_string(&f).unwrap()
+        };
+        for (text, says) in [
+            (
+                with(3, serde_json::json!("far")),
+                "field 3 (max_ms): invalid type: string \"far\", expected u64",
+            ),
+            (
+                with(14, serde_json::json!(2)),
+                // serde_json says "integer `2`" or, with arbitrary_precision on in the
+                // build (as beside xtask), "number": the field and the problem either way.
+                "field 14 (door_locked): invalid type: ",
+            ),
+            (
+                with(16, serde_json::json!([7, 1])),
+                "field 16 (fault [kind 0-2, at_ms] or null): kind 7: 0, 1 or 2",
+            ),
+            (
+                with(17, serde_json::json!([[2, 1, 1, 1, 0, 0]])),
+                "field 17 (interferences): interference 0: kind 2",
+            ),
+            (
+                serde_json::to_string(&fields[..5]).unwrap(),
+                "field 5 (avoid_ms): missing: the array ends after 5 fields",
+            ),
+            ("{}".to_owned(), "not an array of its 18 fields"),
+            ("[1,".to_owned(), "not JSON: EOF while parsing"),
+        ] {
+            let mut scratch = Scenario::empty();
+            // serde-json-core's own error names neither the field nor its place.
+            let theirs = scratch
+                .read_canonical(text.as_bytes())
+                .unwrap_err()
+                .to_string();
+            assert!(!theirs.contains("field"), "{theirs}");
+            let problem = canonical_problem(text.as_bytes());
+            assert!(problem.starts_with(says), "{text}: {problem}");
+        }
     }
 
     #[test]
