@@ -138,5 +138,15 @@ t 45.11 "$B run $S --arch psmpa --json --record /dev/stdout >j.out"
 t 45.23 "$B run $S --arch psmpa --trace same.csv >same.csv"
 sed 's/"go to door", "open door", "enter kitchen"/"open door", "go to door", "enter kitchen"/' "$M" >order.json
 t 45.22 "$B check order.json >/dev/null"
-rm -f cut.rec half.rec p.rec ro.csv j.out same.csv order.json so.txt rep.txt
+# Issue 59: what include_mission! refuses, check refuses with the same line (status 2): a fact
+# named ALL (the generated Fact::ALL), a description of a fact the mission lacks, descriptions
+# as an array; sensitivity over one run prints means without a 95 % interval.
+sed 's/"in_kitchen"$/"in_kitchen", "ALL"/' "$M" >all.json
+t 59.18 "$B check all.json"
+sed 's/"name": "fetch-tea",/"name": "fetch-tea", "fact_descriptions": {"at_dor": "x"},/' "$M" >desc.json
+t 59.19 "$B check desc.json"
+sed 's/"name": "fetch-tea",/"name": "fetch-tea", "fact_descriptions": ["at_door"],/' "$M" >desc2.json
+t 59.19 "$B check desc2.json"
+t 59.20 "$B sensitivity --runs 1 | grep -c '\[1 run\]' >&2"
+rm -f cut.rec half.rec p.rec ro.csv j.out same.csv order.json so.txt rep.txt all.json desc.json desc2.json
 echo "files left: $(ls -A | grep -v -e '^tm$' -e '^out$' -e '^err$' | tr '\n' ' ')"

@@ -146,32 +146,16 @@ fn expand(input: &Input) -> syn::Result<Tokens> {
     .map_err(|e| syn::Error::new(span, e))?
 }
 
-/// An UpperCamelCase identifier for a mission's name: words split at anything that cannot
-/// continue a Rust identifier (`go to door`, `path_clear`, `GetIn Kitchen` are `GoToDoor`,
-/// `PathClear`, `GetInKitchen`; `x²` is `X`); `N` before anything that cannot start one (a
-/// digit, `٣`); `Self_` for `self`.
-fn variant(name: &str) -> String {
-    let mut out = String::new();
-    for word in name.split(|c: char| c == '_' || !unicode_ident::is_xid_continue(c)) {
-        let mut chars = word.chars();
-        if let Some(first) = chars.next() {
-            // Upper case only where that is still one character that continues an identifier.
-            let mut upper = first.to_uppercase();
-            match (upper.next(), upper.next()) {
-                (Some(u), None) if unicode_ident::is_xid_continue(u) => out.push(u),
-                _ => out.push(first),
-            }
-            out.push_str(chars.as_str());
-        }
-    }
-    if out.starts_with(|c: char| !unicode_ident::is_xid_start(c)) {
-        out.insert(0, 'N');
-    }
-    match out.as_str() {
-        "" => "Unnamed".to_owned(),
-        "Self" => "Self_".to_owned(),
-        _ => out,
-    }
+use psmpa_model::check::variant;
+
+/// A description as a variant's doc comment: one line of its words, so that no fence (```)
+/// and no indented line makes it a code block, which rustdoc would run as a failing doctest.
+fn doc_line(description: &str) -> String {
+    description
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+        .replace("```", "'''")
 }
 
 /// The variants of a table's names; a compile error when two names make one identifier.
@@ -236,21 +220,8 @@ impl Descriptions {
     /// entry of `fact_descriptions` that names no fact is an error (a typo would lose it).
     fn of(bytes: &[u8]) -> Result<Self, String> {
         let v: serde_json::Value = serde_json::from_slice(bytes).unwrap_or_default();
-        if let Some(described) = v.get("fact_descriptions") {
-            let facts: Vec<&str> = v["facts"]
-                .as_array()
-                .map_or_else(Vec::new, |f| f.iter().filter_map(|n| n.as_str()).collect());
-            let Some(map) = described.as_object() else {
-                return Err(
-                    "fact_descriptions: an object from a fact's name to its description".to_owned(),
-                );
-            };
-            if let Some(name) = map.keys().find(|k| !facts.contains(&k.as_str())) {
-                return Err(format!(
-                    "fact_descriptions: `{name}` is not a fact of the mission (not in `facts`)"
-                ));
-            }
-        }
+        // The check `psmpa-sim check` makes too: one verdict.
+        check::fact_descriptions(&v)?;
         let of = |section: &str| -> Vec<Option<String>> {
             v[section].as_array().map_or_else(Vec::new, |items| {
                 items
@@ -317,7 +288,7 @@ fn names_enum(
         .map(|(i, s)| {
             let name = format!("`{}`", s.replace('`', "'"));
             match described.get(i).cloned().flatten() {
-                Some(d) => format!("{name}: {d}"),
+                Some(d) => format!("{name}: {}", doc_line(&d)),
                 None => name,
             }
         })
@@ -335,6 +306,9 @@ fn names_enum(
         #[doc = #doc]
         #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
         #repr_attr
+        // A variant is the mission's name, not the user's code: one that starts with a letter
+        // that has no upper case of one character (`ßx`) warns in no crate.
+        #[allow(non_camel_case_types)]
         pub enum #ty {
             #( #[doc = #variant_docs] #variants = #index as #repr, )*
         }
@@ -1027,6 +1001,37 @@ fn generate(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_description_never_makes_a_code_block_and_a_variant_never_warns() {
+        let fenced = "Near the door.\n```\npanic!()\n```\n\n    indented();\n";
+        let line = doc_line(fenced);
+        assert_eq!(line, "Near the door. ''' panic!() ''' indented();");
+        let ty = format_ident!("Fact");
+        let tokens = names_enum(
+            "fact",
+            &ty,
+            quote!(FactId),
+            quote!(u8),
+            &[format_ident!("Near")],
+            &["near"],
+            &[Some(fenced.to_owned())],
+            (&format_ident!("M"), quote!(())),
+        )
+        .to_string();
+        let docs: Vec<&str> = tokens.split("doc = ").skip(1).collect();
+        assert!(
+            docs.iter()
+                .any(|d| d.starts_with("\"`near`: Near the door.")),
+            "{tokens}"
+        );
+        assert!(
+            docs.iter()
+                .all(|d| !d.starts_with("\"`near`: Near the door.\\n")),
+            "{tokens}"
+        );
+        assert!(tokens.contains("allow (non_camel_case_types)"), "{tokens}");
+    }
 
     #[test]
     fn a_large_missions_hash_is_computed_here_not_by_the_compiler() {

@@ -7,6 +7,7 @@
 //!   and a plan set (32 sensors, 32 plans; 64 actions, bodies of 16), every name resolved.
 //! * Its goal is reachable ([`unreachable_goal`]).
 
+use std::borrow::ToOwned;
 use std::format;
 use std::fs::{File, Metadata};
 use std::io::Read as _;
@@ -85,7 +86,8 @@ pub const LONG_TIMEOUT_MS: u64 = 60_000;
 /// valid; the robot runs it as written):
 ///
 /// * a plan body in an order its preconditions cannot run: an action needs a fact that only an
-///   action later in the body adds, and that neither the plan's context nor a sensor gives;
+///   action later in the body adds, and that neither the plan's context nor a sensor gives,
+///   nor the task's initial state (a fact it starts with that no action deletes);
 /// * a plan context that can never hold: it needs a fact no action adds, no sensor perceives
 ///   and the task does not start with;
 /// * a sensor timeout longer than [`LONG_TIMEOUT_MS`]: a sensor that stops answering goes
@@ -107,8 +109,14 @@ pub fn warnings<
         .actions()
         .iter()
         .fold(crate::facts::FactSetOf::<W>::EMPTY, |a, x| a.union(x.add));
+    let deleted = d
+        .actions()
+        .iter()
+        .fold(crate::facts::FactSetOf::<W>::EMPTY, |a, x| a.union(x.del));
+    // What the task starts with and nothing takes away holds whenever a plan runs.
+    let always = m.task.init.difference(deleted);
     for (i, plan) in m.library.plans().iter().enumerate() {
-        let given = plan.context.union(perceivable);
+        let given = plan.context.union(perceivable).union(always);
         for (k, id) in plan.body.iter().enumerate() {
             let Some(action) = d.action(*id) else {
                 continue;
@@ -244,7 +252,79 @@ pub fn check<R, const W: usize, const NF: usize>(
     if let Some(why) = unreachable_goal(m) {
         return Err(format!("{}: {why}", file.display()));
     }
+    let value: serde_json::Value = serde_json::from_slice(&doc).unwrap_or_default();
+    fact_descriptions(&value).map_err(|e| format!("{}: {e}", file.display()))?;
+    let d = &m.domain;
+    let sensors: Vec<&str> = d.sensors().iter().map(|s| s.name).collect();
+    let actions: Vec<&str> = d.actions().iter().map(|a| a.name).collect();
+    let plans: Vec<&str> = m.library.plans().iter().map(|p| p.name).collect();
+    for (table, one, names) in [
+        ("facts", "Fact", d.fact_names()),
+        ("events", "Event", d.event_names()),
+        ("sensors", "Sensor", &sensors[..]),
+        ("actions", "Action", &actions[..]),
+        ("plans", "Plan", &plans[..]),
+    ] {
+        if let Some(name) = names.iter().find(|n| variant(n) == "ALL") {
+            return Err(format!(
+                "{}: {table} \"{}\" would be the variant ALL, which include_mission! gives the list of every one ({one}::ALL): rename it",
+                file.display(),
+                printable(name)
+            ));
+        }
+    }
     Ok(then(m))
+}
+
+/// Checks a mission's `fact_descriptions` (the file's JSON, `value`): absent, or an object
+/// from a fact's name to its description; an entry that names no fact is an error (a typo
+/// would lose it). `include_mission!` and `psmpa-sim check` give one verdict.
+pub fn fact_descriptions(value: &serde_json::Value) -> Result<(), String> {
+    let Some(described) = value.get("fact_descriptions") else {
+        return Ok(());
+    };
+    let facts: Vec<&str> = value["facts"]
+        .as_array()
+        .map_or_else(Vec::new, |f| f.iter().filter_map(|n| n.as_str()).collect());
+    let Some(map) = described.as_object() else {
+        return Err(
+            "fact_descriptions: an object from a fact's name to its description".to_owned(),
+        );
+    };
+    if let Some(name) = map.keys().find(|k| !facts.contains(&k.as_str())) {
+        return Err(format!(
+            "fact_descriptions: `{}` is not a fact of the mission (not in `facts`)",
+            printable(name)
+        ));
+    }
+    Ok(())
+}
+
+/// The identifier `include_mission!` makes of a name: its words (split at `_` and at what
+/// continues no identifier) each starting upper case (`go to door` is `GoToDoor`), `N` before
+/// one that starts no identifier, `Unnamed` for none, `Self_` for `Self`.
+pub fn variant(name: &str) -> String {
+    let mut out = String::new();
+    for word in name.split(|c: char| c == '_' || !unicode_ident::is_xid_continue(c)) {
+        let mut chars = word.chars();
+        if let Some(first) = chars.next() {
+            // Upper case only where that is still one character that continues an identifier.
+            let mut upper = first.to_uppercase();
+            match (upper.next(), upper.next()) {
+                (Some(u), None) if unicode_ident::is_xid_continue(u) => out.push(u),
+                _ => out.push(first),
+            }
+            out.push_str(chars.as_str());
+        }
+    }
+    if out.starts_with(|c: char| !unicode_ident::is_xid_start(c)) {
+        out.insert(0, 'N');
+    }
+    match out.as_str() {
+        "" => "Unnamed".to_owned(),
+        "Self" => "Self_".to_owned(),
+        _ => out,
+    }
 }
 
 /// [`check`]'s errors keep the file's text printable: a name with a control character shows it
@@ -316,6 +396,82 @@ mod tests {
             MAX_INPUT as usize
         );
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_body_check_counts_what_the_task_starts_with() {
+        let m = r#"{ "name": "tool", "facts": ["tool", "made", "there"], "events": ["go"],
+          "sensors": [],
+          "actions": [{ "name": "use", "pre": ["tool"], "add": ["there"] },
+                      { "name": "make", "pre": [], "add": ["tool", "made"] }],
+          "plans": [{ "name": "p", "trigger": "go", "context": [], "body": ["use", "make"] }],
+          "task": { "event": "go", "init": ["tool"], "goal": ["there", "made"] } }"#;
+        let warned =
+            |text: &str| check::<_, 1, 64>(Path::new("m.json"), text.as_bytes(), warnings).unwrap();
+        // The task starts with the tool and nothing takes it: no warning.
+        assert_eq!(warned(m), Vec::<String>::new());
+        // Without it, the body's order is a likely mistake.
+        let without = m.replace(r#""init": ["tool"]"#, r#""init": []"#);
+        let w = warned(&without);
+        assert!(w.len() == 1 && w[0].contains("later in the body"), "{w:?}");
+        // An action that takes the tool away: it may be gone when the plan runs.
+        let taken = m.replace(
+            r#""add": ["there"] }"#,
+            r#""add": ["there"], "del": ["tool"] }"#,
+        );
+        let w = warned(&taken);
+        assert!(w.len() == 1 && w[0].contains("later in the body"), "{w:?}");
+    }
+
+    #[test]
+    fn a_name_that_would_be_the_variant_all_is_refused() {
+        for (from, to) in [
+            (r#"["clear", "there"]"#, r#"["clear", "there", "ALL"]"#),
+            (r#"["clear", "there"]"#, r#"["clear", "there", "a_l_l"]"#),
+        ] {
+            let e = checked(&OK.replace(from, to)).unwrap_err();
+            assert!(
+                e.starts_with("m.json: facts \"")
+                    && e.contains("would be the variant ALL")
+                    && e.contains("Fact::ALL"),
+                "{e}"
+            );
+        }
+        let e = checked(&OK.replace(r#""name": "bumper""#, r#""name": "A_LL""#)).unwrap_err();
+        assert!(
+            e.contains("sensors \"A_LL\"") && e.contains("Sensor::ALL"),
+            "{e}"
+        );
+        // `all` is the variant `All`, and a name that only contains it another variant.
+        assert!(checked(&OK.replace(r#""name": "bumper""#, r#""name": "all""#)).is_ok());
+        assert!(
+            checked(&OK.replace(
+                r#"["clear", "there"]"#,
+                r#"["clear", "there", "ALL_CLEAR"]"#
+            ))
+            .is_ok()
+        );
+    }
+
+    #[test]
+    fn fact_descriptions_are_checked_as_the_macro_checks_them() {
+        let with = |d: &str| {
+            OK.replace(
+                r#""name": "hello","#,
+                &format!(r#""name": "hello", "fact_descriptions": {d},"#),
+            )
+        };
+        assert_eq!(checked(&with(r#"{"clear": "nothing ahead"}"#)), Ok(1));
+        let e = checked(&with(r#"{"claer": "nothing ahead"}"#)).unwrap_err();
+        assert_eq!(
+            e,
+            "m.json: fact_descriptions: `claer` is not a fact of the mission (not in `facts`)"
+        );
+        let e = checked(&with(r#"["clear"]"#)).unwrap_err();
+        assert_eq!(
+            e,
+            "m.json: fact_descriptions: an object from a fact's name to its description"
+        );
     }
 
     #[test]
