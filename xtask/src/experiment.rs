@@ -216,9 +216,11 @@ pub fn run() -> Result<(), String> {
     let study: Study = serde_json::from_slice(&out.stdout)
         .map_err(|e| format!("psmpa-sim sensitivity --json: {e}"))?;
     let root = firmware::root();
-    for (page, marker, text) in pages(&study)? {
-        crate::hil::write_between(&root.join(page), marker, &text)?;
-    }
+    let regions: Vec<_> = pages(&study)?
+        .into_iter()
+        .map(|(page, marker, text)| (root.join(page), marker, text))
+        .collect();
+    crate::pages::write_pages(&regions)?;
     println!("the sensitivity study's figures written into README.md and docs/experiment.md");
     Ok(())
 }

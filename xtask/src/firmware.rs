@@ -888,9 +888,11 @@ pub fn qemu_check(inject_fault: bool) -> Result<(), String> {
         }
     }
     if failures.is_empty() && !inject_fault {
-        for (page, marker, text) in qemu_pages(&figures) {
-            crate::hil::write_between(&root().join(page), marker, &text)?;
-        }
+        let regions: Vec<_> = qemu_pages(&figures)
+            .into_iter()
+            .map(|(page, marker, text)| (root().join(page), marker, text))
+            .collect();
+        crate::pages::write_pages(&regions)?;
     }
     if failures.is_empty() {
         println!(

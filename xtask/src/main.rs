@@ -25,6 +25,7 @@ mod callgrind;
 mod experiment;
 mod firmware;
 mod hil;
+mod pages;
 mod planning;
 mod recording;
 mod size;

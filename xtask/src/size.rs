@@ -468,7 +468,7 @@ pub fn run(bless: bool) -> Result<(), String> {
 
     if bless {
         let text = serde_json::to_string_pretty(&now).map_err(|e| e.to_string())? + "\n";
-        std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        crate::pages::write_file(&path, text.as_bytes())?;
         println!("wrote {}", path.display());
     } else if snapshot.is_none() {
         failures.push(format!(
@@ -478,9 +478,11 @@ pub fn run(bless: bool) -> Result<(), String> {
     }
     // The pages show the snapshot (the committed figures), blessed or not.
     if let Ok(shown) = self::snapshot() {
-        for (page, marker, text) in pages(&shown) {
-            crate::hil::write_between(&firmware::root().join(page), marker, &text)?;
-        }
+        let regions: Vec<_> = pages(&shown)
+            .into_iter()
+            .map(|(page, marker, text)| (firmware::root().join(page), marker, text))
+            .collect();
+        crate::pages::write_pages(&regions)?;
     }
     if failures.is_empty() {
         Ok(())

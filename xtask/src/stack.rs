@@ -1877,14 +1877,12 @@ pub fn run() -> Result<(), String> {
         b(pico.and_then(|p| p.0)),
         b(pico.map(|p| p.1)),
     );
-    crate::hil::write_between(&firmware::root().join("README.md"), "stack", &cell)?;
     let pico_cell = format!(
         "{} B (the bench; bound {} B)",
         b(pico.map(|p| p.1)),
         b(pico.and_then(|p| p.0))
     );
     let doc = firmware::root().join("docs/firmware.md");
-    crate::hil::write_between(&doc, "pico-stack", &pico_cell)?;
     let mut qemu_table = String::from("\n| level | worst stack |\n|---|---|\n");
     for (label, w) in &qemu_levels {
         qemu_table += &format!("| {label} | {} B |\n", b(*w));
@@ -1898,7 +1896,6 @@ pub fn run() -> Result<(), String> {
             _ => "?".to_owned(),
         }
     );
-    crate::hil::write_between(&doc, "stack-qemu", &qemu_table)?;
     let mut boards = String::from("\n| level | Pico 2 (RP2350) | Pico (RP2040) |\n|---|---|---|\n");
     if let [p2, p] = board_levels.as_slice() {
         for ((label, a), (other, c)) in p2.iter().zip(p) {
@@ -1922,7 +1919,13 @@ pub fn run() -> Result<(), String> {
         b(pico.and_then(|p| p.0)),
         share(pico.and_then(|p| p.0), 256 * 1024)
     );
-    crate::hil::write_between(&doc, "stack-boards", &boards)
+    // Every page's markers checked before any is written.
+    crate::pages::write_pages(&[
+        (firmware::root().join("README.md"), "stack", cell),
+        (doc.clone(), "pico-stack", pico_cell),
+        (doc.clone(), "stack-qemu", qemu_table),
+        (doc, "stack-boards", boards),
+    ])
 }
 
 /// The Pico image's code (its flash sections, from the ELF's bytes), hashed: which image a

@@ -819,9 +819,11 @@ pub fn run(clock_hz: Option<u64>, json: Option<PathBuf>) -> Result<(), String> {
         .collect();
     // The pages carry the figures at the machines' own clocks only.
     if clock_hz.is_none() && failures.is_empty() {
-        for (page, marker, text) in pages(&analyses, &host) {
-            crate::hil::write_between(&firmware::root().join(page), marker, &text)?;
-        }
+        let regions: Vec<_> = pages(&analyses, &host)
+            .into_iter()
+            .map(|(page, marker, text)| (firmware::root().join(page), marker, text))
+            .collect();
+        crate::pages::write_pages(&regions)?;
     }
     let report = Report {
         machines: analyses.into_iter().map(|(_, a)| a.report).collect(),
@@ -829,7 +831,7 @@ pub fn run(clock_hz: Option<u64>, json: Option<PathBuf>) -> Result<(), String> {
     };
     let path = json.unwrap_or_else(|| firmware::root().join("target/timing.json"));
     let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-    std::fs::write(&path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+    crate::pages::write_file(&path, (text + "\n").as_bytes())?;
     println!("\nwritten to {}", path.display());
     if failures.is_empty() {
         println!(

@@ -1546,6 +1546,18 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
         Ok(p) => p,
         Err(e) => return Ending::BadInput(e),
     };
+    // The pages the figures go to, checked before the runs: a page without its markers fails
+    // now, not after every run, and never leaves one page written and another not.
+    if defaults && mode == Mode::Check {
+        let root = firmware::root();
+        if let Err(e) = crate::pages::check_pages(&[
+            (root.join("docs/firmware.md"), "hil-figures"),
+            (root.join("docs/firmware.md"), "decisions"),
+            (root.join("README.md"), "hil"),
+        ]) {
+            return Ending::Failed(e);
+        }
+    }
     if let Err(e) = harness::check_tools() {
         return Ending::Failed(e);
     }
@@ -1665,14 +1677,12 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
         let (md, cell) = figures(&reports);
         let decisions = decisions_table(&reports);
         let root = firmware::root();
-        for (file, name, text) in [
-            ("docs/firmware.md", "hil-figures", md.as_str()),
-            ("docs/firmware.md", "decisions", decisions.as_str()),
-            ("README.md", "hil", cell.as_str()),
-        ] {
-            if let Err(e) = write_between(&root.join(file), name, text) {
-                return Ending::Failed(e);
-            }
+        if let Err(e) = crate::pages::write_pages(&[
+            (root.join("docs/firmware.md"), "hil-figures", md),
+            (root.join("docs/firmware.md"), "decisions", decisions),
+            (root.join("README.md"), "hil", cell),
+        ]) {
+            return Ending::Failed(e);
         }
     }
     if mode == Mode::Calibrate {
@@ -1709,33 +1719,7 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
     Ending::Passed
 }
 
-/// Puts `text` between `<!-- NAME:start -->` and `<!-- NAME:end -->` in `path`: the figures a
-/// command measured, on the page that shows them.
-pub fn write_between(path: &Path, name: &str, text: &str) -> Result<(), String> {
-    let page = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let (start, end) = (
-        format!("<!-- {name}:start -->"),
-        format!("<!-- {name}:end -->"),
-    );
-    let (Some(a), Some(b)) = (page.find(&start), page.find(&end)) else {
-        return Err(format!(
-            "{}: no {name}:start and {name}:end markers",
-            path.display()
-        ));
-    };
-    let from = a + start.len();
-    if b < from {
-        return Err(format!(
-            "{}: {name}:end before {name}:start",
-            path.display()
-        ));
-    }
-    let updated = format!("{}{text}{}", &page[..from], &page[b..]);
-    if updated != page {
-        std::fs::write(path, updated).map_err(|e| format!("{}: {e}", path.display()))?;
-    }
-    Ok(())
-}
+pub use crate::pages::write_between;
 
 /// One decision's cycles of a run.
 type Pick = fn(&DecisionCycles) -> Option<u64>;
@@ -1893,12 +1877,12 @@ fn calibrate(measured: bound::Costs, runs: usize) -> Ending {
     }
     let path = Budget::path();
     let text = serde_json::to_string_pretty(&new).unwrap_or_default() + "\n";
-    match std::fs::write(&path, text) {
+    match crate::pages::write_file(&path, text.as_bytes()) {
         Ok(()) => {
             println!("written to {}", path.display());
             Ending::Passed
         }
-        Err(e) => Ending::Failed(format!("{}: {e}", path.display())),
+        Err(e) => Ending::Failed(e),
     }
 }
 

@@ -497,13 +497,15 @@ pub fn run(json: bool) -> Ending {
         print!("{table}");
     }
     let cell = format!("{caught} of {} planted bugs caught", verdicts.len());
-    for (file, name, text) in [
-        ("boards/README.md", "bench-mutants", table.as_str()),
-        ("README.md", "mutants", cell.as_str()),
-    ] {
-        if let Err(e) = super::write_between(&root.join(file), name, text) {
-            return Ending::Failed(e);
-        }
+    if let Err(e) = crate::pages::write_pages(&[
+        (
+            root.join("boards/README.md"),
+            "bench-mutants",
+            table.clone(),
+        ),
+        (root.join("README.md"), "mutants", cell),
+    ]) {
+        return Ending::Failed(e);
     }
     let missed: Vec<&str> = verdicts
         .iter()

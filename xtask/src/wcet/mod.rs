@@ -1329,7 +1329,6 @@ fn figures(report: &Report) -> Result<(), String> {
         }
     }
     let root = crate::firmware::root();
-    crate::hil::write_between(&root.join("docs/firmware.md"), "wcet-figures", &text)?;
     let alarm = report.jobs.iter().find(|j| j.job == "alarm");
     let cell = match (alarm, &report.reaction_error) {
         (Some(a), Some(_)) => format!(
@@ -1344,7 +1343,10 @@ fn figures(report: &Report) -> Result<(), String> {
         ),
         (None, _) => format!("{} jobs bounded", report.jobs.len()),
     };
-    crate::hil::write_between(&root.join("README.md"), "wcet", &cell)
+    crate::pages::write_pages(&[
+        (root.join("docs/firmware.md"), "wcet-figures", text),
+        (root.join("README.md"), "wcet", cell),
+    ])
 }
 
 /// The report in words.
