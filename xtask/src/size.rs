@@ -218,10 +218,12 @@ fn report(
     check_growth: bool,
 ) -> Vec<String> {
     let row = |what: &str, value: u64, old: Option<u64>, budget: String| {
-        let delta = old.map_or(String::new(), |o| format!("{:+}", value as i64 - o as i64));
+        let delta = old.map_or(String::new(), |o| {
+            format!("{:+}", i128::from(value) - i128::from(o))
+        });
         println!("  {what:<42} {value:>8} B  {delta:>8}  {budget}");
     };
-    let ram = now.static_ram + now.stack;
+    let ram = now.static_ram.saturating_add(now.stack);
     let over = |value: u64, limit: u64| {
         if value <= limit {
             format!("{} KiB", limit / 1024)
@@ -251,7 +253,7 @@ fn report(
     row(
         "static RAM + stack",
         ram,
-        old.map(|s| s.static_ram + s.stack),
+        old.map(|s| s.static_ram.saturating_add(s.stack)),
         over(ram, budget.ram_with_stack),
     );
     let mut failures = Vec::new();
@@ -273,12 +275,17 @@ fn report(
             ("static RAM", now.static_ram, old.static_ram),
             ("stack", now.stack, old.stack),
         ] {
-            if new * 100 > old * (100 + GROWTH_PERCENT) {
+            if grew(new, old) {
                 failures.push(format!("{name}: {what} grew from {old} B to {new} B (more than {GROWTH_PERCENT} %); if intended, run cargo xtask size --bless"));
             }
         }
     }
     failures
+}
+
+/// Whether `new` is more than [`GROWTH_PERCENT`] over `old` (in 128 bits: any two figures).
+fn grew(new: u64, old: u64) -> bool {
+    u128::from(new) * 100 > u128::from(old) * u128::from(100 + GROWTH_PERCENT)
 }
 
 /// Prints a board image's rows and returns what breaks its budget or grew past the snapshot.
@@ -308,7 +315,9 @@ fn report_board(
             BOARD_STATIC_RAM,
         ),
     ] {
-        let delta = old.map_or(String::new(), |o| format!("{:+}", value as i64 - o as i64));
+        let delta = old.map_or(String::new(), |o| {
+            format!("{:+}", i128::from(value) - i128::from(o))
+        });
         println!(
             "  {what:<42} {value:>8} B  {delta:>8}  {} KiB",
             budget / 1024
@@ -319,7 +328,7 @@ fn report_board(
             ));
         }
         if let Some(old) = old.filter(|_| check_growth)
-            && value * 100 > old * (100 + GROWTH_PERCENT)
+            && grew(value, old)
         {
             failures.push(format!("{name}: {what} grew from {old} B to {value} B (more than {GROWTH_PERCENT} %); if intended, run cargo xtask size --bless"));
         }
@@ -356,16 +365,16 @@ pub fn pages(s: &Snapshot) -> Vec<(&'static str, &'static str, String)> {
         b(BOARD_STATIC_RAM),
         b(fw.stack),
         b(pr.stack),
-        b(fw.static_ram + fw.stack),
+        b(fw.static_ram.saturating_add(fw.stack)),
         b(FIRMWARE.ram_with_stack),
-        b(pr.static_ram + pr.stack),
+        b(pr.static_ram.saturating_add(pr.stack)),
         b(PRODUCT.ram_with_stack),
     );
     let cell = format!(
         "product image {} of {} flash, {} of {} RAM + stack",
         b(pr.flash),
         kib(PRODUCT.flash),
-        b(pr.static_ram + pr.stack),
+        b(pr.static_ram.saturating_add(pr.stack)),
         kib(PRODUCT.ram_with_stack)
     );
     let boards = format!(
@@ -386,7 +395,37 @@ pub fn pages(s: &Snapshot) -> Vec<(&'static str, &'static str, String)> {
 pub fn snapshot() -> Result<Snapshot, String> {
     let path = firmware::root().join("firmware/size.json");
     let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))
+    parse_snapshot(&path, &bytes)
+}
+
+/// The most any figure of the snapshot may be, bytes: the address space of the chips'
+/// flash (16 MiB on both Picos), far beyond any image of the project.
+const MAX_FIGURE: u64 = 16 << 20;
+
+/// A snapshot's text, each figure at most [`MAX_FIGURE`].
+fn parse_snapshot(path: &Path, bytes: &[u8]) -> Result<Snapshot, String> {
+    let bytes = psmpa_sim::json::strict_file(path, bytes)?;
+    let s: Snapshot =
+        serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    let figures = [
+        ("firmware.flash", s.firmware.flash),
+        ("firmware.static_ram", s.firmware.static_ram),
+        ("firmware.stack", s.firmware.stack),
+        ("product.flash", s.product.flash),
+        ("product.static_ram", s.product.static_ram),
+        ("product.stack", s.product.stack),
+        ("pico2.flash", s.pico2.flash),
+        ("pico2.static_ram", s.pico2.static_ram),
+        ("pico.flash", s.pico.flash),
+        ("pico.static_ram", s.pico.static_ram),
+    ];
+    match figures.iter().find(|(_, v)| *v > MAX_FIGURE) {
+        Some((name, v)) => Err(format!(
+            "{}: {name} {v} B: no image of the project is that large (at most {MAX_FIGURE} B): run cargo xtask size --bless",
+            path.display()
+        )),
+        None => Ok(s),
+    }
 }
 
 /// Measures the three images, compares, and with `bless` writes the snapshot.
@@ -404,9 +443,17 @@ pub fn run(bless: bool) -> Result<(), String> {
         pico: board(&pico_elf)?,
     };
     let path = firmware::root().join("firmware/size.json");
-    let snapshot: Option<Snapshot> = std::fs::read(&path)
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok());
+    let snapshot: Option<Snapshot> = match std::fs::read(&path) {
+        Ok(b) => match parse_snapshot(&path, &b) {
+            Ok(s) => Some(s),
+            Err(e) if bless => {
+                eprintln!("{e}: replaced");
+                None
+            }
+            Err(e) => return Err(e),
+        },
+        Err(_) => None,
+    };
 
     println!("{:<44} {:>10}  {:>8}  budget", "", "measured", "vs snap");
     let mut failures = report(
@@ -494,6 +541,38 @@ pub fn run(bless: bool) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::crate_of;
+
+    #[test]
+    fn a_snapshot_with_a_huge_figure_is_refused_and_growth_never_overflows() {
+        let path = std::path::Path::new("firmware/size.json");
+        let good = std::fs::read(super::firmware::root().join(path)).unwrap();
+        assert!(super::parse_snapshot(path, &good).is_ok());
+        let text = String::from_utf8(good).unwrap();
+        let huge = text.replacen(
+            &format!("\"flash\": {}", super::snapshot().unwrap().firmware.flash),
+            "\"flash\": 18446744073709551615",
+            1,
+        );
+        assert_ne!(huge, text);
+        let e = super::parse_snapshot(path, huge.as_bytes()).unwrap_err();
+        assert!(
+            e.starts_with("firmware/size.json: firmware.flash 18446744073709551615 B"),
+            "{e}"
+        );
+        // The comparisons themselves hold for any figures.
+        assert!(!super::grew(u64::MAX, u64::MAX));
+        assert!(super::grew(u64::MAX, 1));
+        assert!(!super::grew(102, 100));
+        assert!(super::grew(103, 100));
+        let sizes = super::Sizes {
+            flash: u64::MAX,
+            static_ram: u64::MAX,
+            stack: u64::MAX,
+        };
+        let budget = super::FIRMWARE;
+        let failures = super::report("x", sizes, Some(sizes), &budget, true);
+        assert!(failures.iter().any(|f| f.contains("over the budget")));
+    }
 
     /// The text between a page's markers.
     fn between(page: &str, marker: &str) -> Option<String> {

@@ -83,7 +83,7 @@ impl Costs {
 
     /// A sensing segment: the longest sensing poll and the interrupt that released it.
     pub fn segment(&self) -> u64 {
-        self.sensing_poll + self.alarm.max(self.gpio)
+        self.sensing_poll.saturating_add(self.alarm.max(self.gpio))
     }
 
     /// These costs with `plan` cycles of declared planning added to the deciding step.
@@ -117,16 +117,21 @@ impl Costs {
     }
 
     /// Each cost with `percent` more (rounded up), or [`MARGIN_CYCLES`] more, whichever is
-    /// more.
-    pub fn with_margin(self, percent: u64) -> Self {
-        let up = |c: u64| (c * (100 + percent)).div_ceil(100).max(c + MARGIN_CYCLES);
-        Self {
-            sensing_poll: up(self.sensing_poll),
-            alarm: up(self.alarm),
-            gpio: up(self.gpio),
-            deciding: up(self.deciding),
-            critical: up(self.critical),
+    /// more; `None` when a cost is beyond [`MAX_COST`] or the margin beyond 100 %.
+    pub fn with_margin(self, percent: u64) -> Option<Self> {
+        if percent > 100 {
+            return None;
         }
+        let up = |c: u64| {
+            (c <= MAX_COST).then(|| (c * (100 + percent)).div_ceil(100).max(c + MARGIN_CYCLES))
+        };
+        Some(Self {
+            sensing_poll: up(self.sensing_poll)?,
+            alarm: up(self.alarm)?,
+            gpio: up(self.gpio)?,
+            deciding: up(self.deciding)?,
+            critical: up(self.critical)?,
+        })
     }
 
     /// The costs of these that exceed `budget`'s, in words.
@@ -169,6 +174,10 @@ pub struct Budget {
 
 /// The margin a calibration adds to the worst measured costs, percent.
 pub const MARGIN_PERCENT: u64 = 25;
+/// The most a measured cost may be, cycles: a second at 125 MHz, far beyond any step of the
+/// firmware (its deciding step with a plan is a few ms), and far from overflowing the
+/// bound's arithmetic.
+pub const MAX_COST: u64 = 125_000_000;
 /// The least margin of any cost, cycles (8 µs): a handler of a few hundred cycles takes paths
 /// of different lengths (one alarm or two due, an edge or none) that a quarter of it does not
 /// cover. Found on a scenario the project does not ship: an alarm of 744 cycles where the
@@ -184,14 +193,17 @@ impl Budget {
     /// Reads the committed budget.
     pub fn load() -> Result<Self, String> {
         let path = Self::path();
-        let text = std::fs::read_to_string(&path).map_err(|e| {
-            format!(
-                "{}: {e} (cargo xtask hil --calibrate writes it)",
-                path.display()
-            )
-        })?;
+        let text = psmpa_sim::cli::files::read_input(&path, "budget")
+            .map_err(|e| format!("{e} (cargo xtask hil --calibrate writes it)"))?;
+        Self::parse(&path, &text)
+    }
+
+    /// The budget file `path`'s bytes, checked.
+    pub fn parse(path: &std::path::Path, bytes: &[u8]) -> Result<Self, String> {
+        // Strict JSON first: a byte order mark, bad UTF-8, a duplicate key named as such.
+        let text = psmpa_sim::json::strict_file(path, bytes)?;
         let budget: Self =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+            serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))?;
         budget
             .check()
             .map_err(|e| format!("{}: {e}", path.display()))?;
@@ -200,7 +212,20 @@ impl Budget {
 
     /// Whether the budget is its measured costs with its margin, as a calibration writes it.
     pub fn check(&self) -> Result<(), String> {
-        if self.budget == self.measured.with_margin(self.margin_percent) {
+        if self.margin_percent != MARGIN_PERCENT {
+            return Err(format!(
+                "margin_percent {}: a calibration writes {MARGIN_PERCENT} %: write it with cargo xtask hil --calibrate",
+                self.margin_percent
+            ));
+        }
+        for (name, c) in self.measured.named().iter().chain(&self.budget.named()) {
+            if *c > MAX_COST {
+                return Err(format!(
+                    "the {name} cost of {c} cycles is beyond any step of the firmware (at most {MAX_COST}, a second): write it with cargo xtask hil --calibrate"
+                ));
+            }
+        }
+        if Some(self.budget) == self.measured.with_margin(self.margin_percent) {
             Ok(())
         } else {
             Err(format!(
@@ -211,39 +236,47 @@ impl Budget {
     }
 
     /// The budget of `measured`, the worst costs of a calibration.
-    pub fn of(measured: Costs) -> Self {
-        Self {
+    pub fn of(measured: Costs) -> Result<Self, String> {
+        let budget = measured.with_margin(MARGIN_PERCENT).ok_or_else(|| {
+            format!("a measured cost is beyond {MAX_COST} cycles (a second): {measured:?}")
+        })?;
+        Ok(Self {
             about: "Worst step costs of the Pico's image (cycles at 125 MHz) over every shipped bench scenario and fault, and the budget the bench judges by: written by cargo xtask hil --calibrate, never by hand".to_owned(),
             margin_percent: MARGIN_PERCENT,
             measured,
-            budget: measured.with_margin(MARGIN_PERCENT),
-        }
+            budget,
+        })
     }
 
     /// The sonar's timing error a sensing segment of the budget may cause, mm: an edge served
     /// that much late moves the reading by 0.1715 mm a microsecond; one more for rounding.
     pub fn tolerance_mm(&self) -> u32 {
-        let ns = self.budget.segment() * NS;
-        u32::try_from((ns * 343).div_ceil(2_000_000) + 1).unwrap_or(u32::MAX)
+        let ns = self.budget.segment().saturating_mul(NS);
+        u32::try_from(ns.saturating_mul(343).div_ceil(2_000_000) + 1).unwrap_or(u32::MAX)
     }
 }
 
 /// The sonar's and the bumper's bounds, cycles, for their periods in ms.
 pub fn bounds(costs: &Costs, periods_ms: [u64; 2]) -> Result<[u64; 2], TimingError> {
-    let seg = costs.segment() * NS;
+    // Saturating: costs beyond any step (a static bound of an absurd annotation) make an
+    // unschedulable set, not an overflow.
+    let seg = costs.segment().saturating_mul(NS);
     let period = |ms: u64| ms.saturating_mul(1_000_000);
     let (sonar_t, bumper_t) = (period(periods_ms[0]), period(periods_ms[1]));
     let debounce = DEBOUNCE.as_micros() * 1_000;
-    let blocking = Blocking::preemptive(costs.deciding * NS, costs.critical * NS);
-    let reaction = costs.deciding * NS;
+    let blocking = Blocking::preemptive(
+        costs.deciding.saturating_mul(NS),
+        costs.critical.saturating_mul(NS),
+    );
+    let reaction = costs.deciding.saturating_mul(NS);
     let sonar = Job {
         period_ns: sonar_t,
-        cost_ns: SONAR_SEGMENTS * seg,
+        cost_ns: SONAR_SEGMENTS.saturating_mul(seg),
         latency_ns: 0,
     };
     let bumper = Job {
         period_ns: bumper_t,
-        cost_ns: BUMPER_SEGMENTS * seg,
+        cost_ns: BUMPER_SEGMENTS.saturating_mul(seg),
         latency_ns: 0,
     };
     // The sonar after its echo's fall: one segment left.
@@ -261,6 +294,6 @@ pub fn bounds(costs: &Costs, periods_ms: [u64; 2]) -> Result<[u64; 2], TimingErr
     let wait = bumper_t.max(debounce);
     Ok([
         s.response_ns.div_ceil(NS),
-        (wait + b.response_ns).div_ceil(NS),
+        wait.saturating_add(b.response_ns).div_ceil(NS),
     ])
 }

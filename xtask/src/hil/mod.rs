@@ -1518,14 +1518,25 @@ fn play_all(fw: &Firmware, plays: &[Play], budget: &Budget, out: &Path) -> Vec<P
 /// typical costs when there is none. Its cost and bound checks are set aside
 /// ([`calibrating`]): the costs are what is being measured.
 fn provisional_budget() -> Budget {
-    Budget::load().unwrap_or_else(|_| {
-        Budget::of(bound::Costs {
-            sensing_poll: 15_000,
-            alarm: 500,
-            gpio: 1_000,
-            deciding: 80_000,
-            critical: 18_000,
-        })
+    let typical = bound::Costs {
+        sensing_poll: 15_000,
+        alarm: 500,
+        gpio: 1_000,
+        deciding: 80_000,
+        critical: 18_000,
+    };
+    let with_margin = bound::Costs {
+        sensing_poll: 18_750,
+        alarm: 1_500,
+        gpio: 2_000,
+        deciding: 100_000,
+        critical: 22_500,
+    };
+    Budget::load().unwrap_or_else(|_| Budget {
+        about: String::new(),
+        margin_percent: bound::MARGIN_PERCENT,
+        measured: typical,
+        budget: with_margin,
     })
 }
 
@@ -1565,7 +1576,7 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
         Mode::Calibrate => provisional_budget(),
         _ => match Budget::load() {
             Ok(b) => b,
-            Err(e) => return Ending::Failed(e),
+            Err(e) => return Ending::BadInput(e),
         },
     };
     eprintln!("xtask hil: building the Pico's image (boards/pico; a few minutes the first time)");
@@ -1691,7 +1702,10 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
             .map(|(r, _)| r.costs)
             .fold(bound::Costs::default(), bound::Costs::max);
         // The new budget must bound every reaction the calibration measured.
-        let new = Budget::of(measured);
+        let new = match Budget::of(measured) {
+            Ok(b) => b,
+            Err(e) => return Ending::Failed(format!("not calibrated: {e}")),
+        };
         for ((r, _), p) in reports.iter().zip(&plays) {
             let bounds = match scenario_bounds(&new, &p.scenario) {
                 Ok(b) => b,
@@ -1856,7 +1870,10 @@ pub(crate) fn thousands(n: u64) -> String {
 /// Writes the budget of `measured` (the worst costs of `runs` runs) and prints it beside the
 /// committed one.
 fn calibrate(measured: bound::Costs, runs: usize) -> Ending {
-    let new = Budget::of(measured);
+    let new = match Budget::of(measured) {
+        Ok(b) => b,
+        Err(e) => return Ending::Failed(format!("not calibrated: {e}")),
+    };
     let old = Budget::load().ok();
     println!(
         "\ncost budget of the Pico's image, cycles at 125 MHz (worst of {runs} runs, +{} %):",
@@ -2205,7 +2222,7 @@ mod tests {
             deciding: 1_000,
             critical: 10,
         };
-        let b = Budget::of(measured);
+        let b = Budget::of(measured).unwrap();
         // At least 1,000 cycles more.
         assert_eq!(b.budget.sensing_poll, 1_100);
         assert_eq!(b.budget.alarm, 1_003);
@@ -2214,7 +2231,8 @@ mod tests {
             deciding: 10_001,
             ..measured
         }
-        .with_margin(25);
+        .with_margin(25)
+        .unwrap();
         assert_eq!(big.deciding, 12_502);
         assert!(b.check().is_ok());
         let mut edited = b.clone();
@@ -2234,6 +2252,49 @@ mod tests {
             b.budget.with_plan(bound::cycles_of_us(1_000)).deciding,
             2_000 + 125_000
         );
+    }
+
+    #[test]
+    fn a_budget_of_huge_costs_or_an_odd_margin_is_refused_not_a_panic() {
+        let huge = bound::Costs {
+            sensing_poll: u64::MAX / 2,
+            alarm: u64::MAX,
+            gpio: 1,
+            deciding: u64::MAX,
+            critical: 1,
+        };
+        assert!(huge.with_margin(25).is_none());
+        assert!(Budget::of(huge).unwrap_err().contains("beyond"));
+        let b = Budget {
+            about: String::new(),
+            margin_percent: 25,
+            measured: huge,
+            budget: huge,
+        };
+        assert!(
+            b.check().unwrap_err().contains("beyond any step"),
+            "{:?}",
+            b.check()
+        );
+        // The bounds of absurd costs: unschedulable, not an overflow.
+        assert!(bound::bounds(&huge, [100, 20]).is_err());
+        assert!(b.tolerance_mm() > 0);
+        let measured = bound::Costs {
+            sensing_poll: 100,
+            alarm: 3,
+            gpio: 0,
+            deciding: 1_000,
+            critical: 10,
+        };
+        for margin in [0, 10_000, u64::MAX] {
+            let odd = Budget {
+                margin_percent: margin,
+                budget: measured.with_margin(margin.min(100)).unwrap(),
+                ..Budget::of(measured).unwrap()
+            };
+            let e = odd.check().unwrap_err();
+            assert!(e.contains(&format!("margin_percent {margin}")), "{e}");
+        }
     }
 
     #[test]
