@@ -210,7 +210,7 @@ fn graph(
                     sized.push((addr, t));
                     succ.push((next, 0));
                 } else if let Some(c) = image.call(t)? {
-                    cost += c;
+                    cost = cost.saturating_add(c);
                     succ.push((next, 0));
                 }
             }
@@ -223,7 +223,7 @@ fn graph(
                     }
                 }
                 if let Some(c) = most {
-                    cost += c;
+                    cost = cost.saturating_add(c);
                     succ.push((next, 0));
                 }
             }
@@ -302,7 +302,7 @@ fn graph(
             .call_with_length(t, n)?
             .ok_or("a memory function never returns")?;
         if let Some(node) = nodes.get_mut(i) {
-            node.cost += c;
+            node.cost = node.cost.saturating_add(c);
         }
     }
     // A load or store whose base register holds a constant address: the stack's SRAM, or a
@@ -319,8 +319,10 @@ fn graph(
         if let Some(at) = constant(&*image, &nodes, &preds, i, base) {
             let placed = thumb::place(at);
             let node = &mut nodes[i];
-            node.cost =
-                node.cost - node.insn.cost() + thumb::cost_at(&node.insn, placed, words, write);
+            node.cost = node
+                .cost
+                .saturating_sub(node.insn.cost())
+                .saturating_add(thumb::cost_at(&node.insn, placed, words, write));
             node.insn.access = placed.access(words, write);
         }
     }
@@ -361,13 +363,15 @@ fn graph(
     }
     let unplaced = image.unplaced_load();
     for (n, b) in nodes.iter_mut().zip(branched) {
-        n.cost += image.fetch(n.insn.addr, b);
+        n.cost = n.cost.saturating_add(image.fetch(n.insn.addr, b));
         if let thumb::Access::Unknown {
             words,
             write: false,
         } = n.insn.access
         {
-            n.cost += unplaced * u64::from(words);
+            n.cost = n
+                .cost
+                .saturating_add(unplaced.saturating_mul(u64::from(words)));
         }
     }
     Ok((nodes, worst))
@@ -705,9 +709,9 @@ fn region(
         let edges = node
             .succ
             .iter()
-            .map(|Edge::To(w, extra)| (*w, node.cost + extra))
+            .map(|Edge::To(w, extra)| (*w, node.cost.saturating_add(*extra)))
             .collect();
-        (edges, node.completes.map(|c| node.cost + c))
+        (edges, node.completes.map(|c| node.cost.saturating_add(c)))
     };
     let inside = |v: usize| members.get(v).copied().unwrap_or(false);
     let starts: Vec<usize> = entries.iter().map(|e| rep(*e)).collect();
@@ -741,11 +745,11 @@ fn region(
         let d = dist.get(&v).copied().unwrap_or(0);
         let (edges, completes) = out(v);
         if let Some(c) = completes {
-            let c = d + c;
+            let c = d.saturating_add(c);
             summary.completes = Some(summary.completes.map_or(c, |m| m.max(c)));
         }
         for (w, c) in edges {
-            let c = d + c;
+            let c = d.saturating_add(c);
             if is_entry(w) {
                 back = Some(back.map_or(c, |b| b.max(c)));
             } else if !inside(w) {

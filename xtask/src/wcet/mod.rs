@@ -134,8 +134,9 @@ const TASK_POLL: &str = "embassy_executor::raw::TaskStorage<";
 const SENSING_TASK: &str = "psmpa_board_rp::__sensing_task::";
 
 thread_local! {
-    /// The annotations that matched a loop or a call.
-    static USED: std::cell::RefCell<BTreeSet<String>> = const {
+    /// The annotations that matched a loop or a call: `(false, i)` for `loops[i]`, `(true, i)`
+    /// for `lengths[i]`.
+    static USED: std::cell::RefCell<BTreeSet<(bool, usize)>> = const {
         std::cell::RefCell::new(BTreeSet::new())
     };
 }
@@ -186,7 +187,72 @@ impl Annotation {
     fn applies_to(&self, job: &str) -> bool {
         self.jobs.is_empty() || self.jobs.iter().any(|j| j == job)
     }
+
+    /// How narrowly it applies: an entry of a function inlined into a given one (`within`)
+    /// before one of given jobs, before a general one. Of the annotations that match a loop,
+    /// the narrowest bounds it, whatever their order in the file.
+    fn narrowness(&self) -> u8 {
+        u8::from(self.within.is_some()) * 2 + u8::from(!self.jobs.is_empty())
+    }
+
+    /// What tells it from another of the same function.
+    fn key(&self) -> String {
+        let mut jobs = self.jobs.clone();
+        jobs.sort();
+        format!(
+            "{} (jobs [{}]{})",
+            self.function,
+            jobs.join(", "),
+            self.within
+                .as_ref()
+                .map_or(String::new(), |w| format!(", within {w}"))
+        )
+    }
+
+    /// Why it does not apply to a loop of `job` written in a function inlined into `chain`
+    /// (outermost first), if it names the loop's function.
+    fn mismatch(&self, function: &str, job: &str, chain: &[String]) -> Option<String> {
+        if self.function != function && !self.also.iter().any(|a| a == function) {
+            return None;
+        }
+        if !self.applies_to(job) {
+            return Some(format!(
+                "its annotation of {} is for the jobs {:?}, not {job}",
+                self.function, self.jobs
+            ));
+        }
+        let w = self.within.as_ref()?;
+        (!chain.contains(w)).then(|| {
+            format!(
+                "its annotation of {} holds within {w:?}, which is not among the functions the loop is inlined into ({})",
+                self.function,
+                chain.join(", ")
+            )
+        })
+    }
 }
+
+/// The annotation of `loops` that bounds a loop of `job` written in `function`, inlined into
+/// `chain` (outermost first): of those that match, the narrowest, whatever their order.
+fn pick<'a>(
+    loops: &'a [Annotation],
+    function: &str,
+    job: &str,
+    chain: &[String],
+) -> Option<(usize, &'a Annotation)> {
+    loops
+        .iter()
+        .enumerate()
+        .filter(|(_, a)| {
+            (a.function == function || a.also.iter().any(|f| f == function))
+                && a.applies_to(job)
+                && a.within.as_ref().is_none_or(|w| chain.contains(w))
+        })
+        .max_by_key(|(i, a)| (a.narrowness(), std::cmp::Reverse(*i)))
+}
+
+/// The jobs an annotation may name (`jobs`).
+const JOB_NAMES: [&str; 5] = ["sensing_poll", "alarm", "gpio", "deciding", "critical"];
 
 impl Annotations {
     /// The file.
@@ -196,21 +262,57 @@ impl Annotations {
 
     fn load() -> Result<Self, String> {
         let path = Self::path();
-        let text =
-            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        // A regular file of at most 1 MiB: a FIFO would block the analysis for ever.
+        let bytes = psmpa_sim::cli::files::read_input(&path, "loop annotations")?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            format!(
+                "{}: not UTF-8 text (byte {}): a JSON file of loop annotations",
+                path.display(),
+                e.utf8_error().valid_up_to()
+            )
+        })?;
         Self::parse(&text)
     }
 
     /// The annotations in `text` (the file's).
     pub fn parse(text: &str) -> Result<Self, String> {
         let path = Self::path();
-        let a: Self = serde_json::from_str(text).map_err(|e| format!("{}: {e}", path.display()))?;
-        for l in &a.loops {
-            if l.function.trim().is_empty() || l.why.trim().is_empty() {
-                return Err(format!(
-                    "{}: every loop needs a function and a reason",
-                    path.display()
-                ));
+        // Strict JSON first: a duplicate key (a second `bound` that serde_json would take
+        // silently), a byte order mark, a file that is not JSON, named as such.
+        let text = psmpa_sim::json::strict_file(&path, text.as_bytes())?;
+        let a: Self =
+            serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        for (list, entries) in [("loops", &a.loops), ("lengths", &a.lengths)] {
+            let mut seen = BTreeSet::new();
+            for l in entries {
+                if l.function.trim().is_empty() || l.why.trim().is_empty() {
+                    return Err(format!(
+                        "{}: every entry of {list} needs a function and a reason (why)",
+                        path.display()
+                    ));
+                }
+                if let Some(j) = l.jobs.iter().find(|j| !JOB_NAMES.contains(&j.as_str())) {
+                    return Err(format!(
+                        "{}: {list}: the annotation of {} names the job {j:?}: no such job ({})",
+                        path.display(),
+                        l.function,
+                        JOB_NAMES.join(", ")
+                    ));
+                }
+                if l.within.as_ref().is_some_and(|w| w.trim().is_empty()) {
+                    return Err(format!(
+                        "{}: {list}: the annotation of {} has an empty within",
+                        path.display(),
+                        l.function
+                    ));
+                }
+                if !seen.insert(l.key()) {
+                    return Err(format!(
+                        "{}: {list}: two annotations of {}: one each",
+                        path.display(),
+                        l.key()
+                    ));
+                }
             }
         }
         Ok(a)
@@ -523,10 +625,12 @@ impl cfg::Image for Job<'_> {
                 self.annotations
                     .lengths
                     .iter()
-                    .find(|a| a.function == f && a.applies_to(self.job))
+                    .enumerate()
+                    .filter(|(_, a)| a.function == f && a.applies_to(self.job))
+                    .max_by_key(|(i, a)| (a.narrowness(), std::cmp::Reverse(*i)))
             })
-            .map(|a| {
-                USED.with(|u| u.borrow_mut().insert(a.function.clone()));
+            .map(|(i, a)| {
+                USED.with(|u| u.borrow_mut().insert((true, i)));
                 (a.bound, a.why.clone())
             });
         if found.is_none() {
@@ -630,12 +734,8 @@ impl cfg::Image for Job<'_> {
             return Some((n, format!("moves at most {n} bytes (the call's length)")));
         }
         let (function, chain) = self.loop_function(site)?;
-        let (i, found) = self.annotations.loops.iter().enumerate().find(|(_, a)| {
-            (a.function == function || a.also.contains(&function))
-                && a.applies_to(self.job)
-                && a.within.as_ref().is_none_or(|w| chain.contains(w))
-        })?;
-        USED.with(|u| u.borrow_mut().insert(found.function.clone()));
+        let (i, found) = pick(&self.annotations.loops, &function, self.job, &chain)?;
+        USED.with(|u| u.borrow_mut().insert((false, i)));
         self.annotated.borrow_mut().insert(site.header, i);
         Some((found.bound, found.why.clone()))
     }
@@ -645,7 +745,16 @@ impl cfg::Image for Job<'_> {
         let written = self
             .loop_function(site)
             .map(|(f, chain)| {
+                // An annotation of this function that does not apply (a job or a `within`
+                // mistyped) is named: the loop is annotated, but not for here.
+                let why = self
+                    .annotations
+                    .loops
+                    .iter()
+                    .find_map(|a| a.mismatch(&f, self.job, &chain))
+                    .map_or(String::new(), |w| format!("; {w}"));
                 let outer: Vec<&String> = chain.iter().rev().skip(1).take(2).collect();
+                let f = format!("{f}{why}");
                 match outer.as_slice() {
                     [] => f,
                     o => format!(
@@ -876,8 +985,8 @@ fn job(
     if spec.handler {
         // Entry and return, and the vector's word: a constant in flash, one more line.
         let extra = EXCEPTION_ENTRY + EXCEPTION_RETURN + XIP_MISS;
-        wcet.cycles += extra;
-        wcet.xip_cycles += XIP_MISS;
+        wcet.cycles = overflow(wcet.cycles.saturating_add(extra))?;
+        wcet.xip_cycles = wcet.xip_cycles.saturating_add(XIP_MISS);
     }
     Ok((wcet, reached))
 }
@@ -1038,7 +1147,7 @@ fn bounded(
             list.concat()
         ));
     }
-    let core = core.ok_or("it never completes")?;
+    let core = overflow(core.ok_or("it never completes")?)?;
     let code = first.footprint();
     // Constants may be read through any pointer: every load the analysis cannot place is
     // charged a miss (the lines of `.rodata` stay out of the cold code's, so the bound does
@@ -1093,12 +1202,26 @@ fn with_misses(
             .iter()
             .any(|l| (r.start / LINE..r.end.div_ceil(LINE)).contains(l));
     job.conflicted = conflicted;
-    let core = run(&mut job)?.ok_or("it never completes")?;
+    let core = overflow(run(&mut job)?.ok_or("it never completes")?)?;
     let cold = (lines.len() - job.conflicted.len()) as u64 * XIP_MISS;
     let mut loops = job.loops;
     loops.sort_by(|a, b| a.address.cmp(&b.address));
     loops.dedup_by(|a, b| a.address == b.address);
-    Ok((core + cold, loops))
+    Ok((overflow(core.saturating_add(cold))?, loops))
+}
+
+/// `cycles`, or an error when the sums and products of a bound saturated (the cost
+/// arithmetic saturates rather than wrap or panic): an annotation's bound so large that the
+/// job's bound does not fit in 64 bits.
+fn overflow(cycles: u64) -> Result<u64, String> {
+    if cycles == u64::MAX {
+        Err(format!(
+            "its bound overflows 64 bits of cycles: a bound in {} is too large",
+            Annotations::path().display()
+        ))
+    } else {
+        Ok(cycles)
+    }
 }
 
 /// The whole report: each job, and each sensor's reaction bound from them.
@@ -1177,13 +1300,25 @@ pub fn bench_loops_with(annotations: &Annotations) -> Result<Vec<BenchLoop>, Str
 /// Runs the analysis: prints each job's bound; fails (1) naming the first loop or length it
 /// cannot bound, or an annotation that matches nothing; 2 when its annotations do not load.
 pub fn run(json: bool) -> Ending {
-    let analysed = match analysed_image() {
-        Ok(a) => a,
-        Err(e) => return Ending::Failed(e),
-    };
+    // The inputs first: bad ones are refused before the image is built, and a page without
+    // its markers fails before the analysis.
     let annotations = match Annotations::load() {
         Ok(a) => a,
         Err(e) => return Ending::BadInput(e),
+    };
+    if let Err(e) = bound::Budget::load() {
+        return Ending::BadInput(e);
+    }
+    let root = crate::firmware::root();
+    if let Err(e) = crate::pages::check_pages(&[
+        (root.join("docs/firmware.md"), "wcet-figures"),
+        (root.join("README.md"), "wcet"),
+    ]) {
+        return Ending::Failed(e);
+    }
+    let analysed = match analysed_image() {
+        Ok(a) => a,
+        Err(e) => return Ending::Failed(e),
     };
     let (results, used) = match analyse(&analysed, &annotations) {
         Ok(r) => r,
@@ -1197,18 +1332,13 @@ pub fn run(json: bool) -> Ending {
             Err(e) => failures.push(e),
         }
     }
-    let stale: Vec<&Annotation> = annotations
-        .loops
-        .iter()
-        .chain(&annotations.lengths)
-        .filter(|a| !used.contains(&a.function))
-        .collect();
     if failures.is_empty() {
+        let stale = stale(&annotations, &used);
         for a in stale {
             failures.push(format!(
-                "{}: the annotation for {} matches no loop or call of an analysed job: the code changed, update or remove it",
+                "{}: the annotation for {} matches no loop or call of an analysed job (a narrower one of the same loop bounds it, or the code changed): update or remove it",
                 Annotations::path().display(),
-                a.function
+                a.key()
             ));
         }
     }
@@ -1260,6 +1390,26 @@ pub fn run(json: bool) -> Ending {
         None => Ending::Passed,
         Some(first) => Ending::Failed(first.clone()),
     }
+}
+
+/// The annotations no loop or call used (`used`: [`USED`]'s keys), each entry on its own: of
+/// two entries for one function, the one a narrower entry always beat is stale too.
+fn stale<'a>(annotations: &'a Annotations, used: &BTreeSet<(bool, usize)>) -> Vec<&'a Annotation> {
+    annotations
+        .loops
+        .iter()
+        .enumerate()
+        .map(|(i, a)| ((false, i), a))
+        .chain(
+            annotations
+                .lengths
+                .iter()
+                .enumerate()
+                .map(|(i, a)| ((true, i), a)),
+        )
+        .filter(|(k, _)| !used.contains(k))
+        .map(|(_, a)| a)
+        .collect()
 }
 
 /// Writes the jobs' bounds beside the bench's committed budget into `docs/firmware.md`.
@@ -1410,7 +1560,7 @@ fn instruction_cycles_now(
                 return Err(format!("{name} has a loop or a length with no bound"));
             }
             let cycles = cycles.ok_or_else(|| format!("{name} never returns"))?;
-            Ok((at, cycles))
+            Ok((at, overflow(cycles).map_err(|e| format!("{name}: {e}"))?))
         })
         .collect()
 }
@@ -1420,7 +1570,7 @@ fn instruction_cycles_now(
 fn analyse(
     path: &Path,
     annotations: &Annotations,
-) -> Result<(Vec<Result<JobWcet, String>>, BTreeSet<String>), String> {
+) -> Result<(Vec<Result<JobWcet, String>>, BTreeSet<(bool, usize)>), String> {
     let elf = Elf::read(path)?;
     let graph = CallGraph::of(path)?;
     let headers = loop_headers(&elf, &graph, annotations);

@@ -235,3 +235,149 @@ fn rp2040js_charges_nothing_for_the_link_register_and_the_pc() {
     assert_eq!(cycles(super::thumb::Table::TRM), Ok(Some(14)));
     assert_eq!(cycles(super::thumb::Table::RP2040JS), Ok(Some(12)));
 }
+
+#[test]
+fn a_bound_whose_sums_overflow_saturates_instead_of_panicking() {
+    // 0: push {r7, lr}; 2: bl 12; 6: bl 12; 10: pop {r7, pc}; 12: the busy wait of
+    // `a_loop_without_a_bound_is_refused_naming_it`, annotated 2^64-1 rounds: each call
+    // costs more than 64 bits hold, and so do both.
+    let mut f = Fixture::new(&[
+        0xb580, 0xf000, 0xf803, 0xf000, 0xf801, 0xbd80, 0x6801, 0x2900, 0xd0fc, BX_LR,
+    ])
+    .function(0, 12)
+    .function(12, 20);
+    f.annotated.insert(12, u64::MAX);
+    assert_eq!(f.worst(0).map(|w| w.cycles), Ok(Some(u64::MAX)));
+    // Which the analysis reports as an error naming the annotations' file.
+    let e = super::overflow(u64::MAX).unwrap_err();
+    assert!(
+        e.contains("overflows") && e.contains("wcet-loops.json"),
+        "{e}"
+    );
+    assert_eq!(super::overflow(7), Ok(7));
+}
+
+fn annotations(loops: &str, lengths: &str) -> Result<super::Annotations, String> {
+    super::Annotations::parse(&format!(
+        r#"{{"about": "a", "loops": [{loops}], "lengths": [{lengths}]}}"#
+    ))
+}
+
+#[test]
+fn the_narrowest_annotation_bounds_a_loop_whatever_their_order() {
+    let general = r#"{"function": "critical_section::with", "bound": 0, "why": "w"}"#;
+    let within =
+        r#"{"function": "critical_section::with", "within": "flush", "bound": 65, "why": "w"}"#;
+    let chain = [
+        "main".to_owned(),
+        "flush".to_owned(),
+        "critical_section::with".to_owned(),
+    ];
+    for loops in [
+        format!("{general}, {within}"),
+        format!("{within}, {general}"),
+    ] {
+        let a = annotations(&loops, "").unwrap();
+        let (_, found) = super::pick(&a.loops, "critical_section::with", "deciding", &chain)
+            .expect("an annotation");
+        assert_eq!(found.bound, 65, "{loops}");
+        // Outside `flush`, the general one.
+        let (_, found) = super::pick(&a.loops, "critical_section::with", "deciding", &chain[2..])
+            .expect("an annotation");
+        assert_eq!(found.bound, 0, "{loops}");
+    }
+}
+
+#[test]
+fn annotations_refuse_duplicates_empty_reasons_and_unknown_jobs() {
+    let l = |extra: &str| format!(r#"{{"function": "f", "bound": 3, "why": "w"{extra}}}"#);
+    let e = annotations(&format!("{}, {}", l(""), l("")), "").unwrap_err();
+    assert!(
+        e.contains("two annotations of f") && e.contains("wcet-loops.json"),
+        "{e}"
+    );
+    let e = annotations(
+        &format!(
+            "{}, {}",
+            l(r#", "jobs": ["alarm", "gpio"]"#),
+            l(r#", "jobs": ["gpio", "alarm"]"#)
+        ),
+        "",
+    )
+    .unwrap_err();
+    assert!(e.contains("two annotations of f"), "{e}");
+    let e = annotations("", &format!("{}, {}", l(""), l(""))).unwrap_err();
+    assert!(e.contains("lengths: two annotations"), "{e}");
+    // Different jobs or a `within`: two annotations.
+    assert!(annotations(&format!("{}, {}", l(""), l(r#", "within": "g""#)), "").is_ok());
+    let e = annotations("", r#"{"function": "f", "bound": 3, "why": " "}"#).unwrap_err();
+    assert!(e.contains("lengths needs a function and a reason"), "{e}");
+    let e = annotations(&l(r#", "jobs": ["decidng"]"#), "").unwrap_err();
+    assert!(e.contains(r#"the job "decidng": no such job"#), "{e}");
+}
+
+#[test]
+fn an_annotation_that_does_not_apply_says_why() {
+    let a = annotations(
+        r#"{"function": "f", "bound": 3, "why": "w", "within": "flusj"}, {"function": "g", "bound": 3, "why": "w", "jobs": ["alarm"]}"#,
+        "",
+    )
+    .unwrap();
+    let chain = ["flush".to_owned(), "f".to_owned()];
+    let why = a.loops[0].mismatch("f", "deciding", &chain).unwrap();
+    assert!(
+        why.contains(r#"within "flusj""#) && why.contains("flush, f"),
+        "{why}"
+    );
+    let why = a.loops[1].mismatch("g", "deciding", &chain).unwrap();
+    assert!(why.contains("not deciding"), "{why}");
+    assert_eq!(a.loops[1].mismatch("h", "deciding", &chain), None);
+}
+
+#[test]
+fn json_inputs_name_a_byte_order_mark_a_duplicate_key_and_text_that_is_not_json() {
+    let good = r#"{"about": "a", "loops": [{"function": "f", "bound": 3, "why": "w"}]}"#;
+    assert!(super::Annotations::parse(good).is_ok());
+    let e = super::Annotations::parse(&format!("\u{feff}{good}")).unwrap_err();
+    assert!(
+        e.contains("wcet-loops.json") && e.contains("byte order mark"),
+        "{e}"
+    );
+    // A second `bound` in one annotation, which serde_json would take silently.
+    let twice = good.replace(r#""bound": 3,"#, r#""bound": 3, "bound": 100000,"#);
+    let e = super::Annotations::parse(&twice).unwrap_err();
+    assert!(e.contains(r#"the key "bound" appears twice"#), "{e}");
+    let e = super::Annotations::parse("loops: none").unwrap_err();
+    assert!(
+        e.contains("wcet-loops.json: ") && e.contains("line 1"),
+        "{e}"
+    );
+    let path = std::path::Path::new("boards/pico/bench-budget.json");
+    let text = std::fs::read(crate::firmware::root().join(path)).unwrap();
+    assert!(crate::hil::bound::Budget::parse(path, &text).is_ok());
+    let e = crate::hil::bound::Budget::parse(path, &[b"\xef\xbb\xbf".as_slice(), &text].concat())
+        .unwrap_err();
+    assert!(
+        e.starts_with("boards/pico/bench-budget.json: ") && e.contains("byte order mark"),
+        "{e}"
+    );
+}
+
+#[test]
+fn an_entry_no_loop_used_is_stale_though_another_of_its_function_was_used() {
+    let a = annotations(
+        r#"{"function": "critical_section::with", "within": "flush", "bound": 65, "why": "w"}, {"function": "critical_section::with", "bound": 0, "why": "w"}"#,
+        r#"{"function": "memcpy", "bound": 8, "why": "w"}"#,
+    )
+    .unwrap();
+    // Only the general entry bounded a loop: the `within` one is stale, and so is the length.
+    let used = std::collections::BTreeSet::from([(false, 1)]);
+    let stale: Vec<String> = super::stale(&a, &used).iter().map(|s| s.key()).collect();
+    assert_eq!(
+        stale,
+        [
+            "critical_section::with (jobs [], within flush)",
+            "memcpy (jobs [])"
+        ]
+    );
+}
