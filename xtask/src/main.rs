@@ -163,12 +163,14 @@ fn main() -> ExitCode {
         };
         return match hil::run(files, *json, mode) {
             hil::Ending::Passed => ExitCode::SUCCESS,
+            // Names and paths from the files given may hold control characters: one line,
+            // never raw.
             hil::Ending::Failed(e) => {
-                eprintln!("xtask hil: {e}");
+                eprintln!("xtask hil: {}", psmpa_sim::json::printable(&e));
                 ExitCode::FAILURE
             }
             hil::Ending::BadInput(e) => {
-                eprintln!("xtask hil: {e}");
+                eprintln!("xtask hil: {}", psmpa_sim::json::printable(&e));
                 ExitCode::from(2)
             }
         };

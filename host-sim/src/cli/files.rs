@@ -46,6 +46,35 @@ impl Drop for Registered {
     }
 }
 
+/// A file of the command's own that is no output (an image a bench boots, a scratch file):
+/// removed when dropped, whatever ended its use (an error, a panic), and when the process is
+/// interrupted ([`clean_up_on_interrupt`]).
+pub struct Scratch {
+    path: PathBuf,
+    _registered: Registered,
+}
+
+impl Scratch {
+    /// Takes charge of the file at `path` (made or not yet).
+    pub fn new(path: &Path) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            _registered: Registered::new(path),
+        }
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
 pub use psmpa_model::check::{MAX_INPUT, read_input, read_limited};
 
 /// Why a command stopped before the end.

@@ -178,18 +178,21 @@ struct File {
     expect: Expect,
 }
 
-/// Whether `bytes` are a fault scenario rather than a scenario: an object with `fault` and
-/// `expect` and a `scenario` path.
+/// Whether `bytes` are meant as a fault scenario rather than a scenario: an object with
+/// `expect` or `scenario`, which no scenario has (one without `expect` is then refused as a
+/// fault scenario missing it, not read as a scenario; a scenario's own `fault` is its
+/// sonar's).
 pub fn is_fault_file(bytes: &[u8]) -> bool {
-    serde_json::from_slice::<serde_json::Value>(bytes).is_ok_and(|v| {
-        v.get("expect").is_some() && v.get("scenario").is_some_and(|s| s.is_string())
-    })
+    serde_json::from_slice::<serde_json::Value>(bytes)
+        .is_ok_and(|v| ["expect", "scenario"].iter().any(|k| v.get(k).is_some()))
 }
 
 /// Reads a fault scenario; its scenario's path made relative to the file's folder.
 pub fn load(path: &Path, bytes: &[u8]) -> Result<FaultFile, String> {
     let bad = |e: String| format!("{}: not a fault scenario: {e}", path.display());
-    let raw: File = serde_json::from_slice(bytes).map_err(|e| bad(e.to_string()))?;
+    // Strict JSON first: a byte order mark, bad UTF-8 or a duplicate key named as such.
+    let bytes = psmpa_sim::json::strict_file(path, bytes)?;
+    let raw: File = serde_json::from_slice(&bytes).map_err(|e| bad(e.to_string()))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let file = FaultFile {
         name: raw.name,
@@ -214,9 +217,10 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<FaultFile, String> {
         for_s, every_us, ..
     } = file.fault
     {
-        if !(0.0..=60.0).contains(&for_s) || every_us < MIN_CHATTER_US {
+        if !(0.0..=60.0).contains(&for_s) || !(MIN_CHATTER_US..=MAX_CHATTER_US).contains(&every_us)
+        {
             return Err(at(format!(
-                "a chatter lasts 0 to 60 s with at least {MIN_CHATTER_US} us between edges"
+                "a chatter lasts 0 to 60 s with at least {MIN_CHATTER_US} us between edges and at most {MAX_CHATTER_US} (its longest)"
             )));
         }
         let edges = for_s * 1e6 / every_us as f64;
@@ -226,12 +230,42 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<FaultFile, String> {
             )));
         }
     }
-    for sensor in file.expect.sample_gap_max_ms.keys() {
+    for (sensor, gap) in &file.expect.sample_gap_max_ms {
         if !["sonar", "bumper"].contains(&sensor.as_str()) {
             return Err(at(format!(
                 "expect.sample_gap_max_ms: no sensor {sensor:?} on the bench's robot: sonar or bumper"
             )));
         }
+        if !(gap.is_finite() && *gap > 0.0) {
+            return Err(at(format!(
+                "expect.sample_gap_max_ms.{sensor}: {gap}: a gap is more than 0 ms"
+            )));
+        }
+    }
+    let through_test_point = matches!(file.fault, Fault::Hang { .. } | Fault::Panic { .. });
+    if let Some(within) = file.expect.stops_within_ms {
+        if !through_test_point {
+            return Err(at(format!(
+                "expect.stops_within_ms: a {} fault is played on the pins, not injected through a test point: only hang and panic have it (still says the motors stay stopped)",
+                file.fault.name()
+            )));
+        }
+        if within > MAX_STOPS_WITHIN_MS {
+            return Err(at(format!(
+                "expect.stops_within_ms {within}: at most {MAX_STOPS_WITHIN_MS} ms (a minute)"
+            )));
+        }
+    }
+    if file.expect.motors_off_first && !matches!(file.fault, Fault::Panic { .. }) {
+        return Err(at(format!(
+            "expect.motors_off_first: only a panic logs its message as it stops the motors, not a {} fault",
+            file.fault.name()
+        )));
+    }
+    if file.expect.log.iter().any(|l| l.trim().is_empty()) {
+        return Err(at(
+            "expect.log: an empty line is in every log: name what the log must say".to_owned(),
+        ));
     }
     Ok(file)
 }
@@ -242,6 +276,11 @@ pub const MAX_AT_S: f64 = 86_400.0;
 /// GPIO interrupt and the sensing poll it wakes can take them, every edge is one more pending
 /// interrupt.
 pub const MIN_CHATTER_US: u64 = 20;
+/// The longest time between two edges of a chattering bumper, µs: a chatter's longest
+/// duration (60 s).
+pub const MAX_CHATTER_US: u64 = 60_000_000;
+/// The most `expect.stops_within_ms` may be, ms: a minute.
+pub const MAX_STOPS_WITHIN_MS: u64 = 60_000;
 /// The most edges a chatter may make: each is a pin change the harness plays and logs.
 pub const MAX_CHATTER_EDGES: u64 = 200_000;
 

@@ -58,6 +58,11 @@ const FLASH: u32 = 0x1000_0000;
 /// still.
 const GRACE_NS: u64 = 1_000_000_000;
 
+/// After a fault injected through a test point, the longest the run waits for the board to
+/// say how its task ended or to be reset: the watchdog's timeout (500 ms,
+/// `boards/rp/src/lib.rs`), the reset and the boot, and a grace.
+const UNANSWERED_NS: u64 = 2_000_000_000;
+
 /// What `cargo xtask hil` does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {
@@ -83,6 +88,9 @@ pub enum Ending {
 struct Play {
     /// The file given.
     file: PathBuf,
+    /// The stem of its output files and image in `target/hil`, its own among the plays
+    /// ([`unique_stems`]).
+    stem: String,
     scenario: Scenario,
     fault: Option<FaultFile>,
     /// End the run at its first failure that shows while it runs (a planted bug's run: what
@@ -91,16 +99,23 @@ struct Play {
 }
 
 impl Play {
+    /// Its name, control characters escaped: printed, a name from a file never forges a
+    /// line or a colour on the terminal.
     fn name(&self) -> String {
-        match &self.fault {
+        psmpa_sim::json::printable(&match &self.fault {
             Some(f) => format!("fault {}", f.name),
             None => self.scenario.name.as_str().to_owned(),
-        }
+        })
+        .into_owned()
     }
 
-    /// The stem of its output files in `target/hil`: the file's own (`fault-` before a fault
-    /// scenario's).
+    /// The stem of its output files and image in `target/hil`.
     fn stem(&self) -> String {
+        self.stem.clone()
+    }
+
+    /// The stem its file gives: the file's own (`fault-` before a fault scenario's).
+    fn file_stem(&self) -> String {
         let stem = self
             .file
             .file_stem()
@@ -138,6 +153,7 @@ fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
                 .map_err(|e| format!("{}: {e}", file.display()))?;
             plays.push(Play {
                 file,
+                stem: String::new(),
                 scenario,
                 fault: Some(f),
                 stop_at_failure: false,
@@ -147,13 +163,49 @@ fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
             playable(&scenario).map_err(|e| format!("{}: {e}", file.display()))?;
             plays.push(Play {
                 file,
+                stem: String::new(),
                 scenario,
                 fault: None,
                 stop_at_failure: false,
             });
         }
     }
+    unique_stems(&mut plays);
     Ok((plays, defaults))
+}
+
+/// Gives each play a stem of its own: its file's, and where two files give one stem (two
+/// `sonar-6.json` in two folders), with the hash of its canonical path after it, so that
+/// neither boots the other's image nor writes over its pictures and recording; the same file
+/// given twice, with its place in the list too.
+fn unique_stems(plays: &mut [Play]) {
+    let stems: Vec<String> = plays.iter().map(Play::file_stem).collect();
+    let keys: Vec<String> = plays
+        .iter()
+        .zip(&stems)
+        .map(|(p, stem)| {
+            if stems.iter().filter(|s| *s == stem).count() == 1 {
+                return stem.clone();
+            }
+            let path = std::fs::canonicalize(&p.file).unwrap_or_else(|_| p.file.clone());
+            // FNV-1a: stable from run to run and machine to machine.
+            let hash = path
+                .as_os_str()
+                .as_encoded_bytes()
+                .iter()
+                .fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+                    (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3)
+                });
+            format!("{stem}-{:08x}", hash >> 32)
+        })
+        .collect();
+    for (i, p) in plays.iter_mut().enumerate() {
+        p.stem = if keys.iter().filter(|k| **k == keys[i]).count() == 1 {
+            keys[i].clone()
+        } else {
+            format!("{}-{}", keys[i], i + 1)
+        };
+    }
 }
 
 /// Reads an input file as psmpa-sim does: a regular file of at most 1 MiB.
@@ -386,6 +438,10 @@ pub struct Report {
     /// The firmware's log.
     #[serde(skip)]
     pub log: Vec<LogLine>,
+    /// Whether the run was cut at its scenario's `max_s` before the firmware said how its
+    /// task ended.
+    #[serde(skip)]
+    pub cut_at_max_s: bool,
 }
 
 /// The worst own cycles of each decision of the control loop on the chip (the emulated
@@ -530,7 +586,7 @@ pub struct BenchRecording {
 /// Keeps a run's recordings in `target/recordings/bench/` and checks them: the streamed one
 /// replays on the host with every decision equal (where a reset cut it, up to its end), and
 /// after a reset the ring's frames are the streamed recording's last ones.
-fn check_recording(report: &mut Report, stem: &str) {
+fn check_recording(report: &mut Report, stem: &str, cut_at_end: bool) {
     let text: String = report
         .log
         .iter()
@@ -573,7 +629,8 @@ fn check_recording(report: &mut Report, stem: &str) {
     };
     match psmpa_sim::replay::replay(streamed, None, recording::CHIP_LAG) {
         Ok((r, _)) => {
-            let cut = reset
+            // A recording a reset or the run's end (`max_s`) cut: equal up to its end.
+            let cut = (reset || cut_at_end)
                 && r.divergence
                     .as_ref()
                     .is_some_and(|d| d.recorded.is_none() && d.event == found.frames);
@@ -652,7 +709,10 @@ fn play(
 ) -> Result<(Report, PinLog), String> {
     let sc = &play.scenario;
     let settings = settings_for(sc, Chassis::Wheeled);
-    let image = out.join(format!("{}.bin", play.stem()));
+    // The image is 2 MiB of flash, mostly empty: not kept, whatever ends the run (an error, a
+    // panic, an interrupt).
+    let scratch = psmpa_sim::cli::files::Scratch::new(&out.join(format!("{}.bin", play.stem())));
+    let image = scratch.path().to_path_buf();
     std::fs::write(&image, fw.image(&settings)).map_err(|e| format!("{}: {e}", image.display()))?;
     let inputs: BTreeMap<u8, Option<u8>> = BenchWorld::initial_inputs()
         .iter()
@@ -688,8 +748,7 @@ fn play(
     )
     .map_err(|e| format!("{}: {e}", play.name()))?
     .output?;
-    // The image is 2 MiB of flash, mostly empty: not kept.
-    let _ = std::fs::remove_file(&boot.flash);
+    drop(scratch);
     let (mut report, pins, obstacles) = run;
     report.wall_s = wall.elapsed().as_secs_f64();
     if play.fault.is_none() {
@@ -804,9 +863,19 @@ async fn co_simulate(
     send(harness, &mut c.pins, bw.chatter())?;
     let live_bounds = scenario_bounds(budget, sc).ok();
     loop {
-        let finish = c
+        let mut finish = c
             .done
             .map_or(end_ns, |d| d.saturating_add(GRACE_NS).min(end_ns));
+        // A fault injected through a test point that neither the firmware's word nor a reset
+        // answers within the watchdog's timeout and a grace (a hang before the watchdog
+        // started, a board still fed): the run ends there and its checks judge it, rather
+        // than spin to the scenario's end.
+        if let Some(at) = c.injected
+            && c.done.is_none()
+            && c.resets.is_empty()
+        {
+            finish = finish.min(at.saturating_add(UNANSWERED_NS));
+        }
         if now >= finish || (play.stop_at_failure && failing(&bw, &c, live_bounds, now)) {
             break;
         }
@@ -1121,9 +1190,13 @@ fn report(
     if let Some(e) = &c.chip_error {
         failures.push(format!("flight recording: it does not read: {e}"));
     }
+    let cut = cut_at_max_s(sc, c.done, now);
     if let Some(f) = &play.fault {
+        if let Some(e) = never_struck(&f.fault, c.injected, now) {
+            failures.push(format!("faults: {e}"));
+        }
         expectations(&f.expect, &tally, &c, &sample_gap_max_ms, &mut failures);
-    } else if c.done.is_none() {
+    } else if c.done.is_none() && !cut {
         failures.push("mission: the firmware never said how its task ended".to_owned());
     }
     let claimed = c
@@ -1187,8 +1260,33 @@ fn report(
         failures,
         recording: None,
         log: c.log,
+        cut_at_max_s: cut,
     };
     (report, c.pins)
+}
+
+/// Whether the run was cut at the scenario's `max_s` before the firmware said how its task
+/// ended: as psmpa-sim's run, the robot is where the time left it (not at the door), which
+/// the comparison with psmpa-sim judges.
+fn cut_at_max_s(sc: &Scenario, done: Option<u64>, now: u64) -> bool {
+    done.is_none() && now >= sc.max_ms.saturating_mul(1_000_000)
+}
+
+/// Why a fault never struck in a run that ended at `now`, if it did not: one through a test
+/// point never injected, one on the pins after the run's end (a fault after the goal and its
+/// grace).
+fn never_struck(fault: &Fault, injected: Option<u64>, now: u64) -> Option<String> {
+    let missed = match fault {
+        Fault::Hang { .. } | Fault::Panic { .. } => injected.is_none(),
+        _ => now < fault.at_ns(),
+    };
+    missed.then(|| {
+        format!(
+            "the fault never struck: the run ended at {:.3} s, before its at_s {} s",
+            now as f64 / 1e9,
+            fault.at_s()
+        )
+    })
 }
 
 /// psmpa-sim's outcome of the same scenario beside the bench's: reaching the door, and
@@ -1550,6 +1648,8 @@ fn calibrating(failure: &str) -> bool {
 
 /// `cargo xtask hil [FILE ...] [--json] [--calibrate | --mutants]`.
 pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
+    // An interrupted run leaves no image behind (`Scratch`).
+    psmpa_sim::cli::files::clean_up_on_interrupt();
     if mode == Mode::Mutants {
         return mutants::run(json);
     }
@@ -1604,7 +1704,8 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
                 if mode == Mode::Calibrate {
                     report.failures.retain(|f| !calibrating(f));
                 }
-                check_recording(&mut report, &p.stem());
+                let cut = report.cut_at_max_s;
+                check_recording(&mut report, &p.stem(), cut);
                 if !report.failures.is_empty() {
                     failed.push(p.name());
                 }
@@ -1626,7 +1727,10 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
             }
             Err(e) => {
                 failed.push(p.name());
-                eprintln!("{}: {e}", p.name());
+                eprintln!(
+                    "{}",
+                    psmpa_sim::json::printable(&format!("{}: {e}", p.name()))
+                );
             }
         }
     }
@@ -1637,13 +1741,16 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
                 if !json {
                     println!(
                         "determinism: {} played twice, the same pin log ({})",
-                        first.scenario, first.pin_log_hash
+                        psmpa_sim::json::printable(&first.scenario),
+                        first.pin_log_hash
                     );
                 }
             }
             Ok((again, _)) => failed.push(format!(
                 "{} played twice gave two pin logs ({} and {})",
-                first.scenario, first.pin_log_hash, again.pin_log_hash
+                psmpa_sim::json::printable(&first.scenario),
+                first.pin_log_hash,
+                again.pin_log_hash
             )),
             Err(e) => failed.push(e),
         }
@@ -1952,11 +2059,11 @@ fn text(r: &Report) -> String {
     let _ = writeln!(
         s,
         "\n== {}{} ({}): {:.1} s emulated in {:.1} s",
-        r.scenario,
+        psmpa_sim::json::printable(&r.scenario),
         r.fault
             .as_ref()
             .map_or(String::new(), |f| format!(", fault {f}")),
-        r.file,
+        psmpa_sim::json::printable(&r.file),
         r.emulated_s,
         r.wall_s
     );
@@ -2193,6 +2300,156 @@ mod tests {
     }
 
     #[test]
+    fn round_four_fault_files_are_refused_in_one_line() {
+        let dir = std::env::temp_dir().join(format!("psmpa-hil-round4-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let quiet = firmware::root().join("scenarios/quiet.json");
+        let fault = |name: &str, body: &str| {
+            let p = dir.join(name);
+            std::fs::write(
+                &p,
+                format!(
+                    r#"{{"name": "f", "scenario": {:?}, {body}}}"#,
+                    quiet.display().to_string()
+                ),
+            )
+            .unwrap();
+            p
+        };
+        for (name, body, says) in [
+            // Item 4: an interval whose nanoseconds overflow.
+            (
+                "every.json",
+                r#""fault": {"kind": "bumper-chatter", "at_s": 1, "for_s": 2, "every_us": 18446744073709551615}, "expect": {}"#,
+                "at most 60000000 (its longest)",
+            ),
+            // Item 13: a pin fault is never injected through a test point.
+            (
+                "within.json",
+                r#""fault": {"kind": "no-echo", "at_s": 1}, "expect": {"stops_within_ms": 500}"#,
+                "only hang and panic have it",
+            ),
+            (
+                "within-huge.json",
+                r#""fault": {"kind": "hang", "at_s": 1}, "expect": {"stops_within_ms": 18446744073709551615}"#,
+                "at most 60000 ms",
+            ),
+            // Item 27: a negative gap, an empty log line, motors_off_first on a hang.
+            (
+                "gap.json",
+                r#""fault": {"kind": "hang", "at_s": 1}, "expect": {"sample_gap_max_ms": {"sonar": -5}}"#,
+                "a gap is more than 0 ms",
+            ),
+            (
+                "log.json",
+                r#""fault": {"kind": "hang", "at_s": 1}, "expect": {"log": ["", "x"]}"#,
+                "expect.log: an empty line",
+            ),
+            (
+                "first.json",
+                r#""fault": {"kind": "hang", "at_s": 1}, "expect": {"motors_off_first": true}"#,
+                "only a panic logs",
+            ),
+            // Item 25: a fault file without `expect` is a fault file missing it.
+            (
+                "no-expect.json",
+                r#""fault": {"kind": "hang", "at_s": 1}"#,
+                "not a fault scenario: missing field `expect`",
+            ),
+            // Item 24: a duplicate key is named as such.
+            (
+                "twice.json",
+                r#""fault": {"kind": "hang", "at_s": 1, "at_s": 2}, "expect": {}"#,
+                r#"the key "at_s" appears twice"#,
+            ),
+        ] {
+            refused(&fault(name, body), says);
+        }
+        // A scenario's own `fault` (its sonar's) keeps it a scenario.
+        assert!(!fault::is_fault_file(
+            br#"{"name": "s", "fault": {"kind": "silent", "at_s": 1}, "interferences": []}"#
+        ));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn two_scenarios_of_one_file_name_get_their_own_stems_and_names_print_escaped() {
+        let dir = std::env::temp_dir().join(format!("psmpa-hil-stems-{}", std::process::id()));
+        let text = std::fs::read(firmware::root().join("scenarios/sonar-6.json")).unwrap();
+        let (a, b) = (dir.join("a/sonar-6.json"), dir.join("b/sonar-6.json"));
+        for p in [&a, &b] {
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, &text).unwrap();
+        }
+        let crafted = dir.join("crafted.json");
+        std::fs::write(
+            &crafted,
+            r#"{"name": "x\u001b[32m OK\nall 26 runs passed", "interferences": []}"#,
+        )
+        .unwrap();
+        let (list, _) = plays(&[a.clone(), b.clone(), a.clone(), crafted]).unwrap();
+        let stems: Vec<String> = list.iter().map(Play::stem).collect();
+        let mut unique = stems.clone();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(unique.len(), 4, "{stems:?}");
+        assert!(stems[0].starts_with("sonar-6-") && stems[1].starts_with("sonar-6-"));
+        // A stem that is alone stays the file's: the README's sonar-6.txt.
+        assert_eq!(stems[3], "crafted");
+        let (alone, _) = plays(&[a]).unwrap();
+        assert_eq!(alone[0].stem(), "sonar-6");
+        let name = list[3].name();
+        assert!(!name.chars().any(char::is_control), "{name:?}");
+        assert!(
+            name.contains("\\u001b") && name.contains("\\u000a"),
+            "{name}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_fault_the_run_never_reached_fails_and_a_run_cut_at_max_s_is_no_failure() {
+        // Item 14: a hang after the goal (the run ended first) never struck.
+        let hang = Fault::Hang { at_s: 30.0 };
+        let e = never_struck(&hang, None, 25_000_000_000).unwrap();
+        assert!(
+            e.contains("the fault never struck") && e.contains("25.000 s"),
+            "{e}"
+        );
+        assert_eq!(
+            never_struck(&hang, Some(30_000_000_000), 31_000_000_000),
+            None
+        );
+        let silent = Fault::NoEcho { at_s: 30.0 };
+        assert!(never_struck(&silent, None, 25_000_000_000).is_some());
+        assert_eq!(never_struck(&silent, None, 30_000_000_000), None);
+        // Item 16: a run that reached max_s without the firmware's word was cut there.
+        let sc = psmpa_sim::load::parse(
+            Path::new("s.json"),
+            br#"{"name": "s", "max_s": 1, "interferences": []}"#,
+        )
+        .unwrap();
+        assert!(cut_at_max_s(&sc, None, 1_000_000_000));
+        assert!(!cut_at_max_s(&sc, None, 999_999_999));
+        assert!(!cut_at_max_s(&sc, Some(900_000_000), 1_000_000_000));
+    }
+
+    #[test]
+    fn an_image_is_removed_whatever_ends_its_run() {
+        let dir = std::env::temp_dir().join(format!("psmpa-hil-scratch-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let image = dir.join("x.bin");
+        let failing = || -> Result<(), String> {
+            let scratch = psmpa_sim::cli::files::Scratch::new(&image);
+            std::fs::write(scratch.path(), b"image").map_err(|e| e.to_string())?;
+            Err("the harness did not start".to_owned())
+        };
+        assert!(failing().is_err());
+        assert!(!image.exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn the_readme_log_block_is_checked_for_events_and_order_not_numbers() {
         let readme = "x\n```text\n0.003 INFO  go to door started\n...\n27.2 INFO  sonar off: 274 samples\n```\n";
         let log = |lines: &[&str]| lines.iter().map(|l| (*l).to_owned()).collect::<Vec<_>>();
@@ -2211,47 +2468,6 @@ mod tests {
         assert_eq!(words("a  12.5 mm,  3"), "a # mm, #");
         assert_eq!(thousands(1_234_567), "1,234,567");
         assert_eq!(thousands(999), "999");
-    }
-
-    #[test]
-    fn a_budget_is_its_measured_costs_with_the_margin() {
-        let measured = bound::Costs {
-            sensing_poll: 100,
-            alarm: 3,
-            gpio: 0,
-            deciding: 1_000,
-            critical: 10,
-        };
-        let b = Budget::of(measured).unwrap();
-        // At least 1,000 cycles more.
-        assert_eq!(b.budget.sensing_poll, 1_100);
-        assert_eq!(b.budget.alarm, 1_003);
-        // A quarter more where that is more: rounded up.
-        let big = bound::Costs {
-            deciding: 10_001,
-            ..measured
-        }
-        .with_margin(25)
-        .unwrap();
-        assert_eq!(big.deciding, 12_502);
-        assert!(b.check().is_ok());
-        let mut edited = b.clone();
-        edited.budget.deciding += 1;
-        assert!(edited.check().unwrap_err().contains("--calibrate"));
-        let over = bound::Costs {
-            deciding: 2_001,
-            ..measured
-        }
-        .over(&b.budget);
-        assert_eq!(
-            over,
-            ["the deciding cost of 2001 cycles exceeds its budget of 2000 cycles"]
-        );
-        // Declared planning time is the scenario's, added to the step.
-        assert_eq!(
-            b.budget.with_plan(bound::cycles_of_us(1_000)).deciding,
-            2_000 + 125_000
-        );
     }
 
     #[test]
@@ -2295,6 +2511,47 @@ mod tests {
             let e = odd.check().unwrap_err();
             assert!(e.contains(&format!("margin_percent {margin}")), "{e}");
         }
+    }
+
+    #[test]
+    fn a_budget_is_its_measured_costs_with_the_margin() {
+        let measured = bound::Costs {
+            sensing_poll: 100,
+            alarm: 3,
+            gpio: 0,
+            deciding: 1_000,
+            critical: 10,
+        };
+        let b = Budget::of(measured).unwrap();
+        // At least 1,000 cycles more.
+        assert_eq!(b.budget.sensing_poll, 1_100);
+        assert_eq!(b.budget.alarm, 1_003);
+        // A quarter more where that is more: rounded up.
+        let big = bound::Costs {
+            deciding: 10_001,
+            ..measured
+        }
+        .with_margin(25)
+        .unwrap();
+        assert_eq!(big.deciding, 12_502);
+        assert!(b.check().is_ok());
+        let mut edited = b.clone();
+        edited.budget.deciding += 1;
+        assert!(edited.check().unwrap_err().contains("--calibrate"));
+        let over = bound::Costs {
+            deciding: 2_001,
+            ..measured
+        }
+        .over(&b.budget);
+        assert_eq!(
+            over,
+            ["the deciding cost of 2001 cycles exceeds its budget of 2000 cycles"]
+        );
+        // Declared planning time is the scenario's, added to the step.
+        assert_eq!(
+            b.budget.with_plan(bound::cycles_of_us(1_000)).deciding,
+            2_000 + 125_000
+        );
     }
 
     #[test]
