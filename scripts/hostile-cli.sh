@@ -148,5 +148,8 @@ t 59.19 "$B check desc.json"
 sed 's/"name": "fetch-tea",/"name": "fetch-tea", "fact_descriptions": ["at_door"],/' "$M" >desc2.json
 t 59.19 "$B check desc2.json"
 t 59.20 "$B sensitivity --runs 1 | grep -c '\[1 run\]' >&2"
-rm -f cut.rec half.rec p.rec ro.csv j.out same.csv order.json so.txt rep.txt all.json desc.json desc2.json
+# Round 2: a context no action lets hold together (at_door and at_back_door) warns (status 0).
+sed 's/"context": \["door_unlocked"\]/"context": ["at_door", "at_back_door"]/' "$M" >ctx.json
+t 59.r2 "$B check ctx.json"
+rm -f cut.rec half.rec p.rec ro.csv j.out same.csv order.json so.txt rep.txt all.json desc.json desc2.json ctx.json
 echo "files left: $(ls -A | grep -v -e '^tm$' -e '^out$' -e '^err$' | tr '\n' ' ')"

@@ -54,6 +54,29 @@ pub fn unreachable_goal<
 >(
     m: &Tables<'_, NS, NA, NP, L, W, NF>,
 ) -> Option<String> {
+    never_reached(m, m.task.goal).map(|expanded| {
+        format!(
+            "task.goal: no sequence of actions reaches {} from task.init, even with every percept holding ({expanded} states searched)",
+            m.domain.names(m.task.goal)
+        )
+    })
+}
+
+/// How many states a search expanded to find that no sequence of actions makes every fact of
+/// `facts` hold at once from the task's initial state, even when every fact a sensor can
+/// perceive holds whenever it is needed (perceivable facts are never deleted); `None` when
+/// some sequence does, or the search gave up (no verdict, no warning).
+fn never_reached<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>(
+    m: &Tables<'_, NS, NA, NP, L, W, NF>,
+    facts: crate::facts::FactSetOf<W>,
+) -> Option<u32> {
     let d = &m.domain;
     let perceivable = d.perception_of(SensorSet::from_bits(u32::MAX));
     let relaxed: Vec<ActuatorAction<'_, W>> = d
@@ -67,13 +90,10 @@ pub fn unreachable_goal<
     let result = Planner::<4096, W>::new(Strategy::BreadthFirst).plan::<64>(
         &relaxed,
         m.task.init.union(perceivable),
-        m.task.goal,
+        facts,
     );
     match result {
-        Err(PlanningError::Unsolvable { expanded }) => Some(format!(
-            "task.goal: no sequence of actions reaches {} from task.init, even with every percept holding ({expanded} states searched)",
-            d.names(m.task.goal)
-        )),
+        Err(PlanningError::Unsolvable { expanded }) => Some(expanded),
         _ => None,
     }
 }
@@ -89,7 +109,9 @@ pub const LONG_TIMEOUT_MS: u64 = 60_000;
 ///   action later in the body adds, and that neither the plan's context nor a sensor gives,
 ///   nor the task's initial state (a fact it starts with that no action deletes);
 /// * a plan context that can never hold: it needs a fact no action adds, no sensor perceives
-///   and the task does not start with;
+///   and the task does not start with, or facts that each can hold but no sequence of actions
+///   makes hold together (one action adds `at_door` and deletes `at_back_door`, another the
+///   reverse);
 /// * a sensor timeout longer than [`LONG_TIMEOUT_MS`]: a sensor that stops answering goes
 ///   unnoticed that long.
 pub fn warnings<
@@ -150,6 +172,15 @@ pub fn warnings<
             out.push(format!(
                 "plans[{i}].context: {} can never hold (no action adds it, no sensor perceives it, the task does not start with it): the plan is never chosen",
                 d.names(never)
+            ));
+        } else if plan.context.len() > 1
+            && let Some(expanded) = never_reached(m, plan.context)
+        {
+            // Each fact can hold, but not all at once: an action that adds one deletes
+            // another (`at_door` and `at_back_door`).
+            out.push(format!(
+                "plans[{i}].context: {} never hold together (no sequence of actions from task.init makes them all hold, even with every percept holding; {expanded} states searched): the plan is never chosen",
+                d.names(plan.context)
             ));
         }
     }
@@ -421,6 +452,34 @@ mod tests {
         );
         let w = warned(&taken);
         assert!(w.len() == 1 && w[0].contains("later in the body"), "{w:?}");
+    }
+
+    #[test]
+    fn a_context_no_action_lets_hold_together_warns() {
+        // Round 2 of the hostile rounds: "go" adds here and deletes there, "back" the reverse.
+        let m = r#"{ "name": "two", "facts": ["here", "there", "done"], "events": ["e"],
+          "sensors": [],
+          "actions": [{ "name": "go", "pre": [], "add": ["here"], "del": ["there"] },
+                      { "name": "back", "pre": [], "add": ["there"], "del": ["here"] },
+                      { "name": "finish", "pre": ["here"], "add": ["done"] }],
+          "plans": [{ "name": "p", "trigger": "e", "context": ["here", "there"], "body": ["finish"] }],
+          "task": { "event": "e", "init": [], "goal": ["done"] } }"#;
+        let warned =
+            |text: &str| check::<_, 1, 64>(Path::new("m.json"), text.as_bytes(), warnings).unwrap();
+        let w = warned(m);
+        assert!(
+            w.len() == 1 && w[0].starts_with("plans[0].context: {here, there} never hold together"),
+            "{w:?}"
+        );
+        // An action that lets both hold: no warning.
+        let both = m.replace(
+            r#""add": ["there"], "del": ["here"]"#,
+            r#""add": ["there"], "del": []"#,
+        );
+        assert_eq!(warned(&both), Vec::<String>::new());
+        // The task starting with both: they hold together at first.
+        let init = m.replace(r#""init": []"#, r#""init": ["here", "there"]"#);
+        assert_eq!(warned(&init), Vec::<String>::new());
     }
 
     #[test]
