@@ -1657,6 +1657,14 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
         Ok(p) => p,
         Err(e) => return Ending::BadInput(e),
     };
+    // The budget is an input too: refused (2) before anything else is looked at.
+    let budget = match mode {
+        Mode::Calibrate => provisional_budget(),
+        _ => match Budget::load() {
+            Ok(b) => b,
+            Err(e) => return Ending::BadInput(e),
+        },
+    };
     // The pages the figures go to, checked before the runs: a page without its markers fails
     // now, not after every run, and never leaves one page written and another not.
     if defaults && mode == Mode::Check {
@@ -1672,13 +1680,6 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
     if let Err(e) = harness::check_tools() {
         return Ending::Failed(e);
     }
-    let budget = match mode {
-        Mode::Calibrate => provisional_budget(),
-        _ => match Budget::load() {
-            Ok(b) => b,
-            Err(e) => return Ending::BadInput(e),
-        },
-    };
     eprintln!("xtask hil: building the Pico's image (boards/pico; a few minutes the first time)");
     let fw = match build().and_then(|elf| Firmware::read(&elf)) {
         Ok(fw) => fw,
