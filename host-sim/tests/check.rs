@@ -465,3 +465,52 @@ fn likely_mistakes_are_warnings_that_say_why() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Issue 59, items 18 and 19: what `include_mission!` refuses, `check` refuses with the same
+/// line, on any platform and on the NAO: a name whose variant would be `ALL` (hiding the
+/// generated `Fact::ALL`), a description of a fact the mission lacks, descriptions as an array.
+#[test]
+fn what_the_macro_refuses_check_refuses() {
+    let good = fetch_tea();
+    for (i, (from, to, says)) in [
+        (
+            r#""in_kitchen"
+  ]"#,
+            r#""in_kitchen", "ALL"
+  ]"#,
+            r#"facts "ALL" would be the variant ALL"#,
+        ),
+        (
+            r#""name": "fetch-tea","#,
+            r#""name": "fetch-tea", "fact_descriptions": {"at_dor": "x"},"#,
+            "fact_descriptions: `at_dor` is not a fact of the mission",
+        ),
+        (
+            r#""name": "fetch-tea","#,
+            r#""name": "fetch-tea", "fact_descriptions": ["at_door"],"#,
+            "fact_descriptions: an object from a fact's name to its description",
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        assert!(good.contains(from), "case {i}: `{from}` not in the mission");
+        let path = file(&format!("macro-{i}.json"), &good.replacen(from, to, 1));
+        for platform in [&[][..], &["--platform", "nao"][..]] {
+            let out = bin()
+                .arg("check")
+                .args(platform)
+                .arg(&path)
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8(out.stderr).unwrap();
+            assert_eq!(
+                out.status.code(),
+                Some(2),
+                "case {i} {platform:?}: {stderr}"
+            );
+            assert_eq!(stderr.lines().count(), 1, "case {i} {platform:?}: {stderr}");
+            assert!(stderr.contains(says), "case {i} {platform:?}: {stderr}");
+        }
+    }
+}

@@ -283,7 +283,27 @@ pub fn check<R, const W: usize, const NF: usize>(
     if let Some(why) = unreachable_goal(m) {
         return Err(format!("{}: {why}", file.display()));
     }
-    let value: serde_json::Value = serde_json::from_slice(&doc).unwrap_or_default();
+    as_the_macro_reads_it(file, &doc, m)?;
+    Ok(then(m))
+}
+
+/// What `include_mission!` refuses in a mission that loads, for a host tool to refuse it too
+/// (one verdict): `fact_descriptions` naming no fact or not an object ([`fact_descriptions`]),
+/// and a name whose variant would be `ALL`, which would hide the generated `Fact::ALL`
+/// (`Sensor::ALL`, ...). `doc` is the file's strict JSON.
+pub fn as_the_macro_reads_it<
+    const NS: usize,
+    const NA: usize,
+    const NP: usize,
+    const L: usize,
+    const W: usize,
+    const NF: usize,
+>(
+    file: &Path,
+    doc: &[u8],
+    m: &Tables<'_, NS, NA, NP, L, W, NF>,
+) -> Result<(), String> {
+    let value: serde_json::Value = serde_json::from_slice(doc).unwrap_or_default();
     fact_descriptions(&value).map_err(|e| format!("{}: {e}", file.display()))?;
     let d = &m.domain;
     let sensors: Vec<&str> = d.sensors().iter().map(|s| s.name).collect();
@@ -304,7 +324,7 @@ pub fn check<R, const W: usize, const NF: usize>(
             ));
         }
     }
-    Ok(then(m))
+    Ok(())
 }
 
 /// Checks a mission's `fact_descriptions` (the file's JSON, `value`): absent, or an object

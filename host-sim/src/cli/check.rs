@@ -233,6 +233,8 @@ pub fn check_bytes(file: &Path, bytes: &[u8], any_platform: bool) -> Result<Chec
         let loaded: mission::Loaded<'_, (), (), 32, 64, 32, 16> =
             mission::load(&doc, &AnyBehaviour).map_err(|e| error_line(file, &e))?;
         let m: Large<'_> = loaded.mission;
+        // What include_mission! refuses, refused here too: one verdict.
+        psmpa_model::check::as_the_macro_reads_it(file, &doc, &m)?;
         reachable_then_describe(file, &m)
     } else {
         let loaded: mission::Loaded<'_, NaoSensor, NaoAction, 4, 8, 4, 6> =
@@ -240,6 +242,7 @@ pub fn check_bytes(file: &Path, bytes: &[u8], any_platform: bool) -> Result<Chec
         // What the simulated robot needs besides its behaviours' names, as `run` would find.
         robot::requirements(&loaded.mission.domain, &loaded.bindings)
             .map_err(|e| format!("{}: {}", file.display(), json::printable(&e.to_string())))?;
+        psmpa_model::check::as_the_macro_reads_it(file, &doc, &loaded.mission)?;
         reachable_then_describe(file, &loaded.mission)
     }
 }
