@@ -157,3 +157,23 @@ fn a_run_is_deterministic() {
         assert_eq!(a, b);
     }
 }
+
+/// The body plays the scenario's bumper latency (the bench's world is this body): a contact
+/// shows on the switch's pin that much later, and the robot reacts that much later.
+#[test]
+fn the_bumpers_latency_delays_its_contact_on_the_pin() {
+    let with = |latency_ms: u32| {
+        inline(&format!(
+            r#"{{"name": "late", "door_m": 3.0, "robot": {{"speed_mps": 0.1}},
+                "bumper": {{"latency_ms": {latency_ms}}},
+                "interferences": [{{"kind": "ball", "at_s": 1.0, "ahead_m": 0.05, "hold_s": 5.0}}]}}"#
+        ))
+    };
+    let reaction = |latency_ms| {
+        let s = run_chassis(&with(latency_ms), Arch::PSmpa, Chassis::Wheeled).unwrap();
+        let o = s.obstacles[0];
+        assert_eq!(o.fate, Fate::Detected(psmpa_sim::world::Device::Bumper));
+        o.reaction_ms.unwrap()
+    };
+    assert_eq!(reaction(30), reaction(0) + 30);
+}
