@@ -26,4 +26,6 @@ pub mod run;
 pub mod scenario;
 #[cfg(feature = "std")]
 pub mod sim;
+#[cfg(feature = "std")]
+pub mod view;
 pub mod world;

@@ -22,6 +22,8 @@ use psmpa_sim::sim::{
     Recorded, RunError, TraceRecord, WorldRecord, run_logged, run_logged_until, run_recorded,
     run_summary,
 };
+use psmpa_sim::view::server;
+use psmpa_sim::view::source::{self, Pace, Shared};
 use psmpa_sim::{json, load};
 
 #[derive(Parser)]
@@ -108,6 +110,31 @@ enum Command {
         #[arg(long, value_name = "MS", default_value_t = 0, allow_negative_numbers = true,
               value_parser = clap::value_parser!(u32).range(0..=60_000))]
         lag_ms: u32,
+        /// Instead of comparing, play the recording's events at their instants in the live
+        /// view (as `psmpa-sim view`), and serve it until interrupted.
+        #[arg(long, conflicts_with_all = ["json", "mcap", "lag_ms"])]
+        view: bool,
+        #[command(flatten)]
+        serve: ServeArgs,
+    },
+    /// Shows the running mission live in a web page: the simulator running SCENARIO, paced to
+    /// real time times --speed, or a frame stream (`--frames -`: a recording, or a board's
+    /// decoded defmt log with its `rec` lines, on standard input). Serves `/` (the page) and
+    /// `/snapshot` (JSON) until interrupted; prints the page's address on standard output.
+    View {
+        /// Scenario file (JSON) to run.
+        #[arg(required_unless_present = "frames", conflicts_with = "frames")]
+        scenario: Option<PathBuf>,
+        /// Architecture.
+        #[arg(long, value_enum, default_value = "psmpa")]
+        arch: ArchArg,
+        /// Read the recorder's frames from standard input (`-`) as they come, instead of
+        /// running a scenario: the page cannot pause them.
+        #[arg(long, value_name = "-", value_parser = stdin_only,
+              conflicts_with_all = ["arch", "speed", "paused"])]
+        frames: Option<String>,
+        #[command(flatten)]
+        serve: ServeArgs,
     },
     /// Validates a mission file and prints each plan's FSM with its parallel sensor sets.
     Check {
@@ -212,6 +239,74 @@ enum Command {
         #[arg(long, value_name = "FILE.svg")]
         plot: Option<PathBuf>,
     },
+}
+
+/// Where and how the live view serves (`view`, `replay --view`).
+#[derive(clap::Args)]
+struct ServeArgs {
+    /// Port to serve on; 0 picks a free one (the address printed says which).
+    #[arg(long, default_value_t = 8077, value_name = "N")]
+    port: u16,
+    /// Address to listen on: the machine alone by default; 0.0.0.0 shows the page to the
+    /// network (it can pause and step the simulator, never command a robot).
+    #[arg(long, default_value = "127.0.0.1", value_name = "ADDR")]
+    bind: String,
+    /// Virtual time at this many times real time (0.01 to 10,000), for the simulator and a
+    /// replay; the page can change it.
+    #[arg(long, default_value_t = 1.0, value_name = "X", value_parser = speed)]
+    speed: f64,
+    /// Start paused (the page resumes or steps).
+    #[arg(long)]
+    paused: bool,
+}
+
+/// `--speed`: a number from 0.01 to 10,000.
+fn speed(text: &str) -> Result<f64, String> {
+    let (lo, hi) = psmpa_sim::view::source::SPEEDS;
+    match text.parse::<f64>() {
+        Ok(x) if (lo..=hi).contains(&x) => Ok(x),
+        _ => Err(format!("must be a number from {lo} to {hi}")),
+    }
+}
+
+/// `--frames`: standard input only.
+fn stdin_only(text: &str) -> Result<String, String> {
+    if text == "-" {
+        Ok(text.to_owned())
+    } else {
+        Err("must be - (standard input)".to_owned())
+    }
+}
+
+/// Serves the live view from `source` (run on its own thread) on the address `serve` asks
+/// for; prints the page's address first. Runs until the process is interrupted.
+fn view(
+    serve: &ServeArgs,
+    mission: psmpa_sim::robot::FetchTea<'static>,
+    name: String,
+    pace: bool,
+    source: impl FnOnce(&Arc<Shared>) + Send + 'static,
+) -> Result<(), Stop> {
+    let bind: std::net::IpAddr = serve
+        .bind
+        .parse()
+        .map_err(|_| Stop::Bad(format!("--bind: not an IP address: {}", serve.bind)))?;
+    let listener = server::listen(bind, serve.port).map_err(Stop::Bad)?;
+    let addr = listener
+        .local_addr()
+        .map_err(|e| Stop::Bad(format!("cannot listen: {e}")))?;
+    let shared = Arc::new(Shared {
+        view: std::sync::Mutex::new(psmpa_sim::view::model::View::new(mission)),
+        pace: pace.then(|| Pace::new(serve.speed, serve.paused)),
+        source: name,
+    });
+    files::print(format!("psmpa-sim view: http://{addr}/\n").as_bytes())?;
+    let feeding = Arc::clone(&shared);
+    std::thread::Builder::new()
+        .name("view-source".into())
+        .spawn(move || source(&feeding))
+        .map_err(|e| Stop::Resource(format!("cannot start the view's source: {e}")))?;
+    server::serve(listener, shared).map_err(Stop::Bad)
 }
 
 /// A whole number from 0 to 2^64 - 1 (a seed, a run's number), with a message that says so.
@@ -345,6 +440,8 @@ fn run(cli: Cli) -> Result<(), Stop> {
             json,
             mcap,
             lag_ms,
+            view,
+            serve,
         } => {
             if let Some(out) = &mcap {
                 files::distinct(&[("the recording", &recording), ("--mcap", out)])
@@ -359,6 +456,13 @@ fn run(cli: Cli) -> Result<(), Stop> {
                     .map_err(Stop::Bad)?;
             let bytes = psmpa_sim::replay::bytes_of(&recording, bytes).map_err(Stop::Bad)?;
             let rec = psmpa_sim::replay::read(&recording, &bytes).map_err(Stop::Bad)?;
+            if view {
+                let mission = source::mission_of(&rec).map_err(Stop::internal)?;
+                let name = format!("the recording {}", recording.display());
+                return self::view(&serve, mission, name, true, move |shared| {
+                    source::play(&rec, shared);
+                });
+            }
             let (result, log) = psmpa_sim::replay::replay(
                 &rec,
                 mcap,
@@ -379,6 +483,37 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 });
             }
             printed?;
+        }
+        Command::View {
+            scenario,
+            arch,
+            frames,
+            serve,
+        } => {
+            let Some(scenario) = scenario.filter(|_| frames.is_none()) else {
+                let mission = source::fetch_tea_names().map_err(|e| {
+                    Stop::internal(format!("the mission could not be built: {e:?}"))
+                })?;
+                return view(
+                    &serve,
+                    mission,
+                    "frames on standard input".into(),
+                    false,
+                    |shared| {
+                        source::stdin_frames(shared);
+                    },
+                );
+            };
+            let bytes = files::read_input(&scenario, "scenario").map_err(Stop::Bad)?;
+            let sc = load::parse(&scenario, &bytes).map_err(Stop::bad)?;
+            let arch = Arch::from(arch);
+            let mission = psmpa_sim::robot::fetch_tea(&sc)
+                .map_err(|e| Stop::bad(format!("{}: {e:?}", scenario.display())))?
+                .mission;
+            let name = format!("{} under {}", sc.name, arch.name());
+            return view(&serve, mission, name, true, move |shared| {
+                source::simulate(&sc, arch, shared);
+            });
         }
         Command::Check {
             mission,
