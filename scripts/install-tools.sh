@@ -15,7 +15,8 @@
 # mps2-an386 and mps2-an505; the Pico 2 board), qemu-system-arm (apt), defmt-print and flip-link (cargo install,
 # about 4 minutes on 2 cores).
 # all: all of these, the riscv32imac-unknown-none-elf target, clippy and rustfmt,
-# binutils-arm-none-eabi (objdump for `cargo xtask stack`) and valgrind (callgrind).
+# binutils-arm-none-eabi (objdump for `cargo xtask stack`), valgrind (callgrind) and Debian's
+# chromium (headless, for the live view's page test, host-sim/tests/view.rs).
 #
 # apt installs without recommended packages: qemu-system-arm then pulls 25 packages (80 MB
 # installed) instead of 165 (870 MB). On Debian 12 it comes with qemu-system-common 7.2,
@@ -45,7 +46,7 @@ fi
 if [ "$what" = all ]; then
   targets+=(riscv32imac-unknown-none-elf)
   components+=(clippy rustfmt)
-  packages+=(arm-none-eabi-objdump:binutils-arm-none-eabi valgrind:valgrind)
+  packages+=(arm-none-eabi-objdump:binutils-arm-none-eabi valgrind:valgrind chromium:chromium)
 fi
 
 installed_targets=$(rustup target list --installed)

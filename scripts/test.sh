@@ -7,8 +7,11 @@ step() { printf '\n== %s\n' "$*"; }
 
 # Every build here is a first build: incremental state would only take disk (gigabytes of it).
 export CARGO_INCREMENTAL=0
+# The live view's page test (host-sim/tests/view.rs) skips without chromium, except here: the
+# tools step installs it, and a missing one fails the host tests.
+export PSMPA_REQUIRE_CHROMIUM=1
 
-step "tools: MCU targets, clippy, rustfmt, QEMU, ARM binutils, valgrind, defmt-print, flip-link, the bench's rp2040js (only what is missing)"
+step "tools: MCU targets, clippy, rustfmt, QEMU, ARM binutils, valgrind, chromium, defmt-print, flip-link, the bench's rp2040js (only what is missing)"
 bash scripts/install-tools.sh all
 
 step "format"

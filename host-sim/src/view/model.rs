@@ -453,15 +453,19 @@ impl View {
         } else {
             1
         };
-        let mut n = 0usize;
+        // Thinned sensor by sensor: a sensor that samples rarely keeps its first sample.
+        let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
         let events: Vec<&Json> = new
             .into_iter()
             .filter(|e| {
                 if e["kind"] != "sample" {
                     return true;
                 }
-                n += 1;
-                n.is_multiple_of(keep_every)
+                let n = counts
+                    .entry(e["sensor"].as_str().unwrap_or(""))
+                    .or_default();
+                *n += 1;
+                (*n - 1).is_multiple_of(keep_every)
             })
             .collect();
         let errors: Vec<&String> = self
