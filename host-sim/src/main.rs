@@ -131,8 +131,13 @@ enum Command {
         /// Read the recorder's frames from standard input (`-`) as they come, instead of
         /// running a scenario: the page cannot pause them.
         #[arg(long, value_name = "-", value_parser = stdin_only,
-              conflicts_with_all = ["arch", "speed", "paused"])]
+              conflicts_with_all = ["arch", "speed", "paused", "repeat"])]
         frames: Option<String>,
+        /// Run the scenario this many times back to back, virtual time going on (a long run
+        /// from a short scenario: `cargo xtask view-soak` measures the view on one).
+        #[arg(long, default_value_t = 1, value_name = "N",
+              value_parser = clap::value_parser!(u64).range(1..))]
+        repeat: u64,
         #[command(flatten)]
         serve: ServeArgs,
     },
@@ -488,6 +493,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
             scenario,
             arch,
             frames,
+            repeat,
             serve,
         } => {
             let Some(scenario) = scenario.filter(|_| frames.is_none()) else {
@@ -512,7 +518,7 @@ fn run(cli: Cli) -> Result<(), Stop> {
                 .mission;
             let name = format!("{} under {}", sc.name, arch.name());
             return view(&serve, mission, name, true, move |shared| {
-                source::simulate(&sc, arch, shared);
+                source::simulate(&sc, arch, repeat, shared);
             });
         }
         Command::Check {

@@ -606,3 +606,64 @@ fn the_view_keeps_a_bounded_ring_however_long_the_run() {
     assert!(update["runs"].as_array().unwrap().len() <= psmpa_sim::view::model::RUNS);
     assert_eq!(view.events(), 20 * trace.len() as u64);
 }
+
+#[test]
+fn repeated_runs_follow_one_another_in_virtual_time() {
+    let scenario = repo("scenarios/sonar-8.json");
+    let (trace, _, hash) = trace(&scenario);
+    let child = bin()
+        .args([
+            "view",
+            scenario.to_str().unwrap(),
+            "--port",
+            "0",
+            "--speed",
+            "10000",
+            "--repeat",
+            "3",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut server = Server {
+        child,
+        url: String::new(),
+    };
+    let mut line = String::new();
+    BufReader::new(server.child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    server.url = line
+        .trim()
+        .strip_prefix("psmpa-sim view: ")
+        .unwrap()
+        .to_owned();
+    let mut err = BufReader::new(server.child.stderr.take().unwrap());
+    let mut ends = Vec::new();
+    for run in 1..=3 {
+        let mut line = String::new();
+        err.read_line(&mut line).unwrap();
+        assert!(
+            line.contains(&format!("run {run} of 3 ended"))
+                && line.contains(&format!("trace_hash {hash:016x}")),
+            "{line}"
+        );
+        ends.push(line);
+    }
+    let snap = until_events(&server.url, 3 * trace.len());
+    // Each run starts a virtual second after the last one's end.
+    let end = trace.last().unwrap().0.as_millis();
+    let run_ms = psmpa_sim::sim::run_summary(
+        &psmpa_sim::load::parse(&scenario, &std::fs::read(&scenario).unwrap()).unwrap(),
+        Arch::PSmpa,
+    )
+    .unwrap()
+    .time_cost_ms
+    .max(end);
+    assert_eq!(
+        snap["time_ms"],
+        json!(2 * (run_ms + 1000) + end),
+        "{ends:?}"
+    );
+}

@@ -39,8 +39,11 @@ pub fn listen(bind: IpAddr, port: u16) -> Result<TcpListener, String> {
 fn status(shared: &Shared) -> Json {
     match &shared.pace {
         Some(p) => {
-            let (paused, speed, lag_ms) = p.status();
-            json!({ "controllable": true, "paused": paused, "speed": speed, "lag_ms": lag_ms })
+            let (paused, speed, lag_ms, late_ms) = p.status();
+            json!({
+                "controllable": true, "paused": paused, "speed": speed,
+                "lag_ms": lag_ms, "late_ms": late_ms,
+            })
         }
         None => json!({ "controllable": false }),
     }

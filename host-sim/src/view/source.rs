@@ -37,6 +37,7 @@ struct PaceState {
     anchor_ms: u64,
     last_ms: u64,
     lag_ms: u64,
+    late_ms: u64,
 }
 
 /// A command of the page's controls.
@@ -76,6 +77,7 @@ impl Pace {
                 anchor_ms: 0,
                 last_ms: 0,
                 lag_ms: 0,
+                late_ms: 0,
             }),
             changed: Condvar::new(),
         }
@@ -103,7 +105,8 @@ impl Pace {
             let due = s.anchor_wall + Duration::from_secs_f64(ahead.min(1e9));
             let now = Wall::now();
             if now >= due {
-                s.lag_ms = s.lag_ms.max((now - due).as_millis() as u64);
+                s.late_ms = (now - due).as_millis() as u64;
+                s.lag_ms = s.lag_ms.max(s.late_ms);
                 break;
             }
             s = self
@@ -133,11 +136,11 @@ impl Pace {
         self.changed.notify_all();
     }
 
-    /// Paused, the speed, and the most an event came later than due, ms (the view falling
-    /// behind; the lag does not include the time paused).
-    pub fn status(&self) -> (bool, f64, u64) {
+    /// Paused, the speed, the most an event came later than due and how late the last one
+    /// came, ms (the view falling behind; the time paused is not lag).
+    pub fn status(&self) -> (bool, f64, u64, u64) {
         let s = lock(&self.state);
-        (s.paused, s.speed, s.lag_ms)
+        (s.paused, s.speed, s.lag_ms, s.late_ms)
     }
 }
 
@@ -151,43 +154,67 @@ pub struct Shared {
     pub source: String,
 }
 
-/// The runtime's trace events of a live run, as frames into the view, each when it is due.
-struct Sink(Arc<Shared>);
+/// The runtime's trace events of a live run, as frames into the view, each when it is due:
+/// `offset_ms` later than traced (the runs before it, with `--repeat`).
+struct Sink {
+    shared: Arc<Shared>,
+    offset_ms: u64,
+    last_ms: u64,
+}
 
 impl<Ms: Mission<Facts = FactSet>> TraceSink<Ms> for Sink {
     fn record(&mut self, at: Instant, event: &TraceEvent) {
         let frame = Frame::of(at, event);
-        let ms = at.as_millis();
-        if let Some(p) = &self.0.pace {
+        let ms = at.as_millis().saturating_add(self.offset_ms);
+        self.last_ms = ms;
+        if let Some(p) = &self.shared.pace {
             p.wait(ms, frame.kind());
         }
-        lock(&self.0.view).frame(ms, &frame);
+        lock(&self.shared.view).frame(ms, &frame);
     }
 }
 
-/// Runs `scenario` under `arch` into the view, paced; says how the run ended. The run is the
-/// one `psmpa-sim run` makes: the view only waits between its events, in real time, while
-/// virtual time stands still.
-pub fn simulate(scenario: &Scenario, arch: Arch, shared: &Arc<Shared>) {
+/// Runs `scenario` under `arch` into the view, paced, `repeat` times back to back (virtual
+/// time going on from one run to the next); says how each run ended. Each run is the one
+/// `psmpa-sim run` makes: the view only waits between its events, in real time, while virtual
+/// time stands still.
+pub fn simulate(scenario: &Scenario, arch: Arch, repeat: u64, shared: &Arc<Shared>) {
     let started = Wall::now();
-    let ended = crate::sim::run_logged(scenario, arch, (), Sink(Arc::clone(shared)));
-    let lag = shared.pace.as_ref().map_or(0, |p| p.status().2);
-    let mut view = lock(&shared.view);
-    match ended {
-        Ok((summary, (), _)) => {
-            let line = format!(
-                "the run ended at {:.3} s after {:.3} s of real time ({} events, trace_hash {:016x}, the view at most {lag} ms behind)",
-                summary.time_cost_ms as f64 / 1000.0,
-                started.elapsed().as_secs_f64(),
-                summary.trace_events,
-                summary.trace_hash,
-            );
-            eprintln!("psmpa-sim: view: {line}");
-            view.end(line);
-        }
-        Err(e) => {
-            view.error(format!("the run failed: {e}"));
-            view.end("the run failed".to_owned());
+    let mut offset_ms = 0;
+    for run in 1..=repeat.max(1) {
+        let sink = Sink {
+            shared: Arc::clone(shared),
+            offset_ms,
+            last_ms: offset_ms,
+        };
+        let ended = crate::sim::run_logged(scenario, arch, (), sink);
+        let lag = shared.pace.as_ref().map_or(0, |p| p.status().2);
+        let mut view = lock(&shared.view);
+        match ended {
+            Ok((summary, (), sink)) => {
+                let which = if repeat > 1 {
+                    format!("run {run} of {repeat}")
+                } else {
+                    "the run".to_owned()
+                };
+                let line = format!(
+                    "{which} ended at {:.3} s after {:.3} s of real time ({} events, trace_hash {:016x}, the view at most {lag} ms behind)",
+                    summary.time_cost_ms as f64 / 1000.0,
+                    started.elapsed().as_secs_f64(),
+                    summary.trace_events,
+                    summary.trace_hash,
+                );
+                eprintln!("psmpa-sim: view: {line}");
+                view.end(line);
+                // The next run starts a virtual second after this one's end.
+                let end = offset_ms.saturating_add(summary.time_cost_ms);
+                offset_ms = end.max(sink.last_ms).saturating_add(1000);
+            }
+            Err(e) => {
+                view.error(format!("the run failed: {e}"));
+                view.end("the run failed".to_owned());
+                return;
+            }
         }
     }
 }
@@ -397,8 +424,9 @@ impl FrameStream {
         Some(true)
     }
 
-    /// Standard input closed: a partial frame or line left over is said.
-    pub fn close(&mut self, shared: &Shared) {
+    /// The stream ended (`what` says how: "standard input closed"): a partial frame or line
+    /// left over is said.
+    pub fn close(&mut self, shared: &Shared, what: &str) {
         if !self.line.is_empty() {
             // The last line of a log, without its newline.
             self.feed(b"\n", shared);
@@ -411,10 +439,7 @@ impl FrameStream {
                 self.buf.len()
             ));
         }
-        view.end(format!(
-            "standard input closed after {} frames",
-            self.frames
-        ));
+        view.end(format!("{what} after {} frames", self.frames));
     }
 }
 
@@ -434,5 +459,5 @@ pub fn stdin_frames(shared: &Arc<Shared>) {
             }
         }
     }
-    stream.close(shared);
+    stream.close(shared, "standard input closed");
 }
