@@ -25,6 +25,7 @@ mod callgrind;
 mod experiment;
 mod firmware;
 mod hil;
+mod live;
 mod pages;
 mod planning;
 mod recording;
@@ -105,6 +106,14 @@ enum Task {
         /// brake ...): exit 0 only when every one fails it; a table of what caught each.
         #[arg(long, conflicts_with_all = ["files"])]
         mutants: bool,
+        /// Also show the chip's run live in psmpa-sim's view (a web page on 127.0.0.1 at
+        /// --port), frame by frame as its recording comes off RTT (with several runs, one at a
+        /// time); it serves on after the bench until interrupted.
+        #[arg(long, conflicts_with_all = ["json", "calibrate", "mutants"])]
+        view: bool,
+        /// The view's port (0: a free one; the address printed says which).
+        #[arg(long, default_value_t = 8077, requires = "view")]
+        port: u16,
     },
     /// Static worst-case execution times of the Pico image's jobs (cycles of the RP2040's
     /// Cortex-M0+), from the binary: exit 1 naming any loop it cannot bound.
@@ -152,8 +161,14 @@ fn main() -> ExitCode {
         json,
         calibrate,
         mutants,
+        view,
+        port,
     } = &task
     {
+        if *view && let Err(e) = live::start(*port) {
+            eprintln!("xtask hil: {e}");
+            return ExitCode::from(2);
+        }
         let mode = if *calibrate {
             hil::Mode::Calibrate
         } else if *mutants {
@@ -161,7 +176,7 @@ fn main() -> ExitCode {
         } else {
             hil::Mode::Check
         };
-        return match hil::run(files, *json, mode) {
+        let code = match hil::run(files, *json, mode) {
             hil::Ending::Passed => ExitCode::SUCCESS,
             // Names and paths from the files given may hold control characters: one line,
             // never raw.
@@ -174,6 +189,9 @@ fn main() -> ExitCode {
                 ExitCode::from(2)
             }
         };
+        // The bench's verdict is out; with --view, the page stays until interrupted.
+        live::serve_on();
+        return code;
     }
     if let Task::Wcet {
         json,

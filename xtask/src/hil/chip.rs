@@ -16,9 +16,20 @@ pub struct ChipRecording {
     tick_hz: u64,
     /// A second header came (the ring sent after a watchdog reset): the stream ended.
     ended: bool,
+    /// The live view showing this run (`cargo xtask hil --view`), once claimed.
+    live: Option<crate::live::Claim>,
 }
 
 impl ChipRecording {
+    /// A run shown on the live view by `claim`.
+    #[cfg(test)]
+    pub fn shown(claim: crate::live::Claim) -> Self {
+        Self {
+            live: Some(claim),
+            ..Self::default()
+        }
+    }
+
     /// Takes one decoded log line; the frames it completes, each with its instant in ns since
     /// the chip booted. Lines that are not the recording's are ignored.
     pub fn line(&mut self, text: &str) -> Result<Vec<(u64, Frame<1>)>, String> {
@@ -28,11 +39,26 @@ impl ChipRecording {
         let Some(bytes) = psmpa_sim::replay::rec_bytes(text) else {
             return Ok(Vec::new());
         };
-        let bytes = bytes?;
+        let bytes = match bytes {
+            Ok(b) => b,
+            Err(e) => {
+                if let Some(live) = &self.live {
+                    live.error(format!("the chip's recording: {e}"));
+                }
+                return Err(e);
+            }
+        };
         if bytes.starts_with(&record::MAGIC) && !self.bytes.is_empty() {
             // What the ring kept, sent again after a reset: not new events.
             self.ended = true;
             return Ok(Vec::new());
+        }
+        if self.bytes.is_empty() && self.live.is_none() {
+            // The view follows a run from its header on.
+            self.live = crate::live::claim();
+        }
+        if let Some(live) = &mut self.live {
+            live.bytes(&bytes);
         }
         self.bytes.extend_from_slice(&bytes);
         self.frames()

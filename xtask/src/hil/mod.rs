@@ -21,7 +21,7 @@
 //! times. [`mutants`] plants bugs in a copy of the firmware and requires each to fail.
 
 pub(crate) mod bound;
-mod chip;
+pub(crate) mod chip;
 pub mod fault;
 pub mod harness;
 pub(crate) mod mutants;
