@@ -34,6 +34,7 @@ mod splitmix;
 mod stack;
 mod timing;
 mod trace;
+mod view_soak;
 mod wcet;
 
 use std::process::ExitCode;
@@ -137,6 +138,17 @@ enum Task {
     /// The sensitivity study (`psmpa-sim sensitivity`, its seeded defaults) and its figures
     /// written into README.md and docs/experiment.md.
     Experiment,
+    /// The live view under load: `psmpa-sim view scenarios/sonar-8.json --speed 100` run again
+    /// and again (--repeat) for the minutes asked, pages following its updates; fails when it
+    /// falls behind or its memory grows, else writes the figures into docs/simulator.md.
+    ViewSoak {
+        /// How long, minutes.
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=600))]
+        minutes: u64,
+        /// Pages following the view's updates, as browser tabs do.
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u16).range(0..=64))]
+        pages: u16,
+    },
     /// Response-time analysis from step costs measured in QEMU on both machines: a latency
     /// bound per sensor, checked against every measured reaction; the tables also go to a
     /// JSON file.
@@ -227,6 +239,7 @@ fn main() -> ExitCode {
         Task::Size { bless } => size::run(bless),
         Task::Stack => stack::run(),
         Task::Experiment => experiment::run(),
+        Task::ViewSoak { minutes, pages } => view_soak::run(minutes, usize::from(pages)),
         Task::Bench {
             instructions: true, ..
         } => bench::instructions(),
