@@ -568,7 +568,7 @@ fn help_lists_the_flags() {
     assert_success(&out);
     let text = String::from_utf8(out.stdout).unwrap();
     for flag in [
-        "--arch", "--speed", "--port", "--bind", "--frames", "--paused",
+        "--arch", "--speed", "--port", "--bind", "--frames", "--paused", "--repeat",
     ] {
         assert!(text.contains(flag), "{flag} in {text}");
     }
