@@ -146,8 +146,11 @@ fn rss_kib(pid: u32) -> Result<u64, String> {
 
 /// Runs the soak for `minutes` with `pages` pages following; writes the figures when it passes.
 pub fn run(minutes: u64, pages: usize) -> Result<(), String> {
-    let sim = firmware::build_host_sim()?;
     let root = firmware::root();
+    let doc = root.join("docs/simulator.md");
+    // The markers first: not ten minutes measured for a page that cannot take them.
+    crate::pages::check_pages(&[(doc.clone(), "view-soak")])?;
+    let sim = firmware::build_host_sim()?;
     let scenario = root.join("scenarios/sonar-8.json");
     let mut child = Command::new(&sim)
         .arg("view")
@@ -289,7 +292,7 @@ pub fn run(minutes: u64, pages: usize) -> Result<(), String> {
             mib(r.rss_kib)
         ));
     }
-    crate::hil::write_between(&root.join("docs/simulator.md"), "view-soak", &text)?;
+    crate::pages::write_between(&doc, "view-soak", &text)?;
     println!("{text}");
     println!("the figures written into docs/simulator.md");
     Ok(())
