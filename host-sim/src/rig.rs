@@ -70,6 +70,19 @@ fn instant_at(ns: u64) -> Instant {
     Instant::from_ticks(u64::try_from(ticks).unwrap_or(u64::MAX))
 }
 
+/// Adds `set` to `pending` and wakes the pump; `overflow` when it is full.
+fn schedule(
+    pending: &mut heapless::Vec<Set, PENDING>,
+    overflow: &mut bool,
+    pump: &mut WakerRegistration,
+    set: Set,
+) {
+    if pending.push(set).is_err() {
+        *overflow = true;
+    }
+    pump.wake();
+}
+
 struct State<'s, L: WorldLog> {
     body: Body<'s, L>,
     /// Input changes scheduled, in the order the body set them.
@@ -87,28 +100,31 @@ struct State<'s, L: WorldLog> {
     world_due: Option<u64>,
 }
 
-impl<L: WorldLog> State<'_, L> {
+impl<'s, L: WorldLog> State<'s, L> {
     /// Schedules the body's input changes.
     fn schedule(&mut self, set: Set) {
-        if self.pending.push(set).is_err() {
-            self.overflow = true;
-        }
-        self.pump.wake();
+        schedule(&mut self.pending, &mut self.overflow, &mut self.pump, set);
+    }
+
+    /// The body, and where its input changes go: scheduled as it makes them (one past
+    /// [`PENDING`] marks the run void, none is dropped).
+    fn body_and_schedule(&mut self) -> (&mut Body<'s, L>, impl FnMut(Set) + '_) {
+        let Self {
+            body,
+            pending,
+            overflow,
+            pump,
+            ..
+        } = self;
+        (body, move |set| schedule(pending, overflow, pump, set))
     }
 
     /// Plays every change due by `ns`, in time order, and the world's own events.
     fn advance(&mut self, ns: u64) {
         if self.world_due.is_some_and(|t| t <= ns) {
             self.world_due = None;
-            let mut due = heapless::Vec::<Set, 24>::new();
-            self.body.inputs_now(ns, &mut |set| {
-                if due.push(set).is_err() {
-                    // Never more than the switches' and the marker's edges.
-                }
-            });
-            for set in due {
-                self.schedule(set);
-            }
+            let (body, mut schedule) = self.body_and_schedule();
+            body.inputs_now(ns, &mut schedule);
         }
         while let Some(i) = self
             .pending
@@ -195,13 +211,8 @@ impl<'s, L: WorldLog, M: RawMutex> Rig<'s, L, M> {
         let ns = now_ns();
         self.with(|s| {
             s.advance(ns);
-            let mut out = heapless::Vec::<Set, 24>::new();
-            let _ = s.body.output(pin, level, ns, &mut |set| {
-                let _ = out.push(set);
-            });
-            for set in out {
-                s.schedule(set);
-            }
+            let (body, mut schedule) = s.body_and_schedule();
+            let _ = body.output(pin, level, ns, &mut schedule);
         });
     }
 
@@ -210,13 +221,8 @@ impl<'s, L: WorldLog, M: RawMutex> Rig<'s, L, M> {
         let ns = now_ns();
         self.with(|s| {
             s.advance(ns);
-            let mut out = heapless::Vec::<Set, 24>::new();
-            let _ = s.body.duty(pin, permille, ns, &mut |set| {
-                let _ = out.push(set);
-            });
-            for set in out {
-                s.schedule(set);
-            }
+            let (body, mut schedule) = s.body_and_schedule();
+            let _ = body.duty(pin, permille, ns, &mut schedule);
         });
     }
 
@@ -289,13 +295,8 @@ impl<'s, L: WorldLog, M: RawMutex> Rig<'s, L, M> {
         };
         self.with(|s| {
             s.advance(ns);
-            let mut out = heapless::Vec::<Set, 24>::new();
-            let _ = s.body.recorded(at_ns, frame, ns, &mut |set| {
-                let _ = out.push(set);
-            });
-            for set in out {
-                s.schedule(set);
-            }
+            let (body, mut schedule) = s.body_and_schedule();
+            let _ = body.recorded(at_ns, frame, ns, &mut schedule);
         });
     }
 
