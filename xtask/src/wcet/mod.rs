@@ -680,15 +680,25 @@ impl cfg::Image for Job<'_> {
             .any(|f| WAKER_CALLS.iter().any(|w| f.starts_with(w)));
         let formatting = in_frames(FORMATTING);
         let executor = in_frames(EXECUTOR);
-        targets.retain(|t| {
+        let of = |t: &u64, family: &[&str]| {
             let name = self.elf.name(*t);
-            let of = |family: &[&str]| {
-                family
-                    .iter()
-                    .any(|p| name.starts_with(p) || name.contains(p))
-            };
-            (waker == of(WAKER_FNS)) && (formatting == of(FORMATTING)) && (executor || !of(TASKS))
+            family
+                .iter()
+                .any(|p| name.starts_with(p) || name.contains(p))
+        };
+        let candidates = targets.clone();
+        targets.retain(|t| {
+            (waker == of(t, WAKER_FNS))
+                && (formatting == of(t, FORMATTING))
+                && (executor || !of(t, TASKS))
         });
+        if targets.is_empty() && !waker {
+            // The debug information does not show the call inlined from core's Waker (code
+            // shared by two inlined paths keeps one path's frames, which one depends on the
+            // link): every candidate but another family's, a waker's functions included.
+            targets = candidates;
+            targets.retain(|t| (formatting == of(t, FORMATTING)) && (executor || !of(t, TASKS)));
+        }
         // An executor polls its own tasks: the sensing executor only the sensing task,
         // thread mode every other one (which task a poll function polls, by the debug
         // information of its code).
@@ -723,7 +733,12 @@ impl cfg::Image for Job<'_> {
         }
         if targets.is_empty() {
             return Err(format!(
-                "nothing known for the call through a register at {site:#x}"
+                "nothing known for the call through a register at {site:#x} (inlined from: {})",
+                if frames.is_empty() {
+                    "no debug information".to_owned()
+                } else {
+                    frames.join(" < ")
+                }
             ));
         }
         Ok(targets.into_iter().collect())
