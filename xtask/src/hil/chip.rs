@@ -99,13 +99,14 @@ impl ChipRecording {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use embassy_time::Instant;
     use psmpa_core::record::{RecordOut, Recorder};
     use psmpa_core::{SensorId, TraceEvent, TraceSink};
 
-    struct Lines(Vec<String>);
+    /// The chip's log: each write of its recorder a `rec [..]` line.
+    pub(crate) struct Lines(pub(crate) Vec<String>);
 
     impl RecordOut for Lines {
         fn write(&mut self, bytes: &[u8]) {
