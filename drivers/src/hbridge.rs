@@ -33,6 +33,11 @@ pub trait Motor {
     fn brake(&mut self) -> Result<(), PinError>;
     /// Lets the motor run down freely.
     fn coast(&mut self) -> Result<(), PinError>;
+    /// How far its wheel has rolled forward in all, µm, read from an encoder on it; `None`
+    /// for a motor without one (a robot then counts its way by wheel time).
+    fn rolled_um(&self) -> Option<u64> {
+        None
+    }
 }
 
 /// One channel of a TB6612FNG: direction pins IN1, IN2 and the PWM input.
@@ -158,6 +163,12 @@ impl<L: Motor, R: Motor, S: OutputPin> Drive<L, R, S> {
     /// [`drive`](Self::drive) or [`brake`](Self::brake) wakes it.
     pub fn standby(&mut self) -> Result<(), PinError> {
         self.standby.set_low().map_err(|_| PinError)
+    }
+
+    /// How far the robot has rolled forward, µm, by the left wheel's encoder: `None` without
+    /// one ([`Motor::rolled_um`]).
+    pub fn rolled_um(&self) -> Option<u64> {
+        self.left.rolled_um()
     }
 
     /// The left motor.
