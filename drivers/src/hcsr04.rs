@@ -29,7 +29,8 @@ pub const RISE_TIMEOUT: Duration = Duration::from_millis(5);
 /// The echo must fall this long after it rose, or the line is stuck. The module ends a pulse
 /// by itself after about 38 ms when no echo returns. A whole read (trigger, rise, pulse) stays
 /// within 48 ms, inside the Fetch Tea sonar's 50 ms timeout: a stuck line is this driver's
-/// [`Hcsr04Error::Stuck`], not the runtime's timeout.
+/// [`Hcsr04Error::Stuck`], not the runtime's timeout. A read that first waits out a pulse
+/// still running takes that pulse's rest longer.
 pub const PULSE_LIMIT: Duration = Duration::from_millis(42);
 /// Nearer than this the module cannot measure (its rated minimum).
 pub const MIN_MM: u32 = 20;
@@ -52,9 +53,9 @@ pub enum Range {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Hcsr04Error {
-    /// The echo line was already high before the trigger: an earlier pulse (this module's
-    /// after a cancelled read, or a neighbour's) is still running, or the line is stuck high.
-    /// Nothing was triggered; a later read may succeed.
+    /// The echo line was high before the trigger and stayed high for [`PULSE_LIMIT`]: longer
+    /// than any pulse of the module's own, so the line is stuck high (or a neighbour keeps
+    /// it so). Nothing was triggered; a later read may succeed.
     Busy,
     /// The echo did not rise within [`RISE_TIMEOUT`] of the trigger: the module did not
     /// answer (unpowered, disconnected, or it missed the trigger). A lost sample.
@@ -131,12 +132,20 @@ impl<T: OutputPin, E: InputPin + Wait> Hcsr04<T, E> {
     /// and times the pulse (at most [`PULSE_LIMIT`]). Takes the pulse's width plus about the
     /// trigger pulse: 38 ms and a little with nothing in range.
     ///
+    /// An echo already high (a pulse of an earlier read, cancelled) is first waited out, at
+    /// most [`PULSE_LIMIT`] ([`Hcsr04Error::Busy`] if it does not fall): the read then takes
+    /// that much longer.
+    ///
     /// Cancel-safe: dropped at any await, it leaves at worst the trigger high (the next read
-    /// pulls it low first) or a pulse running (the next read is [`Hcsr04Error::Busy`] until it
-    /// ends).
+    /// pulls it low first) or a pulse running (the next read waits for it to end).
     pub async fn measure(&mut self) -> Result<Range, Hcsr04Error> {
+        // A pulse still running (this module's, from a read cancelled mid-echo: the sensor
+        // switched off and on again) ends by itself: wait for it rather than lose the sample.
         if self.echo.is_high().map_err(|_| Hcsr04Error::Pin)? {
-            return Err(Hcsr04Error::Busy);
+            match with_timeout(PULSE_LIMIT, self.echo.wait_for_low()).await {
+                Ok(fell) => fell.map_err(|_| Hcsr04Error::Pin)?,
+                Err(_) => return Err(Hcsr04Error::Busy),
+            }
         }
         // Low first: a read cancelled during the trigger pulse left it high.
         self.trigger.set_low().map_err(|_| Hcsr04Error::Pin)?;

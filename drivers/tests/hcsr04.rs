@@ -81,11 +81,21 @@ fn an_echo_that_rises_late_is_no_echo_too() {
 }
 
 #[test]
-fn an_echo_high_before_the_trigger_is_busy_and_nothing_is_triggered() {
+fn an_echo_high_for_the_pulse_limit_before_the_trigger_is_busy_and_nothing_is_triggered() {
     let (range, ended, writes) = read(ScriptedPin::constant(true));
     assert_eq!(range, Err(Hcsr04Error::Busy));
-    assert_eq!(ended, 0);
+    assert_eq!(ended, PULSE_LIMIT.as_millis());
     assert_eq!(writes, []);
+}
+
+#[test]
+fn a_pulse_still_running_is_waited_out_before_the_trigger() {
+    // A cancelled read's 38 ms pulse ends at 20 ms; this read triggers then and measures.
+    let echo = ScriptedPin::new(true, &[(20, false), (22, true), (28, false)]);
+    let (range, ended, writes) = read(echo);
+    assert_eq!(range, Ok(Range::Mm(1_029)));
+    assert_eq!(ended, 28);
+    assert_eq!(writes, [(20, false), (20, true), (21, false)]);
 }
 
 #[test]
