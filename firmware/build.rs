@@ -10,7 +10,6 @@
 //!   `OUT_DIR`. (flip-link follows the include and moves the stack in the copy.)
 //! * every `scenarios/*.json`, validated here by the host's parser and embedded in its
 //!   canonical form (integers only), which the firmware reads with serde-json-core at boot;
-//! * `missions/fetch-tea.json` without insignificant whitespace;
 //! * each scenario's mission hash under each architecture, for its recordings' headers
 //!   (`psmpa_sim::robot::mission_hash`, which `psmpa-sim replay` checks).
 
@@ -18,47 +17,6 @@ use std::{env, fs, path::Path, path::PathBuf};
 
 use psmpa_sim::robot::{Arch, mission_hash};
 use psmpa_sim::scenario::Scenario;
-
-/// The JSON text without whitespace outside strings.
-fn minify(json: &[u8]) -> Vec<u8> {
-    let (mut out, mut in_string, mut escaped) = (Vec::with_capacity(json.len()), false, false);
-    for &b in json {
-        if in_string {
-            out.push(b);
-            match (escaped, b) {
-                (true, _) => escaped = false,
-                (false, b'\\') => escaped = true,
-                (false, b'"') => in_string = false,
-                _ => {}
-            }
-        } else if !b.is_ascii_whitespace() {
-            in_string = b == b'"';
-            out.push(b);
-        }
-    }
-    out
-}
-
-/// The minified mission without its top-level `"description"` (documentation the loader
-/// skips: no need to carry it in flash).
-fn without_description(json: &[u8]) -> Vec<u8> {
-    let text = String::from_utf8_lossy(json);
-    let key = "\"description\":\"";
-    let Some(start) = text.find(key) else {
-        return json.to_vec();
-    };
-    // The value ends at the first unescaped quote.
-    let value = start + key.len();
-    let mut end = value;
-    let bytes = text.as_bytes();
-    while end < bytes.len() && !(bytes[end] == b'"' && bytes[end - 1] != b'\\') {
-        end += 1;
-    }
-    // Drop the key, the value and the comma after it.
-    let mut out = String::from(&text[..start]);
-    out.push_str(text[end + 1..].trim_start_matches(','));
-    out.into_bytes()
-}
 
 fn write(path: &Path, bytes: &[u8]) {
     if let Err(e) = fs::write(path, bytes) {
@@ -97,16 +55,6 @@ fn main() {
         println!("cargo:rustc-link-arg-bins=-Tlink.x");
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     }
-
-    let mission = root.join("missions/fetch-tea.json");
-    match fs::read(&mission) {
-        Ok(json) => write(
-            &out.join("fetch-tea.json"),
-            &without_description(&minify(&json)),
-        ),
-        Err(e) => panic!("cannot read {}: {e}", mission.display()),
-    }
-    println!("cargo:rerun-if-changed={}", mission.display());
 
     let dir = root.join("scenarios");
     let mut names: Vec<String> = fs::read_dir(&dir)

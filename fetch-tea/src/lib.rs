@@ -93,7 +93,7 @@ use core::cell::{Cell, RefCell};
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::mutex::Mutex;
-use embassy_time::{Duration, Instant, Timer};
+use embassy_time::{Duration, Instant, TICK_HZ, Timer};
 use embedded_hal::digital::{InputPin, OutputPin};
 use embedded_hal_async::digital::Wait;
 use psmpa_core::planner::{Planner, Search, Strategy};
@@ -136,6 +136,27 @@ pub const STEP_SETTLE: Duration =
 
 /// [`SensorFault::Device`] code: a pin reported an error.
 pub const PIN_FAULT: u8 = 1;
+
+/// The robot's own trace events (`TraceEvent::User`'s codes), for a reader of its trace.
+pub mod codes {
+    /// The walk stopped for an obstacle and started a side step (value: the sonar's fresh
+    /// reading, mm, or 0 when another sensor showed it).
+    pub const AVOID: u16 = 1;
+    /// The side step ended and the walk resumed.
+    pub const RESUME: u16 = 2;
+    /// The door handle did not give: the door is locked.
+    pub const LOCKED: u16 = 3;
+}
+
+/// How far the robot drives ahead, mm, while its sonar keeps one distance before the sonar is
+/// stuck: 5 cm, 0.2 s at the board's calibrated speed.
+pub const STUCK_AFTER_MM: u32 = 50;
+
+/// How close to its goal a walk ends, mm: the odometer counts wheel time, and a walk within
+/// this of its goal is done (the world docks a robot within 20 mm of a door). The driving a
+/// processor's own work takes from an act phase (a tick or two each time the wheels start)
+/// then cannot decide alone whether the walk ends in this phase or the next.
+pub const ARRIVE_WITHIN_MM: u32 = 2;
 
 /// The robot's measurements and timings. A board keeps them in a calibration record in
 /// flash ([`Settings::to_record`], [`Settings::from_record`]), so that a robot is calibrated
@@ -466,6 +487,40 @@ struct Pause {
     since: Option<Instant>,
     /// Ticks held in all, the current hold's aside.
     total: u64,
+    /// The odometer: thousandths of full duty times ticks the wheels drove straight ahead,
+    /// the current stretch's aside.
+    odometer: u64,
+    /// The current straight stretch ahead: since when, at which duty.
+    ahead: Option<(Instant, i16)>,
+    /// The sonar's last reading in range and the odometer (its units) when it was first read.
+    echo: Option<(u16, u64)>,
+    /// A side step is under way: its legs carry the robot around what is ahead, not towards
+    /// it, and do not count on the odometer.
+    stepping: bool,
+}
+
+impl Pause {
+    /// The odometer now, the current stretch's part included.
+    fn odometer_now(&self) -> u64 {
+        let now = self.ahead.map_or(0, |(since, duty)| {
+            let ticks = Instant::now().saturating_duration_since(since).as_ticks();
+            ticks.saturating_mul(u64::from(duty.unsigned_abs()))
+        });
+        self.odometer.saturating_add(now)
+    }
+
+    /// Ends the current straight stretch ahead at `now` and starts one at `duty` if the
+    /// wheels now drive straight ahead.
+    fn moving(&mut self, now: Instant, command: Option<(i16, i16)>) {
+        if let Some((since, duty)) = self.ahead.take() {
+            let ticks = now.saturating_duration_since(since).as_ticks();
+            let run = ticks.saturating_mul(u64::from(duty.unsigned_abs()));
+            self.odometer = self.odometer.saturating_add(run);
+        }
+        self.ahead = command
+            .filter(|&(left, right)| !self.stepping && left == right && left > 0)
+            .map(|(duty, _)| (now, duty));
+    }
 }
 
 /// Processor work: what a walk's planning costs ([`Settings::plan`]). `()` does none (on the
@@ -502,6 +557,10 @@ impl<So, Bu, Ca, Ha, Wh> FetchTea<So, Bu, Ca, Ha, Wh> {
                 driving: None,
                 since: None,
                 total: 0,
+                odometer: 0,
+                ahead: None,
+                echo: None,
+                stepping: false,
             })),
             compute: (),
         }
@@ -530,6 +589,37 @@ impl<So, Bu, Ca, Ha, Wh, Pc> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
     pub const fn settings(&self) -> &Settings {
         &self.settings
     }
+
+    /// Notes the sonar's reading (`None`: nothing in range, or switched on); whether it is
+    /// stuck: an echo in range that keeps one distance while the wheels carry the robot
+    /// [`STUCK_AFTER_MM`] on, the sonar on all along. (One stuck at "nothing in range" cannot
+    /// be told from an empty path; nor, under SMPA, one that sticks while the wheels are held.)
+    fn echo(&self, mm: Option<u16>) -> bool {
+        self.pause.lock(|p| {
+            let mut pause = p.get();
+            let at = pause.odometer_now();
+            let stuck = match (pause.echo, mm) {
+                (Some((last, since)), Some(mm)) if last == mm => {
+                    // The odometer's units (ticks times duty) against the distance, both
+                    // sides multiplied out: no division on the sampling path.
+                    let s = &self.settings;
+                    let driven = at
+                        .saturating_sub(since)
+                        .saturating_mul(u64::from(s.walk_mm_s));
+                    let limit = u64::from(STUCK_AFTER_MM)
+                        .saturating_mul(u64::from(s.walk_permille.unsigned_abs()))
+                        .saturating_mul(TICK_HZ);
+                    driven >= limit
+                }
+                _ => {
+                    pause.echo = mm.map(|mm| (mm, at));
+                    false
+                }
+            };
+            p.set(pause);
+            stuck
+        })
+    }
 }
 
 impl<So, B, C, H, Wh, Pc> Sensor<fetch_tea::FetchTea>
@@ -540,7 +630,13 @@ where
     C: InputPin,
     H: InputPin + Wait,
 {
-    async fn switch_on(&self, _: fetch_tea::Sensor) -> Result<(), SensorFault> {
+    async fn switch_on(&self, sensor: fetch_tea::Sensor) -> Result<(), SensorFault> {
+        if sensor == fetch_tea::Sensor::Sonar {
+            // What the echo did before the sonar was off says nothing about it now: under SMPA
+            // the robot drives between sense phases, and the next obstacle, as far ahead as
+            // the last, echoes at the same distance.
+            self.echo(None);
+        }
         Ok(())
     }
 
@@ -552,6 +648,15 @@ where
         let reading = match sensor {
             Sonar => {
                 let read = self.sonar.lock().await.measure().await;
+                if let Ok(range) = read {
+                    let mm = match range {
+                        Range::Mm(mm) => Some(mm),
+                        Range::NothingInRange => None,
+                    };
+                    if self.echo(mm) {
+                        return Err(SensorFault::Stuck);
+                    }
+                }
                 return sonar_reading(read, self.settings.clearance_mm);
             }
             Bumper => {
@@ -607,7 +712,19 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         if held {
             return Ok(());
         }
-        self.wheels(|w| w.drive(left, right))
+        let set = self.wheels(|w| w.drive(left, right));
+        self.moved(Some((left, right)));
+        set
+    }
+
+    /// Notes on the odometer that the wheels now run as `command` says, once their pins are
+    /// written: the wheels change when the pins do.
+    fn moved(&self, command: Option<(i16, i16)>) {
+        self.pause.lock(|p| {
+            let mut pause = p.get();
+            pause.moving(Instant::now(), command);
+            p.set(pause);
+        });
     }
 
     /// Brakes the wheels.
@@ -617,7 +734,38 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
             pause.driving = None;
             p.set(pause);
         });
-        self.wheels(Drive::brake)
+        let set = self.wheels(Drive::brake);
+        self.moved(None);
+        set
+    }
+
+    /// Starts or ends a side step.
+    fn stepping(&self, stepping: bool) {
+        self.pause.lock(|p| {
+            let mut pause = p.get();
+            pause.stepping = stepping;
+            p.set(pause);
+        });
+    }
+
+    /// How long the wheels have driven straight ahead, at the walking duty: the odometer, in
+    /// ticks. Counted from the wheels' own commands, it leaves out the held (SMPA), turning
+    /// and braking times exactly, whenever the walk looks at it.
+    fn driven(&self) -> u64 {
+        if let Some(um) = self.rolled_um() {
+            // An encoder: the distance rolled, as the ticks it takes at the calibrated speed.
+            let per = u64::from(self.settings.walk_mm_s).saturating_mul(1_000);
+            return um.saturating_mul(TICK_HZ).checked_div(per).unwrap_or(0);
+        }
+        let run = self.pause.lock(|p| p.get().odometer_now());
+        run.checked_div(u64::from(self.settings.walk_permille.unsigned_abs()))
+            .unwrap_or(0)
+    }
+
+    /// How far the wheels' encoder says the robot has rolled, µm: `None` without one.
+    fn rolled_um(&self) -> Option<u64> {
+        self.wheels
+            .lock(|w| w.try_borrow().ok().and_then(|w| w.rolled_um()))
     }
 
     /// The time SMPA's sense phases have held the robot so far (0 under P-SMPA).
@@ -671,10 +819,15 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         let all = self.settings.avoid.as_ticks();
         let turn = all.checked_div(4).unwrap_or(0);
         let pass = all.saturating_sub(turn.saturating_mul(2));
+        self.stepping(true);
         for (left, right, ticks) in [(back, d, turn), (d, d, pass), (d, back, turn)] {
-            self.drive(left, right)?;
+            if let Err(e) = self.drive(left, right) {
+                self.stepping(false);
+                return Err(e);
+            }
             self.drive_for(Duration::from_ticks(ticks)).await;
         }
+        self.stepping(false);
         self.brake()
     }
 
@@ -688,10 +841,19 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         A: Beside<fetch_tea::sensor::Sonar> + Beside<fetch_tea::sensor::Bumper>,
     {
         use fetch_tea::sensor::{Bumper, Sonar};
-        let Some(mut left) = time else {
+        let Some(time) = time else {
             return Outcome::Failure;
         };
         let duty = self.settings.walk_permille;
+        // The driving the walk needs, less what it may end short by.
+        let within = ARRIVE_WITHIN_MM
+            .saturating_mul(u32::try_from(TICK_HZ).unwrap_or(u32::MAX))
+            .checked_div(self.settings.walk_mm_s)
+            .unwrap_or(0);
+        let goal = time.as_ticks().saturating_sub(u64::from(within));
+        // The odometer when the walk began, and the driving that did not move the robot: the
+        // wheels pushing against what the bumper touched.
+        let (base, mut blocked) = (self.driven(), 0u64);
         let mut version = io.version();
         let mut moving = None;
         // When the last side step ended: a violation last seen before it (and a contact
@@ -726,33 +888,44 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
                 moving = Some(go);
             }
             if !go && self.settings.avoid.as_ticks() > 0 {
+                let mm = match io.sample(Sonar).map(|e| e.value) {
+                    Some(Value::Mm(mm)) if fresh => mm,
+                    _ => 0,
+                };
+                io.trace(codes::AVOID, mm);
                 if self.side_step().await.is_err() {
                     return self.stop(Outcome::Failure);
                 }
+                io.trace(codes::RESUME, 0);
                 passed = Instant::now();
                 stepped_sonar = io.sample(Sonar).map(|e| e.at);
                 version = io.version();
                 continue;
             }
-            let (since, paused) = (Instant::now(), self.paused());
-            let arrival = go.then(|| since.saturating_add(left));
-            let changed = io.changed_until(version, arrival).await;
-            if go {
+            let (since, start) = (Instant::now(), self.driven());
+            let left = goal.saturating_sub(start.saturating_sub(base).saturating_sub(blocked));
+            let arrival = go.then(|| since.saturating_add(Duration::from_ticks(left)));
+            let changed = if left == 0 {
+                None
+            } else {
+                io.changed_until(version, arrival).await
+            };
+            if go && self.rolled_um().is_none() {
                 // Wheels held by what the bumper touched do not move the robot: a contact
-                // read since this stretch began ends the driving at the read's instant.
-                let held = io
+                // read since this stretch began ends its driving at the read's instant (an
+                // encoder counts only what the wheels rolled).
+                if let Some(at) = io
                     .sample(Bumper)
                     .filter(|e| e.value == Value::Bool(true) && e.at >= since)
-                    .map(|e| e.at);
-                let until = held.unwrap_or_else(Instant::now);
-                // Nor does a sense phase that held it (SMPA).
-                let driven = until
-                    .saturating_duration_since(since)
-                    .checked_sub(self.paused().checked_sub(paused).unwrap_or_default())
-                    .unwrap_or_default();
-                left = left.checked_sub(driven).unwrap_or(Duration::from_ticks(0));
+                    .map(|e| e.at)
+                {
+                    let after = Instant::now().saturating_duration_since(at).as_ticks();
+                    let ran = self.driven().saturating_sub(start);
+                    blocked = blocked.saturating_add(after.min(ran));
+                }
             }
-            if left.as_ticks() == 0 {
+            let driven = self.driven().saturating_sub(base).saturating_sub(blocked);
+            if driven >= goal {
                 return self.stop(Outcome::Success);
             }
             if let Some(v) = changed {
@@ -773,6 +946,7 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
         }
         // Locked (or the marker is not in view): the precondition says which.
         if io.violation().is_some() {
+            io.trace(codes::LOCKED, 0);
             return Outcome::Interrupted;
         }
         self.timed(self.settings.push_permille, self.settings.push)
@@ -825,9 +999,11 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator<fet
         match (held, resume) {
             (true, Some(Some(_))) => {
                 let _ = self.wheels(Drive::brake);
+                self.moved(None);
             }
             (false, Some(Some((left, right)))) => {
                 let _ = self.wheels(|w| w.drive(left, right));
+                self.moved(Some((left, right)));
             }
             _ => {}
         }

@@ -1,5 +1,6 @@
 //! psmpa on a Cortex-M4F (QEMU mps2-an386) or a Cortex-M33 (QEMU mps2-an505): the same core,
-//! the same Fetch Tea mission and the same simulated world as the host simulator. Every embedded scenario runs under both
+//! the same Fetch Tea robot (`psmpa-fetch-tea`, on its devices simulated behind the drivers'
+//! traits, `psmpa_sim::rig`) and the same simulated world as the host simulator. Every embedded scenario runs under both
 //! architectures, one run per boot, from tick 0 of a fresh clock; each run logs every world
 //! event and the summary fields of `psmpa-sim run --json`, which `cargo xtask qemu` compares
 //! with the host, and what it measured in cycles. The runtime's sensing side runs on an
@@ -21,22 +22,22 @@ mod firmware {
 
     use cortex_m_rt::entry;
     use defmt::{error, info};
+    use embassy_futures::join::join;
     use embassy_futures::select::select;
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_sync::signal::Signal;
     use psmpa_core::record::{Frame, RecordOut, Recorder};
     use psmpa_core::{DecidingSide, SensingSide, TraceEvent, TraceSink};
-    use psmpa_sim::robot::{Arch, Nao, NaoRuntime, PlannerSpace, Robot};
+    use psmpa_fetch_tea::fetch_tea;
+    use psmpa_sim::rig::{self, Chassis, Observed, Rig, RigRobot};
+    use psmpa_sim::robot::{Arch, PlannerSpace};
     use psmpa_sim::scenario::Scenario;
-    use psmpa_sim::world::{Device, Fate, World, WorldEvent, WorldLog};
+    use psmpa_sim::world::{Device, Fate, WorldEvent, WorldLog};
 
     use psmpa_firmware::board::{self, fail, stack_high_water};
     use psmpa_firmware::{executor, time_driver, world_trace};
 
     include!(concat!(env!("OUT_DIR"), "/scenarios.rs"));
-
-    /// `missions/fetch-tea.json`, whitespace removed at build time.
-    static FETCH_TEA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fetch-tea.json"));
 
     /// Marks [`NEXT_RUN`] as written by a previous boot.
     const MAGIC: u32 = 0x7053_4d50;
@@ -74,11 +75,10 @@ mod firmware {
         // `#[entry]` makes these `&'static mut`, safely: main runs once. Uninitialised (`.bss`)
         // until written here: no initial values in flash.
         static mut DECIDING: executor::Slot = MaybeUninit::uninit();
-        static mut ROBOT: MaybeUninit<Robot<'static>> = MaybeUninit::uninit();
         static mut SCENARIO: MaybeUninit<Scenario> = MaybeUninit::uninit();
         static mut SPACE: PlannerSpace = PlannerSpace::new();
-        static mut WORLD: MaybeUninit<RunWorld> = MaybeUninit::uninit();
-        static mut NAO: MaybeUninit<RunNao> = MaybeUninit::uninit();
+        static mut RIG: MaybeUninit<RunRig> = MaybeUninit::uninit();
+        static mut ROBOT: MaybeUninit<RunRobot> = MaybeUninit::uninit();
         static mut RUNTIME: MaybeUninit<RunRuntime> = MaybeUninit::uninit();
         board::guard_stack();
         let run = this_run();
@@ -103,25 +103,21 @@ mod firmware {
         let mut start = LogOut::new();
         psmpa_sim::robot::record_start(&mut start, mission, json, arch);
         start.flush();
-        let robot = load_robot(ROBOT);
         let scenario = SCENARIO.write(Scenario::empty());
         if !parse(scenario, json, run) {
             error!("{=str}: invalid scenario", file);
             fail("invalid scenario");
         }
-        if robot.apply(scenario).is_err() {
-            fail("the scenario's sensor periods do not apply");
-        }
-        let (robot, scenario) = (&*robot, &*scenario);
-        let (world, runtime) = build(WORLD, NAO, RUNTIME, robot, scenario, arch);
+        let scenario = &*scenario;
+        let (rig, runtime) = build(RIG, ROBOT, RUNTIME, scenario, arch);
         let (sensing, deciding) = runtime.split();
         // Everything is prepared: the clock starts, and the run with it, at tick 0.
         time_driver::start();
         executor::run_idle(
             DECIDING,
             |thread, interrupt| {
-                let task = one_run(deciding, world, scenario, SPACE, arch, run, runs);
-                match (task, sense(sensing)) {
+                let task = one_run(deciding, rig, scenario, SPACE, arch, run, runs);
+                match (task, sense(sensing, rig)) {
                     (Ok(task), Ok(sense)) => {
                         thread.spawn(task);
                         interrupt.spawn(sense);
@@ -133,76 +129,100 @@ mod firmware {
         )
     }
 
-    /// A run's world, robot and runtime, each in a `static` of its own: their two sides run
-    /// as two tasks, sensing on the interrupt executor, which preempts deciding. What they
-    /// share is behind critical sections (`CriticalSectionRawMutex`).
-    type RunWorld = World<'static, Reactions, CriticalSectionRawMutex>;
-    type RunNao = Nao<'static, 'static, Reactions, CriticalSectionRawMutex>;
-    type RunRuntime =
-        NaoRuntime<'static, 'static, 'static, Reactions, Sink, CriticalSectionRawMutex>;
+    /// A run's rig (the robot's body in the world, its devices simulated), robot and
+    /// runtime, each in a `static` of its own: their two sides run as two tasks, sensing on
+    /// the interrupt executor, which preempts deciding. What they share is behind critical
+    /// sections (`CriticalSectionRawMutex`).
+    type RunRig = Rig<'static, Reactions, CriticalSectionRawMutex>;
+    type RunRobot = RigRobot<'static, 'static, Reactions, CriticalSectionRawMutex, Busy>;
+    type RunRuntime = fetch_tea::Runtime<
+        'static,
+        RunRobot,
+        Observed<'static, 'static, Reactions, CriticalSectionRawMutex, Sink>,
+    >;
 
-    /// Builds the run's world, robot and runtime in their statics, each out of line: the
-    /// frames that build them (each holds its value before it is moved in) never nest.
+    /// Builds the run's rig, robot and runtime in their statics, each out of line: the
+    /// frames that build them (each holds its value before it is moved in) never nest. The
+    /// robot is calibrated for the scenario on the paper's NAO, as psmpa-sim runs it.
     fn build(
-        world: &'static mut MaybeUninit<RunWorld>,
-        nao: &'static mut MaybeUninit<RunNao>,
+        rig: &'static mut MaybeUninit<RunRig>,
+        robot: &'static mut MaybeUninit<RunRobot>,
         runtime: &'static mut MaybeUninit<RunRuntime>,
-        robot: &'static Robot<'static>,
         scenario: &'static Scenario,
         arch: Arch,
-    ) -> (&'static RunWorld, &'static mut RunRuntime) {
-        let world = build_world(world, scenario);
-        let nao = build_nao(nao, world, robot);
-        (world, build_runtime(runtime, nao, robot, scenario, arch))
+    ) -> (&'static RunRig, &'static mut RunRuntime) {
+        let settings = rig::settings_for(scenario, Chassis::Nao);
+        let rig = build_rig(rig, scenario, settings.walk_permille.unsigned_abs());
+        let robot = build_robot(robot, rig, settings);
+        let runtime = build_runtime(runtime, robot, rig, scenario, arch);
+        for (sensor, period) in [
+            (fetch_tea::Sensor::Sonar, settings.sonar_period),
+            (fetch_tea::Sensor::Bumper, settings.bumper_period),
+        ] {
+            runtime.set_period(sensor, period);
+        }
+        (rig, runtime)
     }
 
     #[inline(never)]
-    fn build_world(
-        slot: &'static mut MaybeUninit<RunWorld>,
+    fn build_rig(
+        slot: &'static mut MaybeUninit<RunRig>,
         scenario: &'static Scenario,
-    ) -> &'static RunWorld {
-        slot.write(World::new(scenario, Reactions::default()))
+        walk_permille: u16,
+    ) -> &'static RunRig {
+        slot.write(Rig::new(
+            scenario,
+            Reactions::default(),
+            walk_permille,
+            rig::sensor_ids(),
+        ))
     }
 
     #[inline(never)]
-    fn build_nao(
-        slot: &'static mut MaybeUninit<RunNao>,
-        world: &'static RunWorld,
-        robot: &'static Robot<'static>,
-    ) -> &'static RunNao {
-        slot.write(Nao::new(world, robot).with_compute(compute))
+    fn build_robot(
+        slot: &'static mut MaybeUninit<RunRobot>,
+        rig: &'static RunRig,
+        settings: psmpa_fetch_tea::Settings,
+    ) -> &'static RunRobot {
+        slot.write(rig.robot(settings, rig::Chassis::Nao).with_compute(Busy))
     }
 
     #[inline(never)]
     fn build_runtime(
         slot: &'static mut MaybeUninit<RunRuntime>,
-        nao: &'static RunNao,
-        robot: &'static Robot<'static>,
+        robot: &'static RunRobot,
+        rig: &'static RunRig,
         scenario: &'static Scenario,
         arch: Arch,
     ) -> &'static mut RunRuntime {
-        slot.write(NaoRuntime::new(
-            &robot.mission,
-            nao,
-            Sink,
+        slot.write(fetch_tea::Runtime::new(
+            fetch_tea::FetchTea,
+            robot,
+            Observed::new(rig, Sink),
             psmpa_sim::robot::config(scenario, arch),
         ))
     }
 
     /// A behaviour's computation: busy cycles of the deciding side's own.
-    fn compute(us: u32) {
-        executor::compute(us.saturating_mul(time_driver::CORE_HZ / 1_000_000));
+    struct Busy;
+
+    impl psmpa_fetch_tea::Compute for Busy {
+        fn compute(&self, time: embassy_time::Duration) {
+            let us = u32::try_from(time.as_micros()).unwrap_or(u32::MAX);
+            executor::compute(us.saturating_mul(time_driver::CORE_HZ / 1_000_000));
+        }
     }
 
     /// Ends the sensing side when the deciding side has ended, as the host's loop polls it no
     /// more then: signalled from thread mode, it preempts at once, before the summary.
     static STOP: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
-    /// The sensing side, on the interrupt executor.
+    /// The sensing side, on the interrupt executor, with the rig's inputs (they change at
+    /// the sensing side's priority, as a board's pins raise interrupts).
     #[embassy_executor::task]
-    async fn sense(mut side: SensingSide<'static, RunRuntime>) {
+    async fn sense(mut side: SensingSide<'static, RunRuntime>, rig: &'static RunRig) {
         // The stop first: once it is signalled, not one more sample.
-        let _ = select(STOP.wait(), side.run()).await;
+        let _ = select(STOP.wait(), join(side.run(), rig.pump())).await;
     }
 
     /// Reads a scenario's canonical form in place, out of line: no copy of it on the stack.
@@ -219,16 +239,6 @@ mod firmware {
             first.at_ms += 60_000;
         }
         ok
-    }
-
-    /// Loads the mission in place, out of line.
-    #[inline(never)]
-    fn load_robot(slot: &'static mut MaybeUninit<Robot<'static>>) -> &'static mut Robot<'static> {
-        let robot = slot.write(Robot::empty());
-        if robot.load_into(FETCH_TEA).is_err() {
-            fail("the Fetch Tea mission does not load");
-        }
-        robot
     }
 
     /// The flight recorder's transport here: whole frames gathered in RAM and sent as one
@@ -509,17 +519,20 @@ mod firmware {
     #[embassy_executor::task]
     async fn one_run(
         mut deciding: DecidingSide<'static, RunRuntime>,
-        world: &'static RunWorld,
+        rig: &'static RunRig,
         scenario: &'static Scenario,
         space: &'static mut PlannerSpace,
         arch: Arch,
         run: u32,
         runs: u32,
     ) {
-        let ended = psmpa_sim::run::decide(&mut deciding, world, scenario, space).await;
+        let ended = psmpa_sim::run::decide_on(&mut deciding, scenario, space, || rig.halt()).await;
         STOP.signal(());
-        let s = psmpa_sim::run::summary(arch, world, deciding.runtime(), ended);
-        let worst = world.with_log(|reactions| reactions.worst);
+        if rig.overflowed() {
+            fail("the rig scheduled more input changes than it holds");
+        }
+        let s = rig.world(|w| psmpa_sim::run::summary(arch, w, deciding.runtime(), ended));
+        let worst = rig.world(|w| w.with_log(|reactions| reactions.worst));
         finish_recording();
         let (ticks, reference) = (
             embassy_time::Instant::now().as_ticks(),

@@ -19,8 +19,8 @@ use embassy_time::{Duration, Instant, Timer};
 use psmpa_core::record::{self, Frame, Header, Input, RecordOut, Recorder, kind};
 use psmpa_core::trace::Phase;
 use psmpa_core::{
-    Act, ActionOf, Actuator, Describe, FactSet, Mission, Outcome, Platform, Reading, Runtime,
-    Sensor, SensorFault, SensorId, SensorMode, SensorOf, TraceEvent, TraceSink,
+    Act, ActionOf, Actuator, Describe, FactSet, Mission, Outcome, Platform, Reading, Sensor,
+    SensorFault, SensorId, SensorMode, SensorOf, TraceEvent, TraceSink,
 };
 use serde::Serialize;
 
@@ -131,8 +131,8 @@ pub fn bytes_of(file: &Path, bytes: Vec<u8>) -> Result<Vec<u8>, String> {
 
 /// Where a recording was made, and what its replay needs besides the frames.
 pub enum Source {
-    /// psmpa-sim's NAO robot, or the QEMU firmware running it: the scenario (its bytes, a
-    /// file's or the canonical form) and the architecture.
+    /// psmpa-sim's run of the Fetch Tea robot on the paper's NAO, or the QEMU firmware's:
+    /// the scenario (its bytes, a file's or the canonical form) and the architecture.
     Simulator {
         /// The scenario's bytes as recorded.
         scenario_json: Vec<u8>,
@@ -665,62 +665,51 @@ pub fn replay(
         on_demand: modes,
         progress: &progress,
     };
-    match &recording.source {
+    // Both run the compiled mission, as the simulator and the board do: the simulator's with
+    // its scenario's policy and the periods its robot is calibrated with (the paper's NAO),
+    // until the run's end or a second past the last frame; the board's with its calibration's
+    // periods, a second past the last frame.
+    let last = Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);
+    let empty = Scenario::empty();
+    let (scenario, config, periods, end) = match &recording.source {
         Source::Simulator { scenario, arch, .. } => {
-            let robot = robot::fetch_tea(scenario).map_err(|e| e.to_string())?;
-            let describe = |e: &TraceEvent| crate::cli::outputs::describe(&robot.mission, e);
-            let platform = platform(on_demand(robot.mission.domain.sensors()));
-            let mut runtime = Runtime::<'_, robot::Loaded<'_>, Replay<'_>, Compare<'_>>::new(
-                &robot.mission,
-                &platform,
-                compare(&describe, mcap(scenario)?),
+            let settings = crate::rig::settings_for(scenario, crate::rig::Chassis::Nao);
+            (
+                &**scenario,
                 robot::config(scenario, *arch),
-            );
-            let mut space = robot::PlannerSpace::new();
-            // The run's end, or a second past the last frame: a cut recording replays no
-            // longer than it lasted.
-            let last = Instant::from_ticks(frames.last().map_or(0, |f| f.ticks));
-            let end = Instant::from_millis(scenario.max_ms).min(last + Duration::from_secs(1));
-            let (mut sensing, mut deciding) = runtime.split();
-            let ran_to = drive(
-                sensing.run(),
-                deciding.run_planning(&robot::PLANNER, &mut space),
-                start,
-                end,
-            )?;
-            finish(runtime.into_sink(), ran_to)
+                [settings.sonar_period, settings.bumper_period],
+                Instant::from_millis(scenario.max_ms).min(last),
+            )
         }
-        Source::Board { settings } => {
-            // As the board does: the compiled mission, its periods from the calibration.
-            let describe = |e: &TraceEvent| fetch_tea::FetchTea.describe(*e).to_string();
-            let platform = platform(on_demand(fetch_tea::TABLES.domain.sensors()));
-            let mut runtime = fetch_tea::Runtime::<'_, Replay<'_>, Compare<'_>>::new(
-                fetch_tea::FetchTea,
-                &platform,
-                compare(&describe, mcap(&Scenario::empty())?),
-                psmpa_core::Config::default(),
-            );
-            for (sensor, period) in [
-                (fetch_tea::Sensor::Sonar, settings.sonar_period),
-                (fetch_tea::Sensor::Bumper, settings.bumper_period),
-            ] {
-                if period.is_some() && !runtime.set_period(sensor, period) {
-                    return Err(format!(
-                        "the calibration's periods: {period:?} for {sensor}"
-                    ));
-                }
-            }
-            // A second past the last frame: what the board traced at its last instant too.
-            let end =
-                Instant::from_ticks(frames.last().map_or(0, |f| f.ticks)) + Duration::from_secs(1);
-            // The board's control loop: the same planner, where no library plan applies.
-            let mut space = psmpa_fetch_tea::PlannerSpace::new();
-            let (mut sensing, mut deciding) = runtime.split();
-            let decided = deciding.run_planning(&psmpa_fetch_tea::PLANNER, &mut space);
-            let ran_to = drive(sensing.run(), decided, start, end)?;
-            finish(runtime.into_sink(), ran_to)
+        Source::Board { settings } => (
+            &empty,
+            psmpa_core::Config::default(),
+            [settings.sonar_period, settings.bumper_period],
+            last,
+        ),
+    };
+    let describe = |e: &TraceEvent| fetch_tea::FetchTea.describe(*e).to_string();
+    let platform = platform(on_demand(fetch_tea::TABLES.domain.sensors()));
+    let mut runtime = fetch_tea::Runtime::<'_, Replay<'_>, Compare<'_>>::new(
+        fetch_tea::FetchTea,
+        &platform,
+        compare(&describe, mcap(scenario)?),
+        config,
+    );
+    for (sensor, period) in [fetch_tea::Sensor::Sonar, fetch_tea::Sensor::Bumper]
+        .into_iter()
+        .zip(periods)
+    {
+        if period.is_some() && !runtime.set_period(sensor, period) {
+            return Err(format!("the recording's periods: {period:?} for {sensor}"));
         }
     }
+    // The control loop: the same planner, where no library plan applies.
+    let mut space = psmpa_fetch_tea::PlannerSpace::new();
+    let (mut sensing, mut deciding) = runtime.split();
+    let decided = deciding.run_planning(&psmpa_fetch_tea::PLANNER, &mut space);
+    let ran_to = drive(sensing.run(), decided, start, end)?;
+    finish(runtime.into_sink(), ran_to)
 }
 
 /// By sensor index: whether the mission reads it on demand.

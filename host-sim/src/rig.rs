@@ -27,7 +27,7 @@ use embassy_futures::select::select;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::{NoopRawMutex, RawMutex};
 use embassy_sync::waitqueue::WakerRegistration;
-use embassy_time::{Duration, Instant, TICK_HZ, Timer};
+use embassy_time::{Duration, Instant, TICK_HZ, Timer, with_timeout};
 use embedded_hal::digital::{ErrorType, InputPin, OutputPin};
 use embedded_hal::pwm::SetDutyCycle;
 use embedded_hal_async::digital::Wait;
@@ -37,7 +37,8 @@ use psmpa_drivers::hcsr04::range_from_echo_us;
 use psmpa_drivers::hcsr04::{Hcsr04Error, PULSE_LIMIT, RISE_TIMEOUT, Range, Ranger};
 
 use psmpa_drivers::Active;
-use psmpa_drivers::hbridge::{Channel, Drive};
+use psmpa_drivers::PinError;
+use psmpa_drivers::hbridge::{Channel, Drive, Motor};
 use psmpa_drivers::marker::Marker;
 use psmpa_drivers::switch::{DEBOUNCE, Switch};
 use psmpa_fetch_tea::{Devices, FetchTea, Settings, fetch_tea};
@@ -449,8 +450,12 @@ impl<'r, 's, L: WorldLog, M: RawMutex> RigSonar<'r, 's, L, M> {
 
 impl<L: WorldLog, M: RawMutex> Ranger for RigSonar<'_, '_, L, M> {
     async fn measure(&mut self) -> Result<Range, Hcsr04Error> {
+        // As the driver: a pulse still running (a cancelled read's) is waited out.
         if self.rig.level(pin::ECHO) {
-            return Err(Hcsr04Error::Busy);
+            let fell = self.rig.wait_input(pin::ECHO, |high| !high);
+            if with_timeout(PULSE_LIMIT, fell).await.is_err() {
+                return Err(Hcsr04Error::Busy);
+            }
         }
         let start = now_ns();
         // The pulse: its fall 10 µs after its rise fires the module, which schedules its echo.
@@ -521,17 +526,58 @@ where
     }
 }
 
-/// A wheel of the rig's robot: its H-bridge channel.
-pub type RigWheel<'r, 's, L, M> =
-    Channel<RigOutput<'r, 's, L, M>, RigOutput<'r, 's, L, M>, RigPwm<'r, 's, L, M>>;
+/// A wheel of the rig's robot: its H-bridge channel, with an encoder on the NAO's body.
+pub type RigWheel<'r, 's, L, M> = RigMotor<
+    'r,
+    's,
+    L,
+    M,
+    Channel<RigOutput<'r, 's, L, M>, RigOutput<'r, 's, L, M>, RigPwm<'r, 's, L, M>>,
+>;
 
-/// The Fetch Tea robot of `psmpa-fetch-tea` on the rig's devices.
-pub type RigRobot<'r, 's, L, M> = FetchTea<
+/// A motor of the rig, and its encoder when the body has one: how far the body rolled forward
+/// in the world (a side step's legs are not along the way).
+pub struct RigMotor<'r, 's, L: WorldLog, M: RawMutex, Mo> {
+    rig: &'r Rig<'s, L, M>,
+    motor: Mo,
+    encoder: bool,
+}
+
+impl<L: WorldLog, M: RawMutex, Mo: Motor> Motor for RigMotor<'_, '_, L, M, Mo> {
+    fn drive(&mut self, permille: i16) -> Result<(), PinError> {
+        self.motor.drive(permille)
+    }
+
+    fn brake(&mut self) -> Result<(), PinError> {
+        self.motor.brake()
+    }
+
+    fn coast(&mut self) -> Result<(), PinError> {
+        self.motor.coast()
+    }
+
+    fn rolled_um(&self) -> Option<u64> {
+        if !self.encoder {
+            return None;
+        }
+        let ns = now_ns();
+        let um = self.rig.with(|s| {
+            s.advance(ns);
+            s.body.world().position_um()
+        });
+        u64::try_from(um).ok()
+    }
+}
+
+/// The Fetch Tea robot of `psmpa-fetch-tea` on the rig's devices, computing its planning with
+/// `Pc` (none by default: virtual time).
+pub type RigRobot<'r, 's, L, M, Pc = ()> = FetchTea<
     RigSonar<'r, 's, L, M>,
     Switch<RigInput<'r, 's, L, M>>,
     Marker<RigInput<'r, 's, L, M>>,
     Switch<RigInput<'r, 's, L, M>>,
     Drive<RigWheel<'r, 's, L, M>, RigWheel<'r, 's, L, M>, RigOutput<'r, 's, L, M>>,
+    Pc,
 >;
 
 /// The mission's sensor ids of the sonar, the bumper, the camera and the handle.
@@ -543,13 +589,15 @@ pub fn sensor_ids() -> [usize; SLOTS] {
 impl<'s, L: WorldLog, M: RawMutex> Rig<'s, L, M> {
     /// The robot of `psmpa-fetch-tea` on this rig's devices, calibrated with `settings`, as a
     /// board wires it (the boards' pin table; switches and the marker active low, pulled up).
-    pub fn robot(&self, settings: Settings) -> RigRobot<'_, 's, L, M> {
-        let wheel = |[in1, in2, pwm]: [u8; 3]| {
-            Channel::new(
+    pub fn robot(&self, settings: Settings, chassis: Chassis) -> RigRobot<'_, 's, L, M> {
+        let wheel = |[in1, in2, pwm]: [u8; 3]| RigMotor {
+            rig: self,
+            motor: Channel::new(
                 RigOutput::new(self, in1),
                 RigOutput::new(self, in2),
                 RigPwm::new(self, pwm),
-            )
+            ),
+            encoder: chassis.encoders(),
         };
         let mut sonar = RigSonar::new(self);
         if settings.sonar_rise.as_ticks() > 0 {
@@ -592,6 +640,12 @@ impl Chassis {
             Self::Nao => "nao",
             Self::Wheeled => "wheeled",
         }
+    }
+
+    /// Whether the body counts its way by what it rolled (the NAO counts the steps it took),
+    /// not by wheel time (the boards' chassis has no encoders).
+    pub const fn encoders(self) -> bool {
+        matches!(self, Self::Nao)
     }
 
     /// How long the body pushes a door open and how long it takes through the door.

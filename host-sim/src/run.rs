@@ -2,11 +2,10 @@
 //! until the goal holds, the control loop gives up, or `max_s` passes.
 //!
 //! `no_std`: the pieces of a run, which the host and the firmware put together each in its own
-//! way. The world, the robot and the runtime are built where they stay ([`World::new`],
-//! [`Nao::new`](robot::Nao::new), [`NaoRuntime::new`](robot::NaoRuntime)); the runtime is
-//! split; the sensing side runs at a higher priority (the host's poll loop, through
-//! `simulate_split`; a task on the firmware's interrupt executor) beside [`decide`]; and
-//! [`summary`] reads the outcome.
+//! way. The rig (the robot's body in the world, [`crate::rig::Rig::new`]), the robot on it
+//! and the runtime are built where they stay; the runtime is split; the sensing side runs at a
+//! higher priority (the host's poll loop, through `simulate_split`; a task on the firmware's
+//! interrupt executor) beside [`decide_on`]; and [`summary`] reads the outcome.
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::RawMutex;
@@ -51,27 +50,12 @@ pub struct Summary {
 }
 
 /// The deciding side of a run of `scenario`: Algorithm 1, planning in `space` when it must,
-/// until the goal holds, the control loop gives up, or `max_ms` passes (the robot then halts).
+/// until the goal holds, the control loop gives up, or `max_ms` passes (then `halt` stops the
+/// robot).
 /// Returns how it ended and when, ms. The sensing side runs beside it at a higher priority:
 /// the host's poll loop (`simulate_split`), or a task on the firmware's interrupt executor.
 /// The run starts at the current instant; the host and the firmware start it at tick 0 so
 /// their traces agree.
-pub async fn decide<Ms, L, T, M>(
-    deciding: &mut DecidingSide<'_, Runtime<'_, Ms, robot::Nao<'_, '_, L, M>, T>>,
-    world: &World<'_, L, M>,
-    scenario: &Scenario,
-    space: &mut robot::PlannerSpace,
-) -> (Ending, u64)
-where
-    Ms: Mission<Facts = FactSet>,
-    L: WorldLog,
-    T: TraceSink<Ms>,
-    M: RawMutex,
-{
-    decide_on(deciding, scenario, space, || world.halt()).await
-}
-
-/// [`decide`] for any robot `P`, calling `halt` when `max_ms` passes.
 pub async fn decide_on<Ms, P, T>(
     deciding: &mut DecidingSide<'_, Runtime<'_, Ms, P, T>>,
     scenario: &Scenario,
@@ -96,7 +80,7 @@ where
 }
 
 /// The summary of a run under `arch` that ended with `ending` at `time_cost_ms`
-/// ([`decide`]), from its world and its runtime.
+/// ([`decide_on`]), from its world and its runtime.
 pub fn summary<Ms, L, P, T, M>(
     arch: Arch,
     world: &World<'_, L, M>,

@@ -51,8 +51,8 @@ pub struct RobotFile {
     /// Time a side step around a detected obstacle takes, s.
     #[serde(default, deserialize_with = "number")]
     pub avoid_s: Option<f64>,
-    /// Extension: while the sonar reads an obstacle nearer than this, the walk slows down, m;
-    /// 0 (the default) walks at `speed_mps` throughout.
+    /// Kept for files written before 0.5: the robot walks at `speed_mps` throughout, so only 0
+    /// (the default) is accepted.
     #[serde(default, deserialize_with = "number")]
     pub slow_m: Option<f64>,
     /// Extension: processor time the walk spends planning its path each time it starts or
@@ -805,6 +805,8 @@ pub enum Problem {
     },
     /// The name is empty or only spaces.
     Empty,
+    /// A slow zone other than 0: the robot walks at one speed.
+    NoSlowZone(f64),
     /// Must be a whole number of microseconds from 0 to `max`.
     NotWholeMicros {
         /// The value.
@@ -861,6 +863,11 @@ impl fmt::Display for Problem {
                 write!(f, "must be at most {max}, got {}", Shown(value))
             }
             Self::Empty => f.write_str("must not be empty or only spaces"),
+            Self::NoSlowZone(v) => write!(
+                f,
+                "must be 0: the Fetch Tea robot walks at one speed, with no slow zone; got {}",
+                Shown(v)
+            ),
             Self::NotWholeMicros { value, max } => write!(
                 f,
                 "must be a whole number of microseconds from 0 to {max}, got {}",
@@ -1397,7 +1404,14 @@ impl Scenario {
             Field::of("bumper", "min_contact_ms"),
             pick(b.min_contact_ms, db.min_contact_ms),
         )?;
-        let slow_um = metres(Field::of("robot", "slow_m"), pick(r.slow_m, dr.slow_m))?;
+        let slow_m = pick(r.slow_m, dr.slow_m);
+        let slow_um = metres(Field::of("robot", "slow_m"), slow_m)?;
+        if slow_um != 0 {
+            return Err(invalid(
+                Field::of("robot", "slow_m"),
+                Problem::NoSlowZone(slow_m),
+            ));
+        }
         let plan_us = {
             let us = pick(r.plan_us, dr.plan_us);
             if !(0.0..=f64::from(MAX_PLAN_US)).contains(&us) || f64::from(us as u32) != us {
@@ -1638,9 +1652,15 @@ mod tests {
             ),
             (0, 0, 0, 0)
         );
+        let e = Scenario::parse(br#"{"name":"x","robot":{"slow_m":1.2},"interferences":[]}"#);
+        assert_eq!(
+            e.unwrap_err().to_string(),
+            "robot.slow_m: must be 0: the Fetch Tea robot walks at one speed, with no slow zone; \
+             got 1.2"
+        );
         let s = Scenario::parse(
             br#"{"name":"x","sonar":{"latency_ms":40},"bumper":{"latency_ms":1000},
-                "robot":{"slow_m":1.2,"plan_us":100000},"interferences":[]}"#,
+                "robot":{"slow_m":0,"plan_us":100000},"interferences":[]}"#,
         )
         .unwrap();
         assert_eq!(
@@ -1650,7 +1670,7 @@ mod tests {
                 s.slow_um,
                 s.plan_us
             ),
-            (40, 1000, 1_200_000, 100_000)
+            (40, 1000, 0, 100_000)
         );
         let mut buf = [0u8; 4096];
         let len = s.to_canonical(&mut buf).unwrap();

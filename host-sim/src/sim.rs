@@ -3,14 +3,12 @@
 use embassy_time::{Duration, Instant};
 use psmpa_core::{TraceEvent, TraceSink};
 
-use std::cell::OnceCell;
-
 use crate::backend::{SimError, simulate_split};
 use crate::rig::{self, Chassis, Observed, Rig};
-use crate::robot::{self, Arch, MissionError, Robot};
-use crate::run::{Summary, decide, decide_on, summary};
+use crate::robot::{self, Arch, MissionError};
+use crate::run::{Summary, decide_on, summary};
 use crate::scenario::Scenario;
-use crate::world::{World, WorldEvent, WorldLog};
+use crate::world::{WorldEvent, WorldLog};
 use psmpa_fetch_tea::fetch_tea;
 
 /// Every world event with its time (ms) and the robot's position (µm).
@@ -84,7 +82,7 @@ pub fn run_summary(scenario: &Scenario, arch: Arch) -> Result<Summary, RunError>
 
 /// Runs `scenario` under `arch`, logging the world into `log` and tracing the runtime into
 /// `sink` as the run goes; gives both back with the summary.
-pub fn run_logged<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>>(
+pub fn run_logged<L: WorldLog, T: TraceSink<fetch_tea::FetchTea>>(
     scenario: &Scenario,
     arch: Arch,
     log: L,
@@ -96,50 +94,14 @@ pub fn run_logged<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>>(
 /// [`run_logged`], asking `stop` at every step of the run (every wake of its sensing or
 /// deciding side): when it answers `true` the run ends at once with [`RunError::Stopped`]. A
 /// command whose output failed (`--trace /dev/full`) stops there instead of simulating on.
-pub fn run_logged_until<L: WorldLog, T: for<'a> TraceSink<robot::Loaded<'a>>>(
+pub fn run_logged_until<L: WorldLog, T: TraceSink<fetch_tea::FetchTea>>(
     scenario: &Scenario,
     arch: Arch,
     log: L,
     sink: T,
     stop: impl Fn() -> bool,
 ) -> Result<(Summary, L, T), RunError> {
-    let limit = Duration::from_millis(scenario.max_ms) + SLACK;
-    let robot = fetch_tea(scenario).map_err(RunError::Mission)?;
-    let mut space = robot::PlannerSpace::new();
-    // Built where they stay, before the run's tick 0: none of them reads the clock.
-    let world: World<'_, L> = World::new(scenario, log);
-    let nao = robot::Nao::new(&world, &robot);
-    let mut runtime =
-        robot::NaoRuntime::new(&robot.mission, &nao, sink, robot::config(scenario, arch));
-    let (mut sensing, mut deciding) = runtime.split();
-    let decided = async {
-        let mut run = core::pin::pin!(decide(&mut deciding, &world, scenario, &mut space));
-        core::future::poll_fn(|cx| {
-            if stop() {
-                return core::task::Poll::Ready(None);
-            }
-            run.as_mut().poll(cx).map(Some)
-        })
-        .await
-    };
-    let done = simulate_split(sensing.run(), decided, limit).map_err(RunError::Sim)?;
-    let ended = done.output.ok_or(RunError::Stopped)?;
-    let summary = summary(arch, &world, &runtime, ended);
-    let sink = runtime.into_sink();
-    Ok((summary, world.into_log(), sink))
-}
-
-thread_local! {
-    /// The Fetch Tea mission as loaded from its JSON, once per thread: a run copies it instead
-    /// of parsing it again (the parse was 2.4 % of a sonar-8 run's instructions).
-    static FETCH_TEA: OnceCell<Result<Robot<'static>, MissionError>> = const { OnceCell::new() };
-}
-
-/// [`robot::fetch_tea`] for `scenario`, from this thread's loaded copy.
-fn fetch_tea(scenario: &Scenario) -> Result<Robot<'static>, MissionError> {
-    let mut robot = FETCH_TEA.with(|m| m.get_or_init(|| Robot::load(robot::FETCH_TEA)).clone())?;
-    robot.apply(scenario)?;
-    Ok(robot)
+    run_with(scenario, Setup::new(arch), log, sink, stop)
 }
 
 /// Runs `scenario` under `arch` recording the world and the trace in memory.
@@ -158,47 +120,14 @@ pub fn run_recorded(scenario: &Scenario, arch: Arch) -> Result<Recorded, RunErro
 }
 
 /// Which of the runtime's paths a run takes through its plans ([`run_on`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum PlanPath {
-    /// The mission loaded from its file at run time, its plans through the run-time FSM (what
-    /// every other command runs).
-    Loaded,
-    /// The same file compiled in (the boards' `fetch_tea`), its plans' states as constants:
-    /// Algorithm 2 at build time, each sensor's own sampler.
+    /// The plans' states as constants: Algorithm 2 at build time, each sensor's own sampler
+    /// (what every command runs).
+    #[default]
     Compiled,
-    /// The same file compiled in, its plans through the run-time FSM.
+    /// The same plans through the run-time FSM.
     CompiledRunTime,
-}
-
-/// Runs `scenario` under `arch` along `path`, with nothing recorded but the trace's hash: the
-/// three paths of one mission give one trace (`host-sim/tests/differential.rs`).
-pub fn run_on(scenario: &Scenario, arch: Arch, path: PlanPath) -> Result<Summary, RunError> {
-    use psmpa_fetch_tea::fetch_tea;
-    let plans = match path {
-        PlanPath::Loaded => return run_summary(scenario, arch),
-        PlanPath::Compiled => psmpa_core::Plans::Compiled,
-        PlanPath::CompiledRunTime => psmpa_core::Plans::RunTime,
-    };
-    let limit = Duration::from_millis(scenario.max_ms) + SLACK;
-    let robot = fetch_tea(scenario).map_err(RunError::Mission)?;
-    let mut space = robot::PlannerSpace::new();
-    let world: World<'_, ()> = World::new(scenario, ());
-    let nao = robot::Nao::new(&world, &robot);
-    let mut config = robot::config(scenario, arch);
-    config.plans = plans;
-    let mut runtime =
-        fetch_tea::Runtime::new(fetch_tea::FetchTea, &nao, psmpa_core::Hashing, config);
-    // The scenario's periods, as the loaded mission takes them.
-    for (sensor, ms) in [
-        (fetch_tea::Sensor::Sonar, scenario.sonar.period_ms),
-        (fetch_tea::Sensor::Bumper, scenario.bumper_period_ms),
-    ] {
-        runtime.set_period(sensor, Some(Duration::from_millis(ms)));
-    }
-    let (mut sensing, mut deciding) = runtime.split();
-    let decided = decide(&mut deciding, &world, scenario, &mut space);
-    let done = simulate_split(sensing.run(), decided, limit).map_err(RunError::Sim)?;
-    Ok(summary(arch, &world, &runtime, done.output))
 }
 
 /// How a run is set up beyond its scenario.
@@ -208,16 +137,29 @@ pub struct Setup {
     pub arch: Arch,
     /// The body the robot drives.
     pub chassis: Chassis,
+    /// The runtime's path through the plans.
+    pub plans: PlanPath,
 }
 
 impl Setup {
-    /// `arch` on the paper's NAO.
+    /// `arch` on the paper's NAO along the compiled plans: what psmpa-sim's commands run.
     pub const fn new(arch: Arch) -> Self {
         Self {
             arch,
             chassis: Chassis::Nao,
+            plans: PlanPath::Compiled,
         }
     }
+}
+
+/// Runs `scenario` under `arch` along `path`, with nothing recorded but the trace's hash: the
+/// two paths of one mission give one trace (`host-sim/tests/differential.rs`).
+pub fn run_on(scenario: &Scenario, arch: Arch, path: PlanPath) -> Result<Summary, RunError> {
+    let setup = Setup {
+        plans: path,
+        ..Setup::new(arch)
+    };
+    run_with(scenario, setup, (), psmpa_core::Hashing, || false).map(|(s, (), _)| s)
 }
 
 /// Runs `scenario` on `chassis` under `arch`, with nothing recorded: the one robot's outcome
@@ -250,9 +192,13 @@ pub fn run_with<L: WorldLog, T: TraceSink<fetch_tea::FetchTea>>(
         settings.walk_permille.unsigned_abs(),
         rig::sensor_ids(),
     );
-    let robot = rig.robot(settings);
+    let robot = rig.robot(settings, setup.chassis);
     let mut space = robot::PlannerSpace::new();
-    let config = robot::config(scenario, setup.arch);
+    let mut config = robot::config(scenario, setup.arch);
+    config.plans = match setup.plans {
+        PlanPath::Compiled => psmpa_core::Plans::Compiled,
+        PlanPath::CompiledRunTime => psmpa_core::Plans::RunTime,
+    };
     let mut runtime = fetch_tea::Runtime::new(
         fetch_tea::FetchTea,
         &robot,

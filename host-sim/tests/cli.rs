@@ -214,8 +214,10 @@ fn run_json_prints_exactly_the_contract_object() {
     assert!(v["max_reaction_ms"].as_u64().unwrap() <= 100);
     let on = v["sensor_on_s"].as_object().unwrap();
     assert_eq!(on.keys().collect::<Vec<_>>(), ["bumper", "sonar"]);
-    // Each sensor samples on its own period, whatever the other does.
-    assert_eq!(v["sample_gap_max_ms"]["sonar"], 100);
+    // Each sensor samples on its own period, whatever the other does. A sonar sample is
+    // delivered when its echo ends: up to the 38 ms of "nothing in range" past its period.
+    let sonar_gap = v["sample_gap_max_ms"]["sonar"].as_u64().unwrap();
+    assert!((100..=138).contains(&sonar_gap), "{sonar_gap}");
     assert_eq!(v["sample_gap_max_ms"]["bumper"], 20);
     let hash = v["trace_hash"].as_str().unwrap();
     assert_eq!(hash.len(), 16);

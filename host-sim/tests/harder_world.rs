@@ -22,30 +22,36 @@ fn when(rec: &psmpa_sim::sim::Recorded, e: WorldEvent) -> Option<u64> {
 
 /// A person walking at 8 m/s towards a robot walking at 0.1 m/s closes 8.1 mm a millisecond:
 /// the sonar's band from 0.5 m down to its 0.25 m minimum takes 31 ms, a third of its
-/// 100 ms period. The sonar reads at 10.0 s and 10.1 s.
+/// 100 ms period. The person sets off as the sonar triggers, at 10.042 s; it triggers again at
+/// 10.142 s and 10.242 s.
 fn runner(ahead_m: f64) -> Scenario {
     inline(&format!(
         r#"{{"name":"runner","door_m":3.0,"interferences":[
-             {{"kind":"box","at_s":10.0,"ahead_m":{ahead_m},"hold_s":4.0,"speed_mps":8.0}}]}}"#
+             {{"kind":"box","at_s":10.042,"ahead_m":{ahead_m},"hold_s":4.0,"speed_mps":8.0}}]}}"#
     ))
 }
 
 #[test]
 fn a_person_is_seen_when_a_sample_falls_in_the_band_and_hits_the_robot_when_none_does() {
-    // 2.0 m ahead: 1,190 mm at 10.1 s, 380 mm at 10.2 s, in the band.
+    // 2.0 m ahead: 1,190 mm at 10.142 s, 380 mm at 10.242 s, in the band.
     let seen = run_recorded(&runner(2.0), Arch::PSmpa).unwrap();
     assert_eq!(
         seen.summary.obstacles[0].fate,
         Fate::Detected(Device::Sonar)
     );
     assert_eq!(seen.summary.tally.collisions, 0);
-    // 1.7 m ahead: 890 mm at 10.1 s, then it reaches the robot within ⌈890 / 8.1⌉ = 110 ms,
-    // before the next read: the bumper is on, but the person hit the robot.
+    // 1.7 m ahead: 890 mm at 10.142 s, then it reaches the robot within ⌈890 / 8.1⌉ = 110 ms,
+    // the next read finding it below the band: the bumper is on, but the person hit the robot.
     let hit = run_recorded(&runner(1.7), Arch::PSmpa).unwrap();
     assert_eq!(hit.summary.obstacles[0].fate, Fate::Collided);
-    assert_eq!(when(&hit, WorldEvent::Collided(0)), Some(10_210));
-    // The person stands against the robot: the bumper feels them and the robot steps aside.
-    assert_eq!(when(&hit, WorldEvent::AvoidStarted(Some(0))), Some(10_220));
+    assert_eq!(when(&hit, WorldEvent::Collided(0)), Some(10_252));
+    // The person stands against the robot: the bump switch feels them once it settles, and
+    // the robot steps aside.
+    let settle = psmpa_drivers::switch::DEBOUNCE.as_millis();
+    assert_eq!(
+        when(&hit, WorldEvent::AvoidStarted(Some(0))),
+        Some(10_252 + settle)
+    );
     assert!(hit.summary.tally.reached_door);
 }
 

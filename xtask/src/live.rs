@@ -113,11 +113,20 @@ pub fn serve_on() {
 mod tests {
     use super::*;
     use crate::hil::chip::ChipRecording;
-    use crate::hil::chip::tests::Lines;
     use embassy_time::Instant;
-    use psmpa_core::record::{self, Header, Recorder};
+    use psmpa_core::record::{self, Header, RecordOut, Recorder};
     use psmpa_core::{FactSet, TraceEvent, TraceSink};
     use psmpa_fetch_tea::fetch_tea::FetchTea;
+
+    /// The chip's log: each write of its recorder a `rec [..]` line.
+    struct Lines(Vec<String>);
+
+    impl RecordOut for Lines {
+        fn write(&mut self, bytes: &[u8]) {
+            let list: Vec<String> = bytes.iter().map(u8::to_string).collect();
+            self.0.push(format!("rec [{}]", list.join(", ")));
+        }
+    }
 
     /// A board's recording of `events` (its start as `boards/rp/src/record.rs` writes it), as
     /// log lines.

@@ -103,11 +103,6 @@ const ONLY_FROM: &[OnlyFrom] = &[
         &["<embassy_executor::raw::Executor>::poll"],
         "embassy's poll loop is the only caller of a task's poll function",
     ),
-    (
-        "psmpa_firmware::firmware::compute",
-        &["psmpa_sim::robot::Nao<"],
-        "the robot's walk is the only user of the firmware's computation hook",
-    ),
     FORMATTING,
 ];
 

@@ -78,8 +78,8 @@ const HOST_STEPS: &[(&str, &str)] = &[
     ),
     (
         "behaviour step (one poll)",
-        // The simulated NAO's, for any mission (`Ms`).
-        "as psmpa_core::platform::Actuator<Ms>>::run::{{closure}}",
+        // The Fetch Tea robot's, on its compiled mission.
+        "as psmpa_core::platform::Actuator<psmpa_fetch_tea::fetch_tea::FetchTea>>::run::{{closure}}",
     ),
     (
         "store read, a sample",
@@ -91,7 +91,7 @@ const HOST_STEPS: &[(&str, &str)] = &[
         "psmpa_core::trace::TraceHash::words",
     ),
     (
-        // The scenarios' missions are loaded at run time: their plans through the FSM.
+        // A plan the planner made (locked-door's) runs through the run-time FSM.
         "Algorithm 2: compile a plan",
         "psmpa_core::runtime::fsm::Fsm::compile",
     ),

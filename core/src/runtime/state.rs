@@ -210,6 +210,14 @@ where
             if let Either::First(outcome) = select(behaviour.as_mut(), Timer::at(act_end)).await {
                 return Ok(outcome);
             }
+            // The phase ended: a behaviour due at that same instant ends in it. (On a chip the
+            // poll that found the phase over may have started a tick earlier, before the
+            // behaviour's own deadline.)
+            if let Poll::Ready(outcome) =
+                poll_fn(|cx| Poll::Ready(behaviour.as_mut().poll(cx))).await
+            {
+                return Ok(outcome);
+            }
         }
     }
 

@@ -128,6 +128,14 @@ pub fn echo_ms(ms: u64) -> Widths {
     Arc::new(move |_| Some(Duration::from_millis(ms)))
 }
 
+/// A far wall's echo: 6 or 7 ms (1,029 or 1,200 mm) by turns, a period (100 ms) each, as a
+/// real echo wavers. At the tests' 1 kHz tick an echo resolves 171 mm, coarser than the 50 mm
+/// of driving after which a sonar that keeps one reading is stuck (`STUCK_AFTER_MM`): a wall
+/// that always echoed the same width while the robot drove would be a stuck sonar.
+pub fn far_echo_ms(at: Instant) -> Duration {
+    Duration::from_millis(6 + (at.as_millis() / 100) % 2)
+}
+
 /// One motor channel's recorded pins.
 #[derive(Clone)]
 pub struct Wheel {
@@ -203,11 +211,11 @@ pub struct World {
 }
 
 impl World {
-    /// Nothing within 1 m (a 6 ms echo: 1,029 mm), no bump, an unlocked door, the marker in
-    /// view.
+    /// Nothing within 1 m (a far wall, [`far_echo_ms`]), no bump, an unlocked door, the
+    /// marker in view.
     pub fn clear() -> Self {
         Self {
-            echo: echo_ms(6),
+            echo: Arc::new(|at| Some(far_echo_ms(at))),
             bumper: Vec::new(),
             unlocked: true,
             marker: true,

@@ -15,9 +15,10 @@ use psmpa_core::{Phase, TraceEvent};
 use serde_json::{Map, Value, json};
 
 use crate::cli::outputs::{Held, describe, world_text};
-use crate::robot::{FetchTea, codes};
+use crate::robot::FetchTea;
 use crate::scenario::{Kind, Scenario};
 use crate::world::{Device, Place, WorldEvent};
+use psmpa_fetch_tea::codes;
 
 /// The topic of the robot's pose.
 pub const POSE: &str = "/robot/pose";
@@ -414,7 +415,6 @@ impl<W: Write> McapLog<W> {
                 codes::AVOID => "avoid",
                 codes::RESUME => "resume",
                 codes::LOCKED => "locked",
-                codes::SPEED => "speed",
                 _ => "user",
             })
             .with("value", value),

@@ -16,10 +16,11 @@ use serde_json::json;
 use crate::cli::files::Output;
 use crate::cli::foxglove::McapLog;
 use crate::cli::report::arch_title;
-use crate::robot::{Arch, FetchTea, codes};
+use crate::robot::{Arch, FetchTea};
 use crate::scenario::{Kind, Scenario};
 use crate::sim::{Recorded, WorldRecord};
 use crate::world::{Device, WorldEvent, WorldLog};
+use psmpa_fetch_tea::codes;
 
 fn secs(ms: u64) -> f64 {
     ms as f64 / 1000.0

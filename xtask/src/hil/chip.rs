@@ -99,14 +99,13 @@ impl ChipRecording {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
     use embassy_time::Instant;
     use psmpa_core::record::{RecordOut, Recorder};
     use psmpa_core::{SensorId, TraceEvent, TraceSink};
 
-    /// The chip's log: each write of its recorder a `rec [..]` line.
-    pub(crate) struct Lines(pub(crate) Vec<String>);
+    struct Lines(Vec<String>);
 
     impl RecordOut for Lines {
         fn write(&mut self, bytes: &[u8]) {

@@ -2496,7 +2496,13 @@ mod tests {
         // The bounds of absurd costs: unschedulable, not an overflow.
         assert!(bound::bounds(&huge, [100, 20]).is_err());
         assert!(b.tolerance_mm() > 0);
-        let measured = measured_costs();
+        let measured = bound::Costs {
+            sensing_poll: 100,
+            alarm: 3,
+            gpio: 0,
+            deciding: 1_000,
+            critical: 10,
+        };
         for margin in [0, 10_000, u64::MAX] {
             let odd = Budget {
                 margin_percent: margin,
@@ -2508,20 +2514,15 @@ mod tests {
         }
     }
 
-    /// Costs a bench might measure, for the budget's tests.
-    fn measured_costs() -> bound::Costs {
-        bound::Costs {
+    #[test]
+    fn a_budget_is_its_measured_costs_with_the_margin() {
+        let measured = bound::Costs {
             sensing_poll: 100,
             alarm: 3,
             gpio: 0,
             deciding: 1_000,
             critical: 10,
-        }
-    }
-
-    #[test]
-    fn a_budget_is_its_measured_costs_with_the_margin() {
-        let measured = measured_costs();
+        };
         let b = Budget::of(measured).unwrap();
         // At least 1,000 cycles more.
         assert_eq!(b.budget.sensing_poll, 1_100);
