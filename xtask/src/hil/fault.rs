@@ -16,7 +16,7 @@
 //!
 //! Expectations (`expect`, each optional): `reached_door`, `collisions`, `watchdog_resets`;
 //! `still`: once the fault has struck (the firmware fails a sensor, resets or panics) the
-//! motors never drive again; `motors_off_first`: after a panic the motors are off before the
+//! motors stop, within `stops_within_ms` or else 20 ms, and never drive again; `motors_off_first`: after a panic the motors are off before the
 //! firmware's log says a word; `stops_within_ms`: the motors drive when the fault is
 //! injected and stop within that many ms after it (for a hang: the watchdog's timeout and a
 //! sensor period), not before it; `log`: lines the log must hold (substrings);
@@ -138,7 +138,8 @@ pub struct Expect {
     pub collisions: Option<u32>,
     /// Resets by the watchdog.
     pub watchdog_resets: Option<u32>,
-    /// The motors never drive once the fault has struck.
+    /// The motors stop once the fault has struck (within `stops_within_ms`, or 20 ms) and
+    /// never drive again.
     #[serde(default)]
     pub still: bool,
     /// After a panic, the motors are off before the log says a word.

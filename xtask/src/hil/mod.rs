@@ -1355,6 +1355,11 @@ fn fate(f: Fate) -> String {
     }
 }
 
+/// How soon the motors must stop once a fault with `still` struck, unless it says
+/// (`stops_within_ms`): the runtime halts the robot in the deciding poll that learns of the
+/// failure, which a poll in progress and the interrupts delay by a few ms at most.
+const STILL_WITHIN_MS: u64 = 20;
+
 /// A fault scenario's expectations, checked.
 fn expectations(
     e: &Expect,
@@ -1426,6 +1431,27 @@ fn expectations(
     }
     if e.still {
         check(c.struck.is_some(), "the fault never struck".to_owned());
+        // Stopped, and stopped in time: a halt that leaves the wheels turning drives blind.
+        if let Some(struck) = c.struck {
+            let within = e.stops_within_ms.unwrap_or(STILL_WITHIN_MS);
+            if let Some(off) = c.off_at {
+                check(
+                    off.saturating_sub(struck) <= within * 1_000_000,
+                    format!(
+                        "the motors stopped {:.3} ms after the fault struck at {:.3} s, not within {within} ms",
+                        off.saturating_sub(struck) as f64 / 1e6,
+                        struck as f64 / 1e9
+                    ),
+                );
+            }
+            check(
+                !c.driving,
+                format!(
+                    "the motors still drove when the run ended, after the fault struck at {:.3} s",
+                    struck as f64 / 1e9
+                ),
+            );
+        }
         if let Some(at) = c.drove_after {
             check(
                 false,
@@ -2153,6 +2179,49 @@ fn text(r: &Report) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `still`: the motors must stop once a fault struck, in time, and stay stopped; a halt
+    /// that leaves them driving (the robot drives blind to the run's end) fails.
+    #[test]
+    fn still_requires_the_motors_stopped_after_the_fault() {
+        let e = Expect {
+            still: true,
+            ..Expect::default()
+        };
+        let judge = |c: &Collected| {
+            let mut failures = Vec::new();
+            expectations(&e, &Tally::default(), c, &BTreeMap::new(), &mut failures);
+            failures
+        };
+        let struck = 3_000_000_000;
+        // Stopped 1 ms after the fault, and still at the end: held.
+        let stopped = Collected {
+            struck: Some(struck),
+            off_at: Some(struck + 1_000_000),
+            ..Collected::default()
+        };
+        assert_eq!(judge(&stopped), Vec::<String>::new());
+        // Never stopped (halt does nothing): driving when the run ended.
+        let blind = Collected {
+            struck: Some(struck),
+            driving: true,
+            ..Collected::default()
+        };
+        let f = judge(&blind);
+        assert!(
+            f.iter()
+                .any(|f| f.contains("still drove when the run ended")),
+            "{f:?}"
+        );
+        // Stopped late.
+        let late = Collected {
+            struck: Some(struck),
+            off_at: Some(struck + (STILL_WITHIN_MS + 1) * 1_000_000),
+            ..Collected::default()
+        };
+        let f = judge(&late);
+        assert!(f.iter().any(|f| f.contains("not within 20 ms")), "{f:?}");
+    }
 
     #[test]
     fn bad_input_is_refused_before_anything_is_built() {

@@ -206,6 +206,19 @@ const MUTANTS: &[Mutant] = &[
         plays: &["scenarios/quiet.json"],
         everywhere: true,
     },
+    Mutant {
+        name: "no-halt",
+        what: "the halt after a failure does nothing: the wheels keep the walk's command and the robot drives on blind",
+        file: "fetch-tea/src/lib.rs",
+        find: "        // Nothing more to do if even braking fails.
+        let _ = self.brake();",
+        replace: "        // Planted: nothing stops the wheels.",
+        plays: &[
+            "boards/faults/no-echo.json",
+            "boards/faults/echo-stuck-high.json",
+        ],
+        everywhere: false,
+    },
 ];
 
 /// What became of one mutant.
