@@ -782,6 +782,7 @@ fn pin_fault(fault: Option<&Fault>) -> Option<PinFault> {
     match fault? {
         f @ Fault::NoEcho { .. } => Some(PinFault::NoEcho { at_ns: f.at_ns() }),
         f @ Fault::EchoStuckHigh { .. } => Some(PinFault::EchoStuck { at_ns: f.at_ns() }),
+        f @ Fault::TooNear { .. } => Some(PinFault::TooNear { at_ns: f.at_ns() }),
         f @ Fault::BumperChatter {
             for_s, every_us, ..
         } => Some(PinFault::Chatter {

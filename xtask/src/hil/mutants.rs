@@ -219,6 +219,17 @@ const MUTANTS: &[Mutant] = &[
         ],
         everywhere: false,
     },
+    Mutant {
+        name: "too-near-clear",
+        what: "the HC-SR04 driver reads an echo too short to time (an obstacle inside 20 mm) as nothing in range",
+        file: "drivers/src/hcsr04.rs",
+        find: "    if mm < MIN_MM as u64 {
+        Err(Hcsr04Error::OutOfRange)",
+        replace: "    if mm < MIN_MM as u64 {
+        Ok(Range::NothingInRange)",
+        plays: &["boards/faults/too-near.json"],
+        everywhere: false,
+    },
 ];
 
 /// What became of one mutant.
