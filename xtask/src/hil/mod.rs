@@ -586,19 +586,24 @@ pub struct BenchRecording {
 /// Keeps a run's recordings in `target/recordings/bench/` and checks them: the streamed one
 /// replays on the host with every decision equal (where a reset cut it, up to its end), and
 /// after a reset the ring's frames are the streamed recording's last ones.
-fn check_recording(report: &mut Report, stem: &str, cut_at_end: bool) {
+fn check_recording(
+    report: &mut Report,
+    stem: &str,
+    cut_at_end: bool,
+    written: &Settings,
+    dir: &Path,
+) {
     let text: String = report
         .log
         .iter()
         .map(|l| format!("{} {}\n", l.level, l.text))
         .collect();
-    let dir = recording::dir("bench");
     let mut fail = |why: String| report.failures.push(format!("flight recording: {why}"));
     let recs = match psmpa_sim::replay::from_log(&text) {
         Ok(r) => r,
         Err(e) => return fail(e),
     };
-    if let Err(e) = std::fs::create_dir_all(&dir) {
+    if let Err(e) = std::fs::create_dir_all(dir) {
         return fail(format!("{}: {e}", dir.display()));
     }
     if recs.len() > 2 {
@@ -623,6 +628,11 @@ fn check_recording(report: &mut Report, stem: &str, cut_at_end: bool) {
     let Some(streamed) = read.first() else {
         return fail("none in the log".to_owned());
     };
+    // The replay follows the recording's own calibration record: it must be the one the bench
+    // wrote into flash (a board that changes what it read runs another robot).
+    if let Some(why) = calibration_differs(&streamed.source, written) {
+        fail(why);
+    }
     let mut found = BenchRecording {
         frames: streamed.frames.len(),
         ..BenchRecording::default()
@@ -660,6 +670,55 @@ fn check_recording(report: &mut Report, stem: &str, cut_at_end: bool) {
         (false, None) => {}
     }
     report.recording = Some(found);
+}
+
+/// Why a board's recording does not carry the calibration record `written` into flash: its
+/// first setting that differs; `None` when it does.
+fn calibration_differs(source: &psmpa_sim::replay::Source, written: &Settings) -> Option<String> {
+    let psmpa_sim::replay::Source::Board { settings } = source else {
+        return Some("not a board's recording".to_owned());
+    };
+    if settings == written {
+        return None;
+    }
+    let (ran, wrote) = (
+        in_ms(&format!("{settings:?}")),
+        in_ms(&format!("{written:?}")),
+    );
+    let field = ran
+        .split(", ")
+        .zip(wrote.split(", "))
+        .find(|(a, b)| a != b)
+        .map_or_else(String::new, |(a, b)| {
+            format!(": {a} where the bench wrote {b}")
+        });
+    Some(format!(
+        "the board ran with another calibration than the bench wrote into its flash{field}"
+    ))
+}
+
+/// `debug` with each `Duration { ticks: N }` written as milliseconds.
+fn in_ms(debug: &str) -> String {
+    const OPEN: &str = "Duration { ticks: ";
+    let mut out = String::new();
+    let mut rest = debug;
+    while let Some(i) = rest.find(OPEN) {
+        out.push_str(&rest[..i]);
+        let after = &rest[i + OPEN.len()..];
+        let Some(end) = after.find(" }") else {
+            out.push_str(&rest[i..]);
+            return out;
+        };
+        match after[..end].parse::<u64>() {
+            Ok(ticks) => {
+                let _ = write!(out, "{} ms", ticks * 1_000 / embassy_time::TICK_HZ);
+            }
+            Err(_) => out.push_str(&rest[i..i + OPEN.len() + end + 2]),
+        }
+        rest = &after[end + 2..];
+    }
+    out.push_str(rest);
+    out
 }
 
 /// psmpa-sim's outcome of the same scenario.
@@ -706,6 +765,7 @@ fn play(
     play: &Play,
     budget: &Budget,
     out: &Path,
+    recordings: &Path,
 ) -> Result<(Report, PinLog), String> {
     let sc = &play.scenario;
     let settings = settings_for(sc, Chassis::Wheeled);
@@ -754,6 +814,8 @@ fn play(
     if play.fault.is_none() {
         compare_with_host(sc, &mut report, &obstacles);
     }
+    let cut = report.cut_at_max_s;
+    check_recording(&mut report, &play.stem(), cut, &settings, recordings);
     Ok((report, pins))
 }
 
@@ -1608,7 +1670,13 @@ pub fn stack_high_water() -> Option<(u64, Option<u64>)> {
 
 /// Plays every one of `plays` on `fw`, two at a time (each run is one Node process and one
 /// thread here); the results in their order.
-fn play_all(fw: &Firmware, plays: &[Play], budget: &Budget, out: &Path) -> Vec<Played> {
+fn play_all(
+    fw: &Firmware,
+    plays: &[Play],
+    budget: &Budget,
+    out: &Path,
+    recordings: &Path,
+) -> Vec<Played> {
     let next = std::sync::atomic::AtomicUsize::new(0);
     let slots: Vec<std::sync::Mutex<Option<Played>>> =
         plays.iter().map(|_| std::sync::Mutex::new(None)).collect();
@@ -1620,7 +1688,7 @@ fn play_all(fw: &Firmware, plays: &[Play], budget: &Budget, out: &Path) -> Vec<P
                     let (Some(p), Some(slot)) = (plays.get(i), slots.get(i)) else {
                         break;
                     };
-                    let result = play(fw, p, budget, out);
+                    let result = play(fw, p, budget, out, recordings);
                     if let Ok(mut slot) = slot.lock() {
                         *slot = Some(result);
                     }
@@ -1723,7 +1791,7 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
         return Ending::Failed(format!("{}: {e}", out.display()));
     }
     let wall = WallClock::now();
-    let results = play_all(&fw, &plays, &budget, &out);
+    let results = play_all(&fw, &plays, &budget, &out, &recording::dir("bench"));
     let mut failed = Vec::new();
     let mut reports = Vec::new();
     for (p, result) in plays.iter().zip(results) {
@@ -1732,8 +1800,6 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
                 if mode == Mode::Calibrate {
                     report.failures.retain(|f| !calibrating(f));
                 }
-                let cut = report.cut_at_max_s;
-                check_recording(&mut report, &p.stem(), cut);
                 if !report.failures.is_empty() {
                     failed.push(p.name());
                 }
@@ -1764,7 +1830,7 @@ pub fn run(files: &[PathBuf], json: bool, mode: Mode) -> Ending {
     }
     // The same scenario, the same pin log: the first one again.
     if defaults && let (Some(p), Some((first, _))) = (plays.first(), reports.first()) {
-        match play(&fw, p, &budget, &out) {
+        match play(&fw, p, &budget, &out, &out.join("again")) {
             Ok((again, _)) if again.pin_log_hash == first.pin_log_hash => {
                 if !json {
                     println!(
@@ -2180,6 +2246,22 @@ fn text(r: &Report) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The recording's calibration record against the one the bench wrote: a board that
+    /// lengthens a period when it reads its calibration runs another robot.
+    #[test]
+    fn a_recording_with_another_calibration_than_the_flash_fails() {
+        let written = Settings::DEFAULT;
+        let board = |settings| psmpa_sim::replay::Source::Board { settings };
+        assert_eq!(calibration_differs(&board(written), &written), None);
+        let mut ran = written;
+        ran.bumper_period = Some(embassy_time::Duration::from_millis(25));
+        let why = calibration_differs(&board(ran), &written).unwrap();
+        assert!(
+            why.contains("bumper_period: Some(25 ms) where the bench wrote bumper_period: None"),
+            "{why}"
+        );
+    }
 
     /// `still`: the motors must stop once a fault struck, in time, and stay stopped; a halt
     /// that leaves them driving (the robot drives blind to the run's end) fails.

@@ -230,6 +230,22 @@ const MUTANTS: &[Mutant] = &[
         plays: &["boards/faults/too-near.json"],
         everywhere: false,
     },
+    Mutant {
+        name: "slow-bumper",
+        what: "the board lengthens the bumper's period by 5 ms when it reads its calibration (25 ms for 20 ms: a fifth fewer samples, each gap within the sampling check's period and debounce)",
+        file: "boards/rp/src/calibration.rs",
+        find: "    Settings::from_record(&record)
+}",
+        replace: "    Settings::from_record(&record).map(|mut s| {
+        s.bumper_period = s
+            .bumper_period
+            .map(|p| p + embassy_time::Duration::from_millis(5));
+        s
+    })
+}",
+        plays: &["scenarios/bumper-4.json"],
+        everywhere: false,
+    },
 ];
 
 /// What became of one mutant.
@@ -422,7 +438,11 @@ fn control(files: &[PathBuf], budget: &Budget, out: &Path) -> Result<(), String>
             .map_err(|e| format!("{ANNOTATIONS}: {e}"))?,
     )?)?;
     let (list, _) = plays(files)?;
-    for (p, result) in list.iter().zip(play_all(&fw, &list, budget, out)) {
+    let recordings = out.join("recordings");
+    for (p, result) in list
+        .iter()
+        .zip(play_all(&fw, &list, budget, out, &recordings))
+    {
         let failures = match result {
             Ok((report, _)) => report.failures,
             Err(e) => vec![e],
@@ -493,7 +513,7 @@ pub fn run(json: bool) -> Ending {
         for p in &mut list {
             p.stop_at_failure = true;
         }
-        let played = play_all(&fw, &list, &budget, &out);
+        let played = play_all(&fw, &list, &budget, &out, &out.join("recordings"));
         let names: Vec<String> = list.iter().map(super::Play::name).collect();
         let v = verdict(m, &played, &names);
         if json {
