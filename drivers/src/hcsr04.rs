@@ -28,9 +28,9 @@ pub const TRIGGER_PULSE: Duration = Duration::from_micros(10);
 pub const RISE_TIMEOUT: Duration = Duration::from_millis(5);
 /// The echo must fall this long after it rose, or the line is stuck. The module ends a pulse
 /// by itself after about 38 ms when no echo returns. A whole read (trigger, rise, pulse) stays
-/// within 48 ms, inside the Fetch Tea sonar's 50 ms timeout: a stuck line is this driver's
-/// [`Hcsr04Error::Stuck`], not the runtime's timeout. A read that first waits out a pulse
-/// still running takes that pulse's rest longer.
+/// within 48 ms; one that first waits out a pulse still running (a read cut short before)
+/// takes up to this longer: 90 ms, inside the Fetch Tea sonar's 100 ms timeout, so a stuck
+/// line is this driver's [`Hcsr04Error::Stuck`], not the runtime's timeout.
 pub const PULSE_LIMIT: Duration = Duration::from_millis(42);
 /// Nearer than this the module cannot measure (its rated minimum).
 pub const MIN_MM: u32 = 20;

@@ -145,8 +145,8 @@ fn bad_missions_are_rejected_with_one_clear_line() {
         // The simulated NAO samples its sonar on the scenario's period: a mission that says
         // otherwise would be overridden, so it is refused.
         (
-            r#""mode": "cyclic", "period_ms": 100, "timeout_ms": 50"#,
-            r#""mode": "one-shot", "timeout_ms": 50"#,
+            r#""mode": "cyclic", "period_ms": 100, "timeout_ms": 100"#,
+            r#""mode": "one-shot", "timeout_ms": 100"#,
             &["sensor `sonar` must be `cyclic`"],
         ),
         (
@@ -438,7 +438,7 @@ fn likely_mistakes_are_warnings_that_say_why() {
         ),
         (
             "timeout.json",
-            m.replace(r#""timeout_ms": 50"#, r#""timeout_ms": 86400000"#),
+            m.replace(r#""timeout_ms": 100"#, r#""timeout_ms": 86400000"#),
             "sensors[0].timeout_ms: 86400000 ms: a sensor that stops answering goes unnoticed",
         ),
     ];

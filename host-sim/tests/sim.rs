@@ -281,13 +281,19 @@ fn a_slow_sonar_read_leaves_the_bumper_on_its_period_and_misses_nothing() {
 }
 
 /// The contract: with a read latency at least as long as the sensor's timeout (the mission's
-/// sonar: 50 ms) every sample of that sensor times out, even one that would answer on the very
+/// sonar's) every sample of that sensor times out, even one that would answer on the very
 /// tick of the timeout; the robot stops before it moves. A read 1 ms shorter answers. (The
 /// bumper is a switch on a pin, read at once: its latency delays the contact, not the read.)
 #[test]
 fn a_read_as_long_as_the_sensors_timeout_always_times_out() {
     {
-        let (sensor, timeout_ms) = ("sonar", 50);
+        let sensor = "sonar";
+        let table = &psmpa_fetch_tea::fetch_tea::TABLES.domain;
+        let timeout_ms = table
+            .sensor_id(sensor)
+            .and_then(|id| table.sensor(id))
+            .map(|s| s.timeout.as_millis())
+            .unwrap();
         let with = |latency: u64| {
             inline(&format!(
                 r#"{{"name":"slow","{sensor}":{{"latency_ms":{latency}}},"interferences":[]}}"#
