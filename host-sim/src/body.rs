@@ -107,6 +107,12 @@ pub enum PinFault {
         /// From when, ns.
         at_ns: u64,
     },
+    /// The marker sensor sees nothing from `at_ns` (its strip covered, its lens dirty): it
+    /// leaves its open-drain output open, even at a door.
+    MarkerGone {
+        /// From when, ns.
+        at_ns: u64,
+    },
     /// The bumper's wire chatters (an edge every `every_ns`) from `at_ns` to `until_ns`.
     Chatter {
         /// From when, ns.
@@ -277,6 +283,18 @@ impl<'s, L: WorldLog, M: RawMutex> Body<'s, L, M> {
     /// Whether the wheels drive the robot along its way now.
     pub const fn driving(&self) -> bool {
         self.driving.is_some()
+    }
+
+    /// Whether the H-bridge short-brakes both wheels now (the TB6612's truth table: STBY high
+    /// and, on each channel, IN1 and IN2 high, or one of them with the PWM low). Otherwise a
+    /// wheel that does not drive coasts (IN1 and IN2 low, or STBY low) and rolls on.
+    pub fn braked(&self) -> bool {
+        self.stby
+            && self
+                .dirs
+                .iter()
+                .zip(self.duties)
+                .all(|([a, b], duty)| (*a && *b) || (*a != *b && duty == 0))
     }
 
     /// A random draw from SplitMix64: the bounces.
@@ -613,7 +631,8 @@ impl<'s, L: WorldLog, M: RawMutex> Body<'s, L, M> {
             let settled = self.bounce(out, pin::BUMPER, pressed, at);
             bumper = Some((settled, pressed));
         }
-        let seen = self.world.door_here().is_some();
+        let blind = matches!(self.fault, Some(PinFault::MarkerGone { at_ns }) if ns >= at_ns);
+        let seen = !blind && self.world.door_here().is_some();
         if self.closed(pin::MARKER) != seen {
             self.set(out, pin::MARKER, seen.then_some(false), ns);
         }

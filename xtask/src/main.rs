@@ -89,11 +89,11 @@ enum Task {
         planning: bool,
     },
     /// The robot's firmware on an emulated Raspberry Pi Pico (RP2040, rp2040js), in the loop
-    /// with the project's world: every shipped scenario and the bench's fault scenarios, or
-    /// the files given; each checked against psmpa-sim and its response-time bounds.
+    /// with the project's world: every shipped scenario, the bench's fault scenarios and its
+    /// soak, or the files given; each checked against psmpa-sim and its response-time bounds.
     Hil {
         /// Scenario files (psmpa-sim's format) or the bench's fault scenarios
-        /// (boards/faults/*.json); none: every shipped one.
+        /// (boards/faults/*.json); none: every shipped one, and boards/soak/*.json.
         files: Vec<std::path::PathBuf>,
         /// Print one JSON object a run on stdout, nothing else.
         #[arg(long)]

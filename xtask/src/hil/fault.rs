@@ -10,7 +10,8 @@
 //!
 //! Faults (`kind`): on the pins, played by the world, `no-echo` (the sonar never answers from
 //! `at_s`), `echo-stuck-high` (its echo line sticks high at the next trigger), `too-near`
-//! (from `at_s` every echo is narrower than the ranger's 20 mm minimum takes),
+//! (from `at_s` every echo is narrower than the ranger's 20 mm minimum takes), `marker-gone`
+//! (from `at_s` the marker sensor sees nothing, even at a door: it leaves its line open),
 //! `bumper-chatter` (the bumper's wire makes an edge every `every_us` for `for_s`); in the
 //! firmware, through its test points, `hang` (thread mode loops for ever, as a behaviour
 //! stuck in a loop) and `panic` (thread mode panics, as a bug would).
@@ -46,6 +47,11 @@ pub enum Fault {
         /// From when, s.
         at_s: f64,
     },
+    /// The marker sensor sees nothing, even at a door.
+    MarkerGone {
+        /// From when, s.
+        at_s: f64,
+    },
     /// The bumper's wire chatters.
     BumperChatter {
         /// From when, s.
@@ -74,6 +80,7 @@ impl Fault {
             Self::NoEcho { at_s }
             | Self::EchoStuckHigh { at_s }
             | Self::TooNear { at_s }
+            | Self::MarkerGone { at_s }
             | Self::BumperChatter { at_s, .. }
             | Self::Hang { at_s }
             | Self::Panic { at_s } => at_s,
@@ -91,6 +98,7 @@ impl Fault {
             Self::NoEcho { .. } => "no-echo",
             Self::EchoStuckHigh { .. } => "echo-stuck-high",
             Self::TooNear { .. } => "too-near",
+            Self::MarkerGone { .. } => "marker-gone",
             Self::BumperChatter { .. } => "bumper-chatter",
             Self::Hang { .. } => "hang",
             Self::Panic { .. } => "panic",
@@ -120,6 +128,7 @@ impl FaultSpec {
             "no-echo" => only_at(Fault::NoEcho { at_s }),
             "echo-stuck-high" => only_at(Fault::EchoStuckHigh { at_s }),
             "too-near" => only_at(Fault::TooNear { at_s }),
+            "marker-gone" => only_at(Fault::MarkerGone { at_s }),
             "hang" => only_at(Fault::Hang { at_s }),
             "panic" => only_at(Fault::Panic { at_s }),
             "bumper-chatter" => match (self.for_s, self.every_us) {
@@ -131,7 +140,7 @@ impl FaultSpec {
                 _ => Err("fault bumper-chatter: at_s, for_s and every_us".to_owned()),
             },
             other => Err(format!(
-                "unknown fault kind {other:?}: no-echo, echo-stuck-high, too-near, bumper-chatter, hang or panic"
+                "unknown fault kind {other:?}: no-echo, echo-stuck-high, too-near, marker-gone, bumper-chatter, hang or panic"
             )),
         }
     }

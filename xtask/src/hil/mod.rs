@@ -128,13 +128,15 @@ impl Play {
     }
 }
 
-/// Reads what to play: the files given, or every shipped scenario and fault scenario.
+/// Reads what to play: the files given, or every shipped scenario, fault scenario and the
+/// bench's soak (`boards/soak`: runs past 65.536 s of uptime, where 16-bit milliseconds wrap).
 fn plays(files: &[PathBuf]) -> Result<(Vec<Play>, bool), String> {
     let defaults = files.is_empty();
     let files: Vec<PathBuf> = if defaults {
         let root = firmware::root();
         let mut all = json_files(&root.join("scenarios"))?;
         all.extend(json_files(&root.join("boards/faults"))?);
+        all.extend(json_files(&root.join("boards/soak"))?);
         all
     } else {
         files.to_vec()
@@ -672,53 +674,54 @@ fn check_recording(
     report.recording = Some(found);
 }
 
+/// The settings of a calibration record ([`Settings::to_record`]), word by word after its
+/// magic and version: each one's name and unit (`‰`: a duty, two's complement).
+const RECORD_FIELDS: [(&str, &str); RECORD_WORDS - 3] = [
+    ("clearance", "mm"),
+    ("walk", "mm"),
+    ("walking duty", "‰"),
+    ("walking speed", "mm/s"),
+    ("push duty", "‰"),
+    ("push", "ms"),
+    ("enter duty", "‰"),
+    ("enter", "ms"),
+    ("planning", "µs"),
+    ("sonar period", "ms"),
+    ("bumper period", "ms"),
+    ("side step", "ms"),
+    ("echo rise", "ms"),
+    ("back door", "mm"),
+];
+
 /// Why a board's recording does not carry the calibration record `written` into flash: its
-/// first setting that differs; `None` when it does.
+/// first setting that differs, compared word by word; `None` when it does.
 fn calibration_differs(source: &psmpa_sim::replay::Source, written: &Settings) -> Option<String> {
     let psmpa_sim::replay::Source::Board { settings } = source else {
         return Some("not a board's recording".to_owned());
     };
-    if settings == written {
+    let (ran, wrote) = (settings.to_record(), written.to_record());
+    if ran == wrote {
         return None;
     }
-    let (ran, wrote) = (
-        in_ms(&format!("{settings:?}")),
-        in_ms(&format!("{written:?}")),
-    );
+    // A period of 0 is the mission's own.
+    let word = |w: u32, (name, unit): (&str, &str)| match unit {
+        "‰" => format!("{} {unit}", w as i32),
+        _ if w == 0 && name.ends_with("period") => "the mission's".to_owned(),
+        _ => format!("{w} {unit}"),
+    };
     let field = ran
-        .split(", ")
-        .zip(wrote.split(", "))
-        .find(|(a, b)| a != b)
-        .map_or_else(String::new, |(a, b)| {
-            format!(": {a} where the bench wrote {b}")
+        .iter()
+        .zip(&wrote)
+        .skip(2)
+        .zip(RECORD_FIELDS)
+        .find(|((a, b), _)| a != b)
+        .map_or_else(String::new, |((a, b), field)| {
+            let (ran, wrote) = (word(*a, field), word(*b, field));
+            format!(": {} {ran} where the bench wrote {wrote}", field.0)
         });
     Some(format!(
         "the board ran with another calibration than the bench wrote into its flash{field}"
     ))
-}
-
-/// `debug` with each `Duration { ticks: N }` written as milliseconds.
-fn in_ms(debug: &str) -> String {
-    const OPEN: &str = "Duration { ticks: ";
-    let mut out = String::new();
-    let mut rest = debug;
-    while let Some(i) = rest.find(OPEN) {
-        out.push_str(&rest[..i]);
-        let after = &rest[i + OPEN.len()..];
-        let Some(end) = after.find(" }") else {
-            out.push_str(&rest[i..]);
-            return out;
-        };
-        match after[..end].parse::<u64>() {
-            Ok(ticks) => {
-                let _ = write!(out, "{} ms", ticks * 1_000 / embassy_time::TICK_HZ);
-            }
-            Err(_) => out.push_str(&rest[i..i + OPEN.len() + end + 2]),
-        }
-        rest = &after[end + 2..];
-    }
-    out.push_str(rest);
-    out
 }
 
 /// psmpa-sim's outcome of the same scenario.
@@ -845,6 +848,7 @@ fn pin_fault(fault: Option<&Fault>) -> Option<PinFault> {
         f @ Fault::NoEcho { .. } => Some(PinFault::NoEcho { at_ns: f.at_ns() }),
         f @ Fault::EchoStuckHigh { .. } => Some(PinFault::EchoStuck { at_ns: f.at_ns() }),
         f @ Fault::TooNear { .. } => Some(PinFault::TooNear { at_ns: f.at_ns() }),
+        f @ Fault::MarkerGone { .. } => Some(PinFault::MarkerGone { at_ns: f.at_ns() }),
         f @ Fault::BumperChatter {
             for_s, every_us, ..
         } => Some(PinFault::Chatter {
@@ -1240,6 +1244,20 @@ fn report(
         failures.push(format!(
             "reactions: the robot still drove {:.3} ms after its {} showed an obstacle at {:.3} s",
             now.saturating_sub(*edge) as f64 / 1e6,
+            names.get(*i).unwrap_or(&"?"),
+            *edge as f64 / 1e9
+        ));
+    }
+    // A reset or a panic lets the wheels coast (every pin low): a stop the firmware did not
+    // command is no reaction of its.
+    let commanded = !matches!(
+        play.fault.as_ref().map(|f| f.fault),
+        Some(Fault::Hang { .. } | Fault::Panic { .. })
+    );
+    for (i, edge, stop) in bw.coasted.iter().filter(|_| commanded) {
+        failures.push(format!(
+            "reactions: the motors coasted to a stop at {:.3} s, after the {} showed an obstacle at {:.3} s (IN1 and IN2 low, or STBY low): a reaction short-brakes the wheels",
+            *stop as f64 / 1e9,
             names.get(*i).unwrap_or(&"?"),
             *edge as f64 / 1e9
         ));
@@ -2258,7 +2276,7 @@ mod tests {
         ran.bumper_period = Some(embassy_time::Duration::from_millis(25));
         let why = calibration_differs(&board(ran), &written).unwrap();
         assert!(
-            why.contains("bumper_period: Some(25 ms) where the bench wrote bumper_period: None"),
+            why.contains("bumper period 25 ms where the bench wrote the mission's"),
             "{why}"
         );
     }

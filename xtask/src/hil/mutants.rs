@@ -246,6 +246,49 @@ const MUTANTS: &[Mutant] = &[
         plays: &["scenarios/bumper-4.json"],
         everywhere: false,
     },
+    Mutant {
+        name: "coasting-stop",
+        what: "the H-bridge's brake lets the motors coast (IN1 and IN2 low) instead of shorting them: the robot rolls on after it stops",
+        file: "drivers/src/hbridge.rs",
+        find: "    pub fn brake(&mut self) -> Result<(), PinError> {
+        self.wake()?;
+        self.left.brake()?;
+        self.right.brake()
+    }",
+        replace: "    pub fn brake(&mut self) -> Result<(), PinError> {
+        self.wake()?;
+        self.coast()
+    }",
+        plays: &["scenarios/sonar-6.json", "scenarios/bumper-4.json"],
+        everywhere: true,
+    },
+    Mutant {
+        name: "floating-marker",
+        what: "the marker sensor's input has no pull-up: its open-drain output, open where no marker is in view, floats",
+        file: "boards/rp/src/lib.rs",
+        find: "Marker::new(Input::new(p.PIN_5, Pull::Up)",
+        replace: "Marker::new(Input::new(p.PIN_5, Pull::None)",
+        plays: &["boards/faults/marker-gone.json"],
+        everywhere: false,
+    },
+    Mutant {
+        name: "time-bomb",
+        what: "a guard against a clock running backwards, kept in 16-bit milliseconds: from 65.536 s of uptime every sonar read is skipped",
+        file: "fetch-tea/src/lib.rs",
+        find: "            Sonar => {
+                let read = self.sonar.lock().await.measure().await;",
+        replace: "            Sonar => {
+                use core::sync::atomic::{AtomicU16, Ordering::Relaxed};
+                static LAST_MS: AtomicU16 = AtomicU16::new(0);
+                let now_ms = Instant::now().as_millis() as u16;
+                if now_ms < LAST_MS.load(Relaxed) {
+                    return Ok(None);
+                }
+                LAST_MS.store(now_ms, Relaxed);
+                let read = self.sonar.lock().await.measure().await;",
+        plays: &["boards/soak/long-hall.json"],
+        everywhere: false,
+    },
 ];
 
 /// What became of one mutant.

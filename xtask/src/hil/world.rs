@@ -136,6 +136,9 @@ pub struct BenchWorld<'s> {
     /// Edges that showed an obstacle to a driving robot that never stopped for them: sensor,
     /// ns.
     pub unanswered: Vec<(usize, u64)>,
+    /// Reactions that let the wheels coast to a stop instead of braking them: sensor, the
+    /// obstacle's edge and the stop, ns.
+    pub coasted: Vec<(usize, u64, u64)>,
     /// What the recording says of each sensor.
     pub sampled: [Sampled; SLOTS],
     /// Readings that disagree with the pins: what the robot read, what the rig presented.
@@ -167,6 +170,7 @@ impl<'s> BenchWorld<'s> {
             tolerance_mm,
             reactions: [Reactions::default(); 2],
             unanswered: Vec::new(),
+            coasted: Vec::new(),
             sampled: Default::default(),
             misreads: Vec::new(),
             sensor_failed: None,
@@ -219,10 +223,14 @@ impl<'s> BenchWorld<'s> {
             }
         }
         if fx.stopped {
-            for r in &mut self.reactions {
+            let braked = self.body.braked();
+            for (i, r) in self.reactions.iter_mut().enumerate() {
                 if let Some(edge) = r.pending.take() {
                     let cycles = ns.saturating_sub(edge) / NS_PER_CYCLE;
                     r.worst_cycles = r.worst_cycles.max(Some(cycles));
+                    if !braked {
+                        self.coasted.push((i, edge, ns));
+                    }
                 }
             }
         }
@@ -573,6 +581,51 @@ mod tests {
         bw.output(pin::RIGHT[1], false, *t);
         bw.duty(pin::LEFT[2], 0, *t);
         bw.duty(pin::RIGHT[2], 0, *t);
+    }
+
+    /// The robot drives at the box 350 mm ahead, its echo falls, and by 10 ms the wheels stop:
+    /// braked (IN2 raised beside IN1) or let coast (IN1 lowered). What was recorded of the
+    /// reaction: whether it coasted, and its cycles.
+    fn reaction_stopping(coast: bool) -> (Vec<(usize, u64, u64)>, Option<u64>) {
+        let sc = boxed();
+        let sc = &sc;
+        psmpa_sim::backend::simulate(
+            async move {
+                let mut bw = BenchWorld::new(sc, 600, [0, 1, 2, 3], None, 20);
+                for p in [pin::STBY, pin::LEFT[0], pin::RIGHT[0]] {
+                    bw.output(p, true, 0);
+                }
+                bw.duty(pin::LEFT[2], 600, 0);
+                bw.duty(pin::RIGHT[2], 600, 0);
+                bw.output(pin::TRIGGER, true, 1_000);
+                bw.output(pin::TRIGGER, false, 11_000);
+                embassy_time::Timer::at(Instant::from_millis(10)).await;
+                for wheel in [pin::LEFT, pin::RIGHT] {
+                    if coast {
+                        bw.output(wheel[0], false, 10_000_000);
+                    } else {
+                        bw.output(wheel[1], true, 10_000_000);
+                    }
+                }
+                (bw.coasted.clone(), bw.reactions[0].worst_cycles)
+            },
+            embassy_time::Duration::from_secs(1),
+        )
+        .unwrap()
+        .output
+    }
+
+    #[test]
+    fn a_reaction_that_lets_the_wheels_coast_is_recorded() {
+        let (coasted, cycles) = reaction_stopping(false);
+        assert!(coasted.is_empty(), "{coasted:?}");
+        assert!(cycles.is_some());
+        let (coasted, cycles) = reaction_stopping(true);
+        assert!(cycles.is_some());
+        assert!(
+            matches!(coasted[..], [(0, edge, 10_000_000)] if edge < 10_000_000),
+            "{coasted:?}"
+        );
     }
 
     /// The world's door events of a scenario `json` driven by `drives` (ms each), with
