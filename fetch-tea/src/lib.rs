@@ -590,15 +590,24 @@ impl<So, Bu, Ca, Ha, Wh, Pc> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
         &self.settings
     }
 
+    /// Runs `change` on the wheels' record ([`Pause`]) under its lock, and keeps it.
+    fn pause<T>(&self, change: impl FnOnce(&mut Pause) -> T) -> T {
+        self.pause.lock(|p| {
+            let mut pause = p.get();
+            let out = change(&mut pause);
+            p.set(pause);
+            out
+        })
+    }
+
     /// Notes the sonar's reading (`None`: nothing in range, or switched on); whether it is
     /// stuck: an echo in range that keeps one distance while the wheels carry the robot
     /// [`STUCK_AFTER_MM`] on, the sonar on all along. (One stuck at "nothing in range" cannot
     /// be told from an empty path; nor, under SMPA, one that sticks while the wheels are held.)
     fn echo(&self, mm: Option<u16>) -> bool {
-        self.pause.lock(|p| {
-            let mut pause = p.get();
+        self.pause(|pause| {
             let at = pause.odometer_now();
-            let stuck = match (pause.echo, mm) {
+            match (pause.echo, mm) {
                 (Some((last, since)), Some(mm)) if last == mm => {
                     // The odometer's units (ticks times duty) against the distance, both
                     // sides multiplied out: no division on the sampling path.
@@ -615,9 +624,7 @@ impl<So, Bu, Ca, Ha, Wh, Pc> FetchTea<So, Bu, Ca, Ha, Wh, Pc> {
                     pause.echo = mm.map(|mm| (mm, at));
                     false
                 }
-            };
-            p.set(pause);
-            stuck
+            }
         })
     }
 }
@@ -703,10 +710,8 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
     /// Drives the wheels at `left` and `right` (thousandths), unless a sense phase holds
     /// them (then they drive once it ends).
     fn drive(&self, left: i16, right: i16) -> Result<(), PinError> {
-        let held = self.pause.lock(|p| {
-            let mut pause = p.get();
+        let held = self.pause(|pause| {
             pause.driving = Some((left, right));
-            p.set(pause);
             pause.since.is_some()
         });
         if held {
@@ -720,20 +725,12 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
     /// Notes on the odometer that the wheels now run as `command` says, once their pins are
     /// written: the wheels change when the pins do.
     fn moved(&self, command: Option<(i16, i16)>) {
-        self.pause.lock(|p| {
-            let mut pause = p.get();
-            pause.moving(Instant::now(), command);
-            p.set(pause);
-        });
+        self.pause(|pause| pause.moving(Instant::now(), command));
     }
 
     /// Brakes the wheels.
     fn brake(&self) -> Result<(), PinError> {
-        self.pause.lock(|p| {
-            let mut pause = p.get();
-            pause.driving = None;
-            p.set(pause);
-        });
+        self.pause(|pause| pause.driving = None);
         let set = self.wheels(Drive::brake);
         self.moved(None);
         set
@@ -741,11 +738,7 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute>
 
     /// Starts or ends a side step.
     fn stepping(&self, stepping: bool) {
-        self.pause.lock(|p| {
-            let mut pause = p.get();
-            pause.stepping = stepping;
-            p.set(pause);
-        });
+        self.pause(|pause| pause.stepping = stepping);
     }
 
     /// How long the wheels have driven straight ahead, at the walking duty: the odometer, in
@@ -980,8 +973,7 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator<fet
     /// SMPA's sense phase: the wheels brake while it lasts and drive on as they were told
     /// when it ends; the time it held them does not count as driven.
     fn hold(&self, _: fetch_tea::Action, held: bool) {
-        let resume = self.pause.lock(|p| {
-            let mut pause = p.get();
+        let resume = self.pause(|pause| {
             let now = Instant::now();
             match (held, pause.since) {
                 (true, None) => pause.since = Some(now),
@@ -992,7 +984,6 @@ impl<So, Bu, Ca, Ha, L: Motor, R: Motor, S: OutputPin, Pc: Compute> Actuator<fet
                 }
                 _ => return None,
             }
-            p.set(pause);
             Some(pause.driving)
         });
         // Nothing more to do if a pin fails: the next command reports it.
