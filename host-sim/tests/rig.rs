@@ -8,7 +8,7 @@ use psmpa_core::{TraceEvent, Value};
 use psmpa_sim::load::{load, parse};
 use psmpa_sim::rig::{Chassis, settings_for};
 use psmpa_sim::robot::Arch;
-use psmpa_sim::run::Ending;
+use psmpa_sim::run::{Ending, Summary};
 use psmpa_sim::scenario::Scenario;
 use psmpa_sim::sim::{Setup, TraceRecord, WorldRecord, run_chassis, run_with};
 use psmpa_sim::world::{Fate, WorldEvent};
@@ -16,6 +16,18 @@ use psmpa_sim::world::{Fate, WorldEvent};
 fn scenario(name: &str) -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("../scenarios/{name}.json"));
     load(&path).unwrap()
+}
+
+/// `sc` under `setup` to its end, its world's events and its trace recorded.
+fn recorded(sc: &Scenario, setup: Setup) -> (Summary, WorldRecord, TraceRecord) {
+    run_with(
+        sc,
+        setup,
+        WorldRecord::default(),
+        TraceRecord::default(),
+        || false,
+    )
+    .unwrap()
 }
 
 /// `arch` on the boards' chassis.
@@ -36,14 +48,7 @@ fn on_an_empty_path_the_robot_drives_its_calibrated_time_pushes_and_enters() {
         r#"{"name": "empty", "door_m": 1.0, "robot": {"speed_mps": 0.1}, "interferences": []}"#,
     );
     let settings = settings_for(&sc, Chassis::Wheeled);
-    let (s, world, _) = run_with(
-        &sc,
-        wheeled(Arch::PSmpa),
-        WorldRecord::default(),
-        TraceRecord::default(),
-        || false,
-    )
-    .unwrap();
+    let (s, world, _) = recorded(&sc, wheeled(Arch::PSmpa));
     assert!(matches!(s.ending, Ending::Goal(_)), "{:?}", s.ending);
     assert!(s.tally.reached_door);
     let at = |want: WorldEvent| {
@@ -76,14 +81,7 @@ fn smpa_sense_phases_hold_the_wheels_and_do_not_count_as_driven() {
     let sc = inline(
         r#"{"name": "held", "door_m": 1.0, "robot": {"speed_mps": 0.1}, "interferences": []}"#,
     );
-    let (s, world, _) = run_with(
-        &sc,
-        wheeled(Arch::Smpa),
-        WorldRecord::default(),
-        TraceRecord::default(),
-        || false,
-    )
-    .unwrap();
+    let (s, world, _) = recorded(&sc, wheeled(Arch::Smpa));
     assert!(s.tally.reached_door, "{:?}", s.ending);
     assert!(
         matches!(s.ending, Ending::Goal(r) if r.plans_failed == 0),
@@ -184,14 +182,7 @@ fn the_bumpers_latency_delays_its_contact_on_the_pin() {
 /// driver does; it does not lose the sample (and the walk does not start on the last belief).
 #[test]
 fn a_sonar_switched_on_during_its_last_pulse_waits_it_out_and_reads() {
-    let (_, _, trace) = run_with(
-        &scenario("locked-door"),
-        Setup::new(Arch::PSmpa),
-        WorldRecord::default(),
-        TraceRecord::default(),
-        || false,
-    )
-    .unwrap();
+    let (_, _, trace) = recorded(&scenario("locked-door"), Setup::new(Arch::PSmpa));
     let sonar = psmpa_fetch_tea::fetch_tea::Sensor::Sonar.id();
     let lost = trace
         .0
@@ -208,14 +199,7 @@ fn a_sonar_switched_on_during_its_last_pulse_waits_it_out_and_reads() {
 #[test]
 fn the_naos_walk_counts_what_it_rolled_not_what_it_pushed() {
     let sc = scenario("bumper-4");
-    let (s, world, trace) = run_with(
-        &sc,
-        Setup::new(Arch::Smpa),
-        WorldRecord::default(),
-        TraceRecord::default(),
-        || false,
-    )
-    .unwrap();
+    let (s, world, trace) = recorded(&sc, Setup::new(Arch::Smpa));
     assert!(s.tally.collisions > 0, "the robot pushed against something");
     let (_, pos, _) = world
         .0
