@@ -366,6 +366,9 @@ const MAIN_TASK: &str = "psmpa_board_rp::__control_task::";
 pub struct JobWcet {
     pub job: String,
     pub cycles: u64,
+    /// The worst the bench measured of this job over every shipped run, as the committed
+    /// budget records it (`cargo xtask hil --calibrate`); `None` without one.
+    pub measured_worst_cycles: Option<u64>,
     /// Of which: the XIP cache's misses.
     pub xip_cycles: u64,
     /// Lines of code it may run.
@@ -1177,6 +1180,7 @@ fn bounded(
         JobWcet {
             job: name.to_owned(),
             cycles,
+            measured_worst_cycles: None,
             xip_cycles: cycles.saturating_sub(core),
             lines: code.len(),
             loops,
@@ -1355,6 +1359,14 @@ pub fn run(json: bool) -> Ending {
                 Annotations::path().display(),
                 a.key()
             ));
+        }
+    }
+    // The bench's measured worst, beside each bound (a missing or bad budget leaves it out
+    // here; the pages' figures fail on it).
+    if let Ok(budget) = bound::Budget::load() {
+        let measured = budget.measured.named();
+        for j in &mut jobs {
+            j.measured_worst_cycles = measured.iter().find(|(n, _)| *n == j.job).map(|(_, c)| *c);
         }
     }
     let mut report = Report {

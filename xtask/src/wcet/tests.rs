@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 
 use super::cfg::{self, Image, Site};
+use super::{JobWcet, Report};
 
 /// Code at address 0, its functions, and what the analysis would ask of an ELF.
 #[derive(Default)]
@@ -380,4 +381,29 @@ fn an_entry_no_loop_used_is_stale_though_another_of_its_function_was_used() {
             "memcpy (jobs [])"
         ]
     );
+}
+
+/// `cargo xtask wcet --json`'s object, as the design's command-line contract (SIMULATION.md) names its fields: each
+/// job's name, bound, the bench's measured worst and loops; each sensor's reaction bound.
+#[test]
+fn the_json_report_has_the_contracts_fields() {
+    let report = Report {
+        jobs: vec![JobWcet {
+            job: "alarm".to_owned(),
+            cycles: 45_144,
+            measured_worst_cycles: Some(457),
+            xip_cycles: 37_568,
+            lines: 84,
+            loops: Vec::new(),
+        }],
+        reaction_bound_cycles: BTreeMap::from([("sonar".to_owned(), Some(9_000))]),
+        reaction_error: None,
+    };
+    let v: serde_json::Value = serde_json::to_value(&report).unwrap();
+    let job = &v["jobs"][0];
+    assert_eq!(job["job"], "alarm");
+    assert_eq!(job["cycles"], 45_144);
+    assert_eq!(job["measured_worst_cycles"], 457);
+    assert!(job["loops"].is_array());
+    assert_eq!(v["reaction_bound_cycles"]["sonar"], 9_000);
 }
