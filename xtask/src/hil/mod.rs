@@ -1155,7 +1155,7 @@ pub const JUDGED_FROM: &[(&str, &str)] = &[
     ("faults", "the motor pins, the watchdog's resets, the log"),
     (
         "mission",
-        "the chip's word that it reached its goal against the world the motor pins drove into the kitchen, and psmpa-sim's outcome",
+        "the chip's word that it reached its goal against the world the motor pins drove into the kitchen, the heading they turned, and psmpa-sim's outcome",
     ),
 ];
 
@@ -1246,6 +1246,14 @@ fn report(
             now.saturating_sub(*edge) as f64 / 1e6,
             names.get(*i).unwrap_or(&"?"),
             *edge as f64 / 1e9
+        ));
+    }
+    for (ns, off) in &bw.off_course {
+        failures.push(format!(
+            "mission: the robot set off along its way at {:.3} s facing {} ms of turning {} off it: its turns did not cancel",
+            *ns as f64 / 1e9,
+            off.abs(),
+            if *off > 0 { "left" } else { "right" }
         ));
     }
     // A reset or a panic lets the wheels coast (every pin low): a stop the firmware did not

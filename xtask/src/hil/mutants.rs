@@ -263,6 +263,15 @@ const MUTANTS: &[Mutant] = &[
         everywhere: true,
     },
     Mutant {
+        name: "same-way-side-step",
+        what: "the side step turns back the way it turned away: the robot walks on facing off its way",
+        file: "fetch-tea/src/lib.rs",
+        find: "[(back, d, turn), (d, d, pass), (d, back, turn)]",
+        replace: "[(back, d, turn), (d, d, pass), (back, d, turn)]",
+        plays: &["scenarios/sonar-6.json", "scenarios/bumper-4.json"],
+        everywhere: true,
+    },
+    Mutant {
         name: "floating-marker",
         what: "the marker sensor's input has no pull-up: its open-drain output, open where no marker is in view, floats",
         file: "boards/rp/src/lib.rs",

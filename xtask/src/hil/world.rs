@@ -23,6 +23,11 @@ use psmpa_sim::world::{World, WorldEvent, WorldLog};
 use psmpa_sim::body::{ECHO_DELAY_NS, echo_ns};
 pub use psmpa_sim::body::{PinFault, SLOTS, Set, pin};
 
+/// How far off its way a walk may set off, as ms of turning on the spot at the walking duty:
+/// the wheels' pins are written one after the other, microseconds apart, and a turn back
+/// lasts as long as the turn away to the tick.
+pub const HEADING_SLACK_MS: i64 = 1;
+
 /// Cycles of the RP2040's 125 MHz clock a nanosecond: 8 ns a cycle.
 pub const NS_PER_CYCLE: u64 = 8;
 
@@ -139,6 +144,11 @@ pub struct BenchWorld<'s> {
     /// Reactions that let the wheels coast to a stop instead of braking them: sensor, the
     /// obstacle's edge and the stop, ns.
     pub coasted: Vec<(usize, u64, u64)>,
+    /// Walks the wheels set off on facing away from the robot's way (their turns did not
+    /// cancel): ns, and how far off, as ms of turning on the spot.
+    pub off_course: Vec<(u64, i64)>,
+    /// Whether the wheels drove the robot along its way at the last pin change.
+    was_driving: bool,
     /// What the recording says of each sensor.
     pub sampled: [Sampled; SLOTS],
     /// Readings that disagree with the pins: what the robot read, what the rig presented.
@@ -171,6 +181,8 @@ impl<'s> BenchWorld<'s> {
             reactions: [Reactions::default(); 2],
             unanswered: Vec::new(),
             coasted: Vec::new(),
+            off_course: Vec::new(),
+            was_driving: false,
             sampled: Default::default(),
             misreads: Vec::new(),
             sensor_failed: None,
@@ -234,6 +246,17 @@ impl<'s> BenchWorld<'s> {
                 }
             }
         }
+        let driving = self.body.driving();
+        if driving && !self.was_driving {
+            // Once a heading: the wheels' pins change one after the other, and a walk may
+            // seem to set off between two of them.
+            let off = self.body.heading();
+            let again = self.off_course.last().is_some_and(|(_, last)| *last == off);
+            if off.abs() > HEADING_SLACK_MS && !again {
+                self.off_course.push((ns, off));
+            }
+        }
+        self.was_driving = driving;
         self.watched(ns);
         if let Some((settled, true)) = fx.bumper
             && self.body.driving()
@@ -626,6 +649,56 @@ mod tests {
             matches!(coasted[..], [(0, edge, 10_000_000)] if edge < 10_000_000),
             "{coasted:?}"
         );
+    }
+
+    /// Sets each wheel's IN1 and IN2 at `*t` and holds them `ms`.
+    async fn wheels(bw: &mut BenchWorld<'_>, t: &mut u64, pins: [(bool, bool); 2], ms: u64) {
+        for (wheel, (in1, in2)) in [pin::LEFT, pin::RIGHT].into_iter().zip(pins) {
+            bw.output(wheel[0], in1, *t);
+            bw.output(wheel[1], in2, *t);
+        }
+        *t += ms * 1_000_000;
+        embassy_time::Timer::at(Instant::from_millis(*t / 1_000_000)).await;
+    }
+
+    /// The robot walks, steps aside around the box (turns left 250 ms, passes 500 ms, turns
+    /// back right, or left again with `back_left`, 250 ms), brakes and walks on: the walks
+    /// the bench found setting off facing away, and whether it walks at the end.
+    fn after_side_step(back_left: bool) -> (Vec<(u64, i64)>, bool) {
+        let sc = psmpa_sim::load::parse(
+            std::path::Path::new("t.json"),
+            br#"{"name": "t", "robot": {"speed_mps": 0.1, "avoid_s": 1.0}, "interferences": [{"kind": "box", "at_s": 0.0, "ahead_m": 0.35, "hold_s": 10.0}]}"#,
+        )
+        .unwrap();
+        let sc = &sc;
+        let (ahead, back, brake) = ((true, false), (false, true), (true, true));
+        psmpa_sim::backend::simulate(
+            async move {
+                let mut bw = BenchWorld::new(sc, 600, [0, 1, 2, 3], None, 20);
+                let t = &mut 0;
+                bw.output(pin::STBY, true, 0);
+                bw.duty(pin::LEFT[2], 600, 0);
+                bw.duty(pin::RIGHT[2], 600, 0);
+                wheels(&mut bw, t, [ahead, ahead], 100).await;
+                wheels(&mut bw, t, [back, ahead], 250).await;
+                wheels(&mut bw, t, [ahead, ahead], 500).await;
+                let turn_back = if back_left { [back, ahead] } else { [ahead, back] };
+                wheels(&mut bw, t, turn_back, 250).await;
+                wheels(&mut bw, t, [brake, brake], 10).await;
+                wheels(&mut bw, t, [ahead, ahead], 100).await;
+                (bw.off_course.clone(), bw.body.driving())
+            },
+            embassy_time::Duration::from_secs(5),
+        )
+        .unwrap()
+        .output
+    }
+
+    #[test]
+    fn a_walk_that_sets_off_facing_away_from_its_way_is_recorded() {
+        assert_eq!(after_side_step(false), (vec![], true));
+        // Turned left twice: 500 ms of turning off its way when it walks on.
+        assert_eq!(after_side_step(true), (vec![(1_100_000_000, 500)], true));
     }
 
     /// The world's door events of a scenario `json` driven by `drives` (ms each), with
