@@ -200,27 +200,176 @@ fn pages(study: &Study) -> Result<Vec<(&'static str, &'static str, String)>, Str
     ])
 }
 
-/// Runs the study with its defaults and writes its figures into the pages.
-pub fn run() -> Result<(), String> {
-    let sim = firmware::build_host_sim()?;
-    let out = Command::new(&sim)
-        .args(["sensitivity", "--json"])
+/// The markers this command writes between: (page, name).
+const REGIONS: [(&str, &str); 7] = [
+    ("docs/experiment.md", "not-reached"),
+    ("README.md", "experiment"),
+    ("README.md", "experiment-harder"),
+    ("docs/experiment.md", "sensitivity-table"),
+    ("docs/experiment.md", "harder-table"),
+    ("docs/experiment.md", "table1"),
+    ("docs/experiment.md", "table1-shifted"),
+];
+
+/// A row of `psmpa-sim table1`'s second table (the shifted instants): sensor, P-SMPA's and
+/// SMPA's detected % and the time ratio, each a mean.
+struct Shifted {
+    sensor: String,
+    scenario: String,
+    psmpa_pct: f64,
+    smpa_pct: f64,
+    ratio: f64,
+}
+
+/// The shifted rows of `table1`'s text: those after its second header whose first cell is a
+/// sensor and a count.
+fn shifted_rows(table1: &str) -> Result<Vec<Shifted>, String> {
+    let second = table1
+        .find("P-SMPA detected %")
+        .ok_or("psmpa-sim table1: no table of shifted instants")?;
+    let mean = |cell: &str| -> Result<f64, String> {
+        cell.split_whitespace()
+            .next()
+            .and_then(|m| m.parse().ok())
+            .ok_or_else(|| format!("psmpa-sim table1: not a mean: {cell:?}"))
+    };
+    let mut rows = Vec::new();
+    for line in table1[second..].lines() {
+        let cells: Vec<&str> = line.split('|').collect();
+        let Some(&[sensor, count]) = cells
+            .first()
+            .map(|c| c.split_whitespace().collect::<Vec<_>>())
+            .as_deref()
+        else {
+            continue;
+        };
+        if cells.len() != 6 || count.parse::<u32>().is_err() {
+            continue;
+        }
+        rows.push(Shifted {
+            sensor: sensor.to_owned(),
+            scenario: format!("{sensor}-{count}"),
+            psmpa_pct: mean(cells[1])?,
+            smpa_pct: mean(cells[3])?,
+            ratio: mean(cells[5])?,
+        });
+    }
+    if rows.is_empty() {
+        return Err("psmpa-sim table1: no shifted rows".to_owned());
+    }
+    Ok(rows)
+}
+
+/// What docs/experiment.md says of the shifted rows: SMPA's detections of the boxes and of
+/// the balls, the time ratios, and what P-SMPA misses.
+fn shifted_summary(rows: &[Shifted]) -> String {
+    let range = |of: &dyn Fn(&Shifted) -> bool, f: fn(&Shifted) -> f64, digits: usize| {
+        let values: Vec<f64> = rows.iter().filter(|r| of(r)).map(f).collect();
+        let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let (lo, hi) = (format!("{lo:.digits$}"), format!("{hi:.digits$}"));
+        if lo == hi {
+            lo
+        } else {
+            format!("{lo} to {hi}")
+        }
+    };
+    let sonar = |r: &Shifted| r.sensor == "sonar";
+    let bumper = |r: &Shifted| r.sensor == "bumper";
+    // What P-SMPA misses of one kind of obstacle, row by row.
+    let misses = |of: &dyn Fn(&Shifted) -> bool, kind: &str| {
+        let missed: Vec<String> = rows
+            .iter()
+            .filter(|r| of(r) && r.psmpa_pct < 100.0)
+            .map(|r| format!("{:.1} % in `{}`", 100.0 - r.psmpa_pct, r.scenario))
+            .collect();
+        if missed.is_empty() {
+            format!("detects every {kind}")
+        } else {
+            format!("misses {} of the {kind}s", missed.join(", "))
+        }
+    };
+    format!(
+        "SMPA then sees {} % of the boxes and {} % of the balls, and the time ratio is {}. P-SMPA {} and {}",
+        range(&sonar, |r| r.smpa_pct, 0),
+        range(&bumper, |r| r.smpa_pct, 0),
+        range(&|_| true, |r| r.ratio, 2),
+        misses(&sonar, "box"),
+        misses(&bumper, "ball"),
+    )
+}
+
+/// Runs `psmpa-sim ARGS` and returns its standard output.
+fn sim_output(sim: &std::path::Path, args: &[&str]) -> Result<Vec<u8>, String> {
+    let out = Command::new(sim)
+        .args(args)
         .output()
         .map_err(|e| format!("{}: {e}", sim.display()))?;
     if !out.status.success() {
         return Err(format!(
-            "psmpa-sim sensitivity failed: {}",
+            "psmpa-sim {} failed: {}",
+            args.join(" "),
             String::from_utf8_lossy(&out.stderr).trim()
         ));
     }
-    let study: Study = serde_json::from_slice(&out.stdout)
-        .map_err(|e| format!("psmpa-sim sensitivity --json: {e}"))?;
+    Ok(out.stdout)
+}
+
+/// Runs the study with its defaults and Table I, and writes their figures into the pages.
+pub fn run() -> Result<(), String> {
     let root = firmware::root();
-    let regions: Vec<_> = pages(&study)?
+    let at = |page: &str| root.join(page);
+    let marked: Vec<_> = REGIONS.iter().map(|(p, m)| (at(p), *m)).collect();
+    crate::pages::check_pages(&marked)?;
+    let sim = firmware::build_host_sim()?;
+    let study: Study = serde_json::from_slice(&sim_output(&sim, &["sensitivity", "--json"])?)
+        .map_err(|e| format!("psmpa-sim sensitivity --json: {e}"))?;
+    let table1 = String::from_utf8(sim_output(&sim, &["table1"])?)
+        .map_err(|e| format!("psmpa-sim table1: {e}"))?;
+    let mut regions: Vec<_> = pages(&study)?
         .into_iter()
-        .map(|(page, marker, text)| (root.join(page), marker, text))
+        .map(|(page, marker, text)| (at(page), marker, text))
         .collect();
+    regions.push((
+        at("docs/experiment.md"),
+        "table1",
+        format!("\n```text\n{table1}```\n"),
+    ));
+    regions.push((
+        at("docs/experiment.md"),
+        "table1-shifted",
+        shifted_summary(&shifted_rows(&table1)?),
+    ));
     crate::pages::write_pages(&regions)?;
-    println!("the sensitivity study's figures written into README.md and docs/experiment.md");
+    println!(
+        "the sensitivity study's and Table I's figures written into README.md and docs/experiment.md"
+    );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shifted rows as `psmpa-sim table1` prints them, and what the page says of them.
+    #[test]
+    fn the_shifted_rows_are_read_and_summed_up() {
+        let text = "Table I ...\nsonar        6 |     6 [6] 100.0 [100.0]    0   23.1 [23] |     2 [2]   33.3 [33.3]    0   41.5 [53] \n\
+            sensor  interf |  P-SMPA detected %   | P-SMPA collisions |   SMPA detected %    |  SMPA collisions  | time SMPA/P-SMPA \n\
+            ------------------\n\
+            sonar        6 | 100.0 [100.0, 100.0] | 0.00 [0.00, 0.00] |    80.4 [78.7, 82.0] | 0.00 [0.00, 0.00] | 1.86 [1.85, 1.87]\n\
+            sonar        7 | 100.0 [100.0, 100.0] | 0.00 [0.00, 0.00] |    81.2 [79.1, 82.1] | 0.22 [0.19, 0.25] | 1.98 [1.97, 1.98]\n\
+            bumper       4 |    98.6 [98.2, 98.9] | 0.00 [0.00, 0.00] |    24.0 [22.5, 25.5] | 3.04 [2.98, 3.10] | 2.37 [2.35, 2.38]\n";
+        let rows = shifted_rows(text).unwrap();
+        assert_eq!(
+            rows.len(),
+            3,
+            "the first table's rows are not the shifted ones"
+        );
+        assert_eq!(
+            shifted_summary(&rows),
+            "SMPA then sees 80 to 81 % of the boxes and 24 % of the balls, and the time ratio is 1.86 to 2.37. P-SMPA detects every box and misses 1.4 % in `bumper-4` of the balls"
+        );
+        assert!(shifted_rows("no table").is_err());
+    }
 }
