@@ -682,7 +682,11 @@ mod tests {
                 wheels(&mut bw, t, [ahead, ahead], 100).await;
                 wheels(&mut bw, t, [back, ahead], 250).await;
                 wheels(&mut bw, t, [ahead, ahead], 500).await;
-                let turn_back = if back_left { [back, ahead] } else { [ahead, back] };
+                let turn_back = if back_left {
+                    [back, ahead]
+                } else {
+                    [ahead, back]
+                };
                 wheels(&mut bw, t, turn_back, 250).await;
                 wheels(&mut bw, t, [brake, brake], 10).await;
                 wheels(&mut bw, t, [ahead, ahead], 100).await;
