@@ -15,9 +15,10 @@
 // to its return, handlers excluded.
 //
 // Commands (xtask -> harness):
-//   {"cmd":"boot","flash":PATH,"symbols":{...},"health_words":N,"outputs":[..],"pwm":[..],
-//    "inputs":{pin:level}}                       the flash image (from 0x1000_0000) and where
-//                                                its RTT block, health block and test points are
+//   {"cmd":"boot","flash":PATH,"symbols":{...},"code":[FROM,TO],"health_words":N,"outputs":[..],
+//    "pwm":[..],"inputs":{pin:level}}            the flash image (from 0x1000_0000), where its
+//                                                RTT block, health block and test points are,
+//                                                and where its code runs (SRAM on the Pico)
 //   {"cmd":"set","pin":P,"level":0|1|null,"at":NS}  an input driven low or high from NS on (NS >=
 //                                                now), or left open (null): it then reads what
 //                                                its pad gives it (see "Pads" below)
@@ -49,8 +50,9 @@
 // * A watchdog that fired fires again at the same instant for ever: the harness stops it and
 //   resets the chip itself (a new chip whose watchdog says it timed out, the same flash and
 //   the same SRAM, as a reset leaves it).
-// * The boot ROM's path halts: the image is started from its vector table (VTOR, SP, PC);
-//   the ROM is zeros (the firmware calls no ROM routine).
+// * The boot ROM's path halts: the image is started from its boot vectors after boot2 (VTOR,
+//   SP, PC), which copy the code into SRAM; the ROM is zeros (the firmware calls no ROM
+//   routine).
 // * Inputs do not follow pull-ups: an input the world leaves open reads what its pad's
 //   configuration (PADS_BANK0) gives it, resolved here: its pull-up, its pull-down, the level
 //   it held under both (the bus keeper), or with neither a floating level: a seeded
@@ -68,9 +70,9 @@ const WATCHDOG = 0x40058; // its peripheral slot (address >> 12)
 const WATCHDOG_REASON_TIMER = 1;
 const SIO_SPINLOCK31 = 0x17c; // embassy-rp's critical section takes spinlock 31
 const VECTOR_TABLE = 0x10000100; // after the 256 B second-stage bootloader
-const FLASH = 0x10000000;
-const FLASH_BYTES = 2 * 1024 * 1024;
 const EXC_HARDFAULT = 3;
+/** The most cycles the copy into SRAM may take (16 bytes in about 14 cycles: 1 MB's worth). */
+const BOOT_COPY_LIMIT = 1_000_000;
 /** Where a `call` returns to (SRAM's scratch bank X, never run), and its stack's top. */
 const RETURN = 0x20040000;
 const CALL_STACK = 0x20042000;
@@ -107,6 +109,7 @@ class Accounts {
     this.handlers = {}; // exception number -> {count, total, max, maxAt}
     this.thread = { count: 0, total: 0, max: 0, maxAt: 0 };
     this.critical = { thread: 0, handler: 0, maxAt: 0 };
+    this.boot = 0; // the last boot's copy into SRAM
   }
   handler(n, cycles, at) {
     const h = (this.handlers[n] ??= { count: 0, total: 0, max: 0, maxAt: 0 });
@@ -130,6 +133,8 @@ class Bench {
     this.schedule = []; // [{at, pin, level}], sorted by at
     this.events = [];
     this.accounts = new Accounts();
+    // Where the code runs (SRAM on the Pico): the halfwords `loopFn` and `timedAt` mark.
+    [this.code, this.codeEnd] = config.code;
     this.watchLoops(config.loops ?? []);
     this.watchCalls(config.timed ?? []);
     this.boot(false);
@@ -200,12 +205,27 @@ class Bench {
     core.VTOR = VECTOR_TABLE;
     core.SP = mcu.readUint32(VECTOR_TABLE);
     core.PC = mcu.readUint32(VECTOR_TABLE + 4) & ~1;
+    this.copyToCode(core);
     this.rtt = null;
     this.healthSeen = -1;
     this.busySince = null;
     // A reset abandons every loop, and the timed call, where it was.
     this.timing = null;
     for (const l of this.loops ?? []) l.count.fill(0);
+  }
+
+  /**
+   * Runs the boot vectors' copy of the image into SRAM (in flash, interrupts off, no
+   * peripheral touched) until the first instruction where the code runs, cortex-m-rt's reset
+   * handler: its cycles are the boot's cost of running from SRAM (0 for code in flash). A
+   * copy that never gets there is left to run on, and the run's checks find the dead chip.
+   */
+  copyToCode(core) {
+    const start = core.cycles;
+    while ((core.PC < this.code || core.PC >= this.codeEnd) && core.cycles - start < BOOT_COPY_LIMIT) {
+      this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
+    }
+    this.accounts.boot = core.cycles - start;
   }
 
   /**
@@ -228,7 +248,7 @@ class Bench {
     }));
     this.loopFn = null;
     if (this.loops.length === 0) return;
-    this.loopFn = new Uint16Array(FLASH_BYTES >> 1);
+    this.loopFn = new Uint16Array((this.codeEnd - this.code) >>> 1);
     this.fnLoops = [null];
     const byStart = new Map();
     for (const [i, l] of this.loops.entries()) {
@@ -238,7 +258,7 @@ class Bench {
         byStart.set(l.start, idx);
         this.fnLoops.push([]);
         const [from, to] = loops[i].function;
-        for (let a = from; a < to; a += 2) this.loopFn[(a - FLASH) >>> 1] = idx;
+        for (let a = from; a < to; a += 2) this.loopFn[(a - this.code) >>> 1] = idx;
       }
       this.fnLoops[idx].push(l);
     }
@@ -251,9 +271,9 @@ class Bench {
   watchCalls(timed) {
     this.calls = [];
     this.timing = null;
-    this.timedAt = new Uint8Array(FLASH_BYTES >> 1);
+    this.timedAt = new Uint8Array((this.codeEnd - this.code) >>> 1);
     for (const [i, at] of timed.entries()) {
-      if (at >= FLASH && at < FLASH + FLASH_BYTES) this.timedAt[((at & ~1) - FLASH) >>> 1] = i + 1;
+      if (at >= this.code && at < this.codeEnd) this.timedAt[((at & ~1) - this.code) >>> 1] = i + 1;
     }
   }
 
@@ -270,7 +290,7 @@ class Bench {
       }
       return;
     }
-    const i = this.timedAt[(npc - FLASH) >>> 1] | 0;
+    const i = this.timedAt[(npc - this.code) >>> 1] | 0;
     if (i !== 0) {
       this.timing = {
         i: i - 1,
@@ -511,13 +531,14 @@ class Bench {
         const ctx = core.IPSR;
         this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
         const npc = core.PC;
-        if (this.timing !== null || this.timedAt[(npc - FLASH) >>> 1] > 0) {
+        const code = this.code;
+        if (this.timing !== null || this.timedAt[(npc - code) >>> 1] > 0) {
           this.callStep(npc);
         }
         const loopFn = this.loopFn;
         if (loopFn !== null) {
-          const a = loopFn[(pc - FLASH) >>> 1] | 0;
-          const b = loopFn[(npc - FLASH) >>> 1] | 0;
+          const a = loopFn[(pc - code) >>> 1] | 0;
+          const b = loopFn[(npc - code) >>> 1] | 0;
           if ((a | b) !== 0 && core.IPSR === ctx) this.loopStep(pc, npc, a, b, ctx);
         }
         if (this.faulted) {

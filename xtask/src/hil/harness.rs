@@ -15,6 +15,9 @@ pub struct Boot {
     pub flash: PathBuf,
     /// Where the firmware keeps what the harness reads or calls.
     pub symbols: Symbols,
+    /// Where the image's code runs (its `.text`, in SRAM on the Pico): the addresses the
+    /// harness watches for [`Boot::loops`] and [`Boot::timed`].
+    pub code: [u32; 2],
     /// Words in the health block.
     pub health_words: u32,
     /// Output pins whose edges are reported.
@@ -78,6 +81,10 @@ pub struct Stats {
     pub thread: HandlerCycles,
     /// Critical sections.
     pub critical: Critical,
+    /// The last boot's cycles from reset to the first instruction in [`Boot::code`]: the
+    /// boot vectors' copy of the image into SRAM.
+    #[serde(default)]
+    pub boot: u64,
     /// Of each of [`Boot::loops`], the most back edges taken on one entry.
     #[serde(default)]
     pub loops: Vec<u64>,

@@ -298,6 +298,15 @@ const MUTANTS: &[Mutant] = &[
         plays: &["boards/soak/long-hall.json"],
         everywhere: false,
     },
+    Mutant {
+        name: "stale-vtor",
+        what: "the boot's copy into SRAM leaves VTOR at the boot vectors in flash: each interrupt takes a word of the copied image for its handler",
+        file: "boards/pico/src/main.rs",
+        find: "    \"    str r1, [r0]\",\n",
+        replace: "",
+        plays: &["scenarios/sonar-6.json"],
+        everywhere: false,
+    },
 ];
 
 /// What became of one mutant.
