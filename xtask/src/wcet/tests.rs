@@ -222,6 +222,24 @@ fn a_layout_dependent_figure_is_given_to_two_significant_figures() {
     assert_eq!(about(49.0), "≈49");
 }
 
+/// The Pico's image runs from SRAM: its lines cost no miss; a line in flash (any XIP alias)
+/// still does.
+#[test]
+fn only_lines_in_flash_are_charged_misses() {
+    let lines = |addrs: &[u64]| addrs.iter().map(|a| a / super::LINE).collect();
+    let touched = lines(&[
+        0x2002_8000,
+        0x2003_fff8,
+        0x1000_0200,
+        0x1300_0000,
+        0x0000_0100,
+    ]);
+    assert_eq!(
+        super::in_flash(&touched),
+        lines(&[0x1000_0200, 0x1300_0000])
+    );
+}
+
 #[test]
 fn rp2040js_charges_nothing_for_the_link_register_and_the_pc() {
     // The fixture of `a_call_adds_the_callee`: 14 cycles by the TRM, whose N counts `PUSH`'s LR
