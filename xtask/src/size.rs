@@ -76,7 +76,14 @@ pub struct BoardSizes {
     pub flash: u64,
     /// `.data + .bss + .uninit`, bytes.
     pub static_ram: u64,
+    /// Of `flash`, what the boot copies into SRAM and runs there (`.vector_table + .text +
+    /// .rodata` linked in SRAM: the Pico's), bytes.
+    #[serde(default)]
+    pub code_in_sram: u64,
 }
+
+/// The SRAM a board image's code may take: the Pico's `memory.x` links it in the last 96 KiB.
+const BOARD_CODE_IN_SRAM: u64 = 96 * 1024;
 
 /// What `firmware/size.json` holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -91,9 +98,10 @@ pub struct Snapshot {
     pub pico: BoardSizes,
 }
 
-const FLASH_SECTIONS: [&str; 7] = [
-    // The RP2040's second-stage bootloader.
+const FLASH_SECTIONS: [&str; 8] = [
+    // The RP2040's second-stage bootloader, and the boot vectors that copy the code to SRAM.
     ".boot2",
+    ".psmpa_boot",
     ".vector_table",
     // The RP2350's boot block (the QEMU images have none).
     ".start_block",
@@ -106,17 +114,25 @@ const FLASH_SECTIONS: [&str; 7] = [
 
 /// Flash and static RAM (`.data + .bss`, and `.uninit`: RAM left uninitialised, such as RTT's
 /// buffer), bytes.
-fn sections(elf: &Path) -> Result<(u64, u64), String> {
+fn sections(elf: &Path) -> Result<(u64, u64, u64), String> {
     let data = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
     let file = object::File::parse(&*data).map_err(|e| format!("{}: {e}", elf.display()))?;
-    let size = |names: &[&str]| -> u64 {
+    let size = |names: &[&str], in_sram: bool| -> u64 {
         file.sections()
             .filter(|s| s.name().is_ok_and(|n| names.contains(&n)))
+            .filter(|s| !in_sram || SRAM.contains(&s.address()))
             .map(|s| s.size())
             .sum()
     };
-    Ok((size(&FLASH_SECTIONS), size(&[".data", ".bss", ".uninit"])))
+    Ok((
+        size(&FLASH_SECTIONS, false),
+        size(&[".data", ".bss", ".uninit"], false),
+        size(&[".vector_table", ".text", ".rodata"], true),
+    ))
 }
+
+/// The Cortex-M's SRAM region of the address map.
+const SRAM: std::ops::Range<u64> = 0x2000_0000..0x4000_0000;
 
 /// Flash bytes by crate, from the size of every function and constant symbol in the flash
 /// sections, named by the first path segment of its demangled name (for `<T as Trait>::f`, the
@@ -202,7 +218,7 @@ fn unnamed(name: &str) -> &'static str {
 
 /// Measures one image: sizes from its ELF, the stack from its run in QEMU.
 fn measure(elf: &Path) -> Result<Sizes, String> {
-    let (flash, static_ram) = sections(elf)?;
+    let (flash, static_ram, _) = sections(elf)?;
     let log = firmware::run(elf)?;
     let stack = firmware::stack_high_water(&log)
         .ok_or_else(|| format!("{} did not report its stack high-water mark", elf.display()))?;
@@ -318,7 +334,17 @@ fn report_board(
             old.map(|s| s.static_ram),
             BOARD_STATIC_RAM,
         ),
-    ] {
+        (
+            "code in SRAM (copied from flash at boot)",
+            now.code_in_sram,
+            old.map(|s| s.code_in_sram),
+            BOARD_CODE_IN_SRAM,
+        ),
+    ]
+    .into_iter()
+    // An image that runs from flash has no row of code in SRAM.
+    .filter(|(_, value, old, _)| *value > 0 || old.is_some_and(|o| o > 0))
+    {
         let delta = old.map_or(String::new(), |o| {
             format!("{:+}", i128::from(value) - i128::from(o))
         });
@@ -438,8 +464,13 @@ pub fn run(bless: bool) -> Result<(), String> {
     let product_elf = firmware::product(&elf);
     let board_elf = firmware::build_board(PICO2)?;
     let pico_elf = firmware::build_board(PICO)?;
-    let board =
-        |elf: &Path| sections(elf).map(|(flash, static_ram)| BoardSizes { flash, static_ram });
+    let board = |elf: &Path| {
+        sections(elf).map(|(flash, static_ram, code_in_sram)| BoardSizes {
+            flash,
+            static_ram,
+            code_in_sram,
+        })
+    };
     let now = Snapshot {
         firmware: measure(&elf)?,
         product: measure(&product_elf)?,
