@@ -205,11 +205,6 @@ pub struct Body<'s, L: WorldLog, M: RawMutex = NoopRawMutex> {
     rng: u64,
     fault: Option<PinFault>,
     stuck: bool,
-    /// How far the wheels have turned the robot, counterclockwise positive: the right wheel's
-    /// duty less the left's, thousandths, times ns, since the start; and when it was last
-    /// brought up to date, ns.
-    turned: i64,
-    turned_at: u64,
 }
 
 impl<'s, L: WorldLog, M: RawMutex> Body<'s, L, M> {
@@ -250,27 +245,23 @@ impl<'s, L: WorldLog, M: RawMutex> Body<'s, L, M> {
             rng: sc.seed ^ 0x9E37_79B9_7F4A_7C15,
             fault,
             stuck: false,
-            turned: 0,
-            turned_at: 0,
         }
     }
 
-    /// Brings [`heading`](Self::heading) up to `ns`, under the wheels as they were since.
-    fn turn_until(&mut self, ns: u64) {
-        let dt = i64::try_from(ns.saturating_sub(self.turned_at)).unwrap_or(i64::MAX);
-        self.turned_at = self.turned_at.max(ns);
+    /// How fast the wheels turn the robot now, counterclockwise positive: the right wheel's
+    /// duty less the left's, thousandths (0 in standby). A judge that integrates it over time
+    /// has the robot's heading; the body itself needs none.
+    pub fn turn_rate(&self) -> i64 {
         if self.stby {
-            let rate = self.wheel(1) - self.wheel(0);
-            self.turned = self.turned.saturating_add(rate.saturating_mul(dt));
+            self.wheel(1) - self.wheel(0)
+        } else {
+            0
         }
     }
 
-    /// How far the wheels have turned the robot from its heading at the start (where its way
-    /// lies), counterclockwise positive: as milliseconds of turning on the spot at the walking
-    /// duty (one wheel forward and one back). A side step that turns back as far as it turned
-    /// away leaves it at 0.
-    pub fn heading(&self) -> i64 {
-        self.turned / (2 * i64::from(self.walk_permille) * 1_000_000)
+    /// The robot's walking duty, thousandths.
+    pub const fn walk_permille(&self) -> u16 {
+        self.walk_permille
     }
 
     /// The inputs at reset: the echo driven low, the switches open, the marker seeing nothing.
@@ -383,7 +374,6 @@ impl<'s, L: WorldLog, M: RawMutex> Body<'s, L, M> {
     /// An output pin moved at `ns`: the robot starts, stops or changes speed; the sonar's
     /// module reads the world when its trigger falls. The inputs it changes go to `out`.
     pub fn output(&mut self, pin: u8, level: bool, ns: u64, out: &mut impl FnMut(Set)) -> Effects {
-        self.turn_until(ns);
         let mut fx = Effects::default();
         let was_high = pin == pin::TRIGGER && core::mem::replace(&mut self.trigger_high, level);
         match pin {
@@ -411,7 +401,6 @@ impl<'s, L: WorldLog, M: RawMutex> Body<'s, L, M> {
 
     /// A PWM output's duty changed at `ns`.
     pub fn duty(&mut self, pin: u8, permille: u16, ns: u64, out: &mut impl FnMut(Set)) -> Effects {
-        self.turn_until(ns);
         if pin == pin::LEFT[2] {
             self.duties[0] = permille;
         } else if pin == pin::RIGHT[2] {

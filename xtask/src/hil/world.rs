@@ -124,6 +124,30 @@ impl Sampled {
     }
 }
 
+/// How far the wheels have turned the robot from its heading at the start (where its way
+/// lies), integrated from their pins: the right wheel's duty less the left's, thousandths,
+/// times ns, counterclockwise positive; and when it was last brought up to date, ns.
+#[derive(Clone, Copy, Debug, Default)]
+struct Heading {
+    turned: i64,
+    at: u64,
+}
+
+impl Heading {
+    /// Brings it up to `ns`, under the wheels' turning `rate` since the last pin change.
+    fn until(&mut self, rate: i64, ns: u64) {
+        let dt = i64::try_from(ns.saturating_sub(self.at)).unwrap_or(i64::MAX);
+        self.at = self.at.max(ns);
+        self.turned = self.turned.saturating_add(rate.saturating_mul(dt));
+    }
+
+    /// As milliseconds of turning on the spot at the walking duty (one wheel forward and one
+    /// back): a side step that turns back as far as it turned away leaves it at 0.
+    fn ms(&self, walk_permille: u16) -> i64 {
+        self.turned / (2 * i64::from(walk_permille.max(1)) * 1_000_000)
+    }
+}
+
 /// The world of one bench run: the body, and the judge's view of it.
 pub struct BenchWorld<'s> {
     body: Body<'s, Events>,
@@ -149,6 +173,8 @@ pub struct BenchWorld<'s> {
     pub off_course: Vec<(u64, i64)>,
     /// Whether the wheels drove the robot along its way at the last pin change.
     was_driving: bool,
+    /// How far the wheels have turned the robot since the start, from their pins.
+    heading: Heading,
     /// What the recording says of each sensor.
     pub sampled: [Sampled; SLOTS],
     /// Readings that disagree with the pins: what the robot read, what the rig presented.
@@ -183,6 +209,7 @@ impl<'s> BenchWorld<'s> {
             coasted: Vec::new(),
             off_course: Vec::new(),
             was_driving: false,
+            heading: Heading::default(),
             sampled: Default::default(),
             misreads: Vec::new(),
             sensor_failed: None,
@@ -250,7 +277,7 @@ impl<'s> BenchWorld<'s> {
         if driving && !self.was_driving {
             // Once a heading: the wheels' pins change one after the other, and a walk may
             // seem to set off between two of them.
-            let off = self.body.heading();
+            let off = self.heading.ms(self.body.walk_permille());
             let again = self.off_course.last().is_some_and(|(_, last)| *last == off);
             if off.abs() > HEADING_SLACK_MS && !again {
                 self.off_course.push((ns, off));
@@ -269,6 +296,7 @@ impl<'s> BenchWorld<'s> {
     /// An output pin moved (or a duty changed) at `ns`: the robot starts, stops or changes
     /// speed; the sonar's module reads the world when its trigger falls.
     pub fn output(&mut self, pin: u8, level: bool, ns: u64) -> Vec<Set> {
+        self.heading.until(self.body.turn_rate(), ns);
         if pin == pin::TRIGGER {
             if level && !self.trigger_high {
                 self.triggers.push(ns);
@@ -289,6 +317,7 @@ impl<'s> BenchWorld<'s> {
 
     /// A PWM output's duty changed at `ns`.
     pub fn duty(&mut self, pin: u8, permille: u16, ns: u64) -> Vec<Set> {
+        self.heading.until(self.body.turn_rate(), ns);
         self.watched(ns);
         let mut out = Vec::new();
         let fx = self.body.duty(
@@ -589,19 +618,35 @@ mod tests {
         assert!(bw.world().tally().detected == 0);
     }
 
-    /// Drives both wheels forward at 600 ‰ from `*t` for `ms`, then brakes; `*t` moves on.
-    async fn drive(bw: &mut BenchWorld<'_>, t: &mut u64, ms: u64) {
-        for p in [pin::STBY, pin::LEFT[0], pin::RIGHT[0]] {
-            bw.output(p, true, *t);
+    /// A wheel's IN1 and IN2: forward, backwards, short brake, off (coasting).
+    const AHEAD: (bool, bool) = (true, false);
+    const BACK: (bool, bool) = (false, true);
+    const BRAKE: (bool, bool) = (true, true);
+    const OFF: (bool, bool) = (false, false);
+
+    /// STBY high and both PWMs at 600 ‰ at `t`: the wheels turn as their IN pins say.
+    fn power(bw: &mut BenchWorld<'_>, t: u64) {
+        bw.output(pin::STBY, true, t);
+        bw.duty(pin::LEFT[2], 600, t);
+        bw.duty(pin::RIGHT[2], 600, t);
+    }
+
+    /// Sets each wheel's IN1 and IN2 at `*t` and holds them `ms`; `*t` moves on.
+    async fn wheels(bw: &mut BenchWorld<'_>, t: &mut u64, pins: [(bool, bool); 2], ms: u64) {
+        for (wheel, (in1, in2)) in [pin::LEFT, pin::RIGHT].into_iter().zip(pins) {
+            bw.output(wheel[0], in1, *t);
+            bw.output(wheel[1], in2, *t);
         }
-        bw.duty(pin::LEFT[2], 600, *t);
-        bw.duty(pin::RIGHT[2], 600, *t);
         *t += ms * 1_000_000;
         embassy_time::Timer::at(Instant::from_millis(*t / 1_000_000)).await;
-        bw.output(pin::LEFT[1], true, *t);
-        bw.output(pin::RIGHT[1], true, *t);
-        bw.output(pin::LEFT[1], false, *t);
-        bw.output(pin::RIGHT[1], false, *t);
+    }
+
+    /// Drives both wheels forward at 600 ‰ from `*t` for `ms`, then brakes and lets go.
+    async fn drive(bw: &mut BenchWorld<'_>, t: &mut u64, ms: u64) {
+        power(bw, *t);
+        wheels(bw, t, [AHEAD; 2], ms).await;
+        wheels(bw, t, [BRAKE; 2], 0).await;
+        wheels(bw, t, [OFF; 2], 0).await;
         bw.duty(pin::LEFT[2], 0, *t);
         bw.duty(pin::RIGHT[2], 0, *t);
     }
@@ -615,21 +660,14 @@ mod tests {
         psmpa_sim::backend::simulate(
             async move {
                 let mut bw = BenchWorld::new(sc, 600, [0, 1, 2, 3], None, 20);
-                for p in [pin::STBY, pin::LEFT[0], pin::RIGHT[0]] {
-                    bw.output(p, true, 0);
-                }
-                bw.duty(pin::LEFT[2], 600, 0);
-                bw.duty(pin::RIGHT[2], 600, 0);
+                let t = &mut 0;
+                power(&mut bw, 0);
+                wheels(&mut bw, t, [AHEAD; 2], 0).await;
                 bw.output(pin::TRIGGER, true, 1_000);
                 bw.output(pin::TRIGGER, false, 11_000);
+                *t = 10_000_000;
                 embassy_time::Timer::at(Instant::from_millis(10)).await;
-                for wheel in [pin::LEFT, pin::RIGHT] {
-                    if coast {
-                        bw.output(wheel[0], false, 10_000_000);
-                    } else {
-                        bw.output(wheel[1], true, 10_000_000);
-                    }
-                }
+                wheels(&mut bw, t, [if coast { OFF } else { BRAKE }; 2], 0).await;
                 (bw.coasted.clone(), bw.reactions[0].worst_cycles)
             },
             embassy_time::Duration::from_secs(1),
@@ -651,16 +689,6 @@ mod tests {
         );
     }
 
-    /// Sets each wheel's IN1 and IN2 at `*t` and holds them `ms`.
-    async fn wheels(bw: &mut BenchWorld<'_>, t: &mut u64, pins: [(bool, bool); 2], ms: u64) {
-        for (wheel, (in1, in2)) in [pin::LEFT, pin::RIGHT].into_iter().zip(pins) {
-            bw.output(wheel[0], in1, *t);
-            bw.output(wheel[1], in2, *t);
-        }
-        *t += ms * 1_000_000;
-        embassy_time::Timer::at(Instant::from_millis(*t / 1_000_000)).await;
-    }
-
     /// The robot walks, steps aside around the box (turns left 250 ms, passes 500 ms, turns
     /// back right, or left again with `back_left`, 250 ms), brakes and walks on: the walks
     /// the bench found setting off facing away, and whether it walks at the end.
@@ -671,25 +699,22 @@ mod tests {
         )
         .unwrap();
         let sc = &sc;
-        let (ahead, back, brake) = ((true, false), (false, true), (true, true));
         psmpa_sim::backend::simulate(
             async move {
                 let mut bw = BenchWorld::new(sc, 600, [0, 1, 2, 3], None, 20);
                 let t = &mut 0;
-                bw.output(pin::STBY, true, 0);
-                bw.duty(pin::LEFT[2], 600, 0);
-                bw.duty(pin::RIGHT[2], 600, 0);
-                wheels(&mut bw, t, [ahead, ahead], 100).await;
-                wheels(&mut bw, t, [back, ahead], 250).await;
-                wheels(&mut bw, t, [ahead, ahead], 500).await;
+                power(&mut bw, 0);
+                wheels(&mut bw, t, [AHEAD, AHEAD], 100).await;
+                wheels(&mut bw, t, [BACK, AHEAD], 250).await;
+                wheels(&mut bw, t, [AHEAD, AHEAD], 500).await;
                 let turn_back = if back_left {
-                    [back, ahead]
+                    [BACK, AHEAD]
                 } else {
-                    [ahead, back]
+                    [AHEAD, BACK]
                 };
                 wheels(&mut bw, t, turn_back, 250).await;
-                wheels(&mut bw, t, [brake, brake], 10).await;
-                wheels(&mut bw, t, [ahead, ahead], 100).await;
+                wheels(&mut bw, t, [BRAKE, BRAKE], 10).await;
+                wheels(&mut bw, t, [AHEAD, AHEAD], 100).await;
                 (bw.off_course.clone(), bw.body.driving())
             },
             embassy_time::Duration::from_secs(5),
