@@ -209,8 +209,8 @@ class Bench {
     this.rtt = null;
     this.healthSeen = -1;
     this.busySince = null;
-    // A reset abandons every loop, and the timed call, where it was.
-    this.timing = null;
+    // A reset abandons every loop, and the timed calls, where they were.
+    this.timing = [];
     for (const l of this.loops ?? []) l.count.fill(0);
   }
 
@@ -233,7 +233,7 @@ class Bench {
    * loop (a jump into its body from the rest of its function, or a call of the function where
    * it starts in the loop) and per exception level (a handler's run of the loop is its own,
    * and the interrupted one goes on when it returns), the back edges taken (a latch to an
-   * entry); the most of each is in `stats`. `loopFn` marks each halfword of flash with its
+   * entry, or a latch call's return to one); the most of each is in `stats`. `loopFn` marks each halfword of the code with its
    * function's index (from 1), so that an instruction outside them costs a lookup.
    */
   watchLoops(loops) {
@@ -242,6 +242,7 @@ class Bench {
       start: l.function[0],
       entries: new Set(l.entries),
       latches: new Set(l.latches),
+      returns: new Set(l.returns ?? []),
       body: new Set(l.body),
       count: new Int32Array(64),
       max: 0,
@@ -266,47 +267,51 @@ class Bench {
 
   /**
    * The functions whose calls are timed: `timed[i]` is an entry address (0: none). `timedAt`
-   * marks each entry's halfword of flash with i + 1; `calls` lists [i, own cycles] in order.
+   * marks each entry's halfword of the code with i + 1; `calls` lists [i, own cycles] in order.
    */
   watchCalls(timed) {
     this.calls = [];
-    this.timing = null;
+    this.timing = [];
     this.timedAt = new Uint8Array((this.codeEnd - this.code) >>> 1);
     for (const [i, at] of timed.entries()) {
       if (at >= this.code && at < this.codeEnd) this.timedAt[((at & ~1) - this.code) >>> 1] = i + 1;
     }
   }
 
-  /** After an instruction that went to `npc`: a timed call begins, or the one timed returns. */
+  /**
+   * After an instruction that went to `npc`: a timed call begins, or the innermost one timed
+   * returns. Timed calls nest (a decision inside a poll of the control task): each counts its
+   * callees, timed or not.
+   */
   callStep(npc) {
     const core = this.core;
-    const t = this.timing;
-    if (t !== null) {
-      // Back at the caller, on its stack, at its exception level: the call is over.
-      if (npc === t.ret && core.SP === t.sp && core.IPSR === t.ctx) {
-        const own = core.cycles - t.start - (this.handlerCycles - t.handlers);
-        this.calls.push([t.i, own]);
-        this.timing = null;
-      }
+    const t = this.timing.at(-1);
+    // Back at the caller, on its stack, at its exception level: the call is over.
+    if (t !== undefined && npc === t.ret && core.SP === t.sp && core.IPSR === t.ctx) {
+      const own = core.cycles - t.start - (this.handlerCycles - t.handlers);
+      this.calls.push([t.i, own]);
+      this.timing.pop();
       return;
     }
     const i = this.timedAt[(npc - this.code) >>> 1] | 0;
     if (i !== 0) {
-      this.timing = {
+      this.timing.push({
         i: i - 1,
         start: core.cycles,
         handlers: this.handlerCycles,
         ret: core.LR & ~1,
         sp: core.SP,
         ctx: core.IPSR,
-      };
+      });
     }
   }
 
   /** One instruction from `pc` to `npc` at exception level `ctx`, in or into a loop's function. */
   loopStep(pc, npc, a, b, ctx) {
     for (const l of this.fnLoops[b || a]) {
-      if (l.latches.has(pc) && l.entries.has(npc)) {
+      // A back edge: a latch to an entry, or, for a latch that is a call, its callee's
+      // return to the entry after it (the call itself only leaves the loop's function).
+      if ((l.latches.has(pc) && l.entries.has(npc)) || (a !== b && l.returns.has(npc))) {
         const c = ++l.count[ctx];
         if (c > l.max) l.max = c;
       } else if (!l.body.has(pc) && l.body.has(npc) && (a === b || npc === l.start)) {
@@ -532,7 +537,7 @@ class Bench {
         this.sim.clock.tick(core.executeInstruction() * NS_PER_CYCLE);
         const npc = core.PC;
         const code = this.code;
-        if (this.timing !== null || this.timedAt[(npc - code) >>> 1] > 0) {
+        if (this.timing.length !== 0 || this.timedAt[(npc - code) >>> 1] > 0) {
           this.callStep(npc);
         }
         const loopFn = this.loopFn;

@@ -179,6 +179,15 @@ const MUTANTS: &[Mutant] = &[
         everywhere: false,
     },
     Mutant {
+        name: "short-run-queue",
+        what: "a loop annotation of the static timing analysis lets the executor poll two tasks a run, where thread mode has three: a loop whose latch is a call",
+        file: ANNOTATIONS,
+        find: "      \"bound\": 3,\n      \"why\": \"polls each task taken from one executor's run queue",
+        replace: "      \"bound\": 2,\n      \"why\": \"polls each task taken from one executor's run queue",
+        plays: &["scenarios/quiet.json"],
+        everywhere: false,
+    },
+    Mutant {
         name: "bumper-ignored",
         what: "a pressed bumper still says the path is clear",
         file: "fetch-tea/src/lib.rs",
@@ -483,7 +492,7 @@ fn write_unshipped(dir: &Path) -> Result<Vec<PathBuf>, String> {
 /// The clean image, its annotated loops counted on every run.
 fn clean(annotations: &crate::wcet::Annotations) -> Result<Firmware, String> {
     let fw = super::build().and_then(|elf| Firmware::read(&elf))?;
-    let loops = crate::wcet::bench_loops_with(annotations)?;
+    let loops = crate::wcet::bench_watch_with(annotations)?.loops;
     Ok(Firmware { loops, ..fw })
 }
 

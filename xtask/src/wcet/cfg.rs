@@ -88,6 +88,10 @@ pub struct Loop {
     /// Every instruction in it.
     #[serde(skip)]
     pub body: Vec<u64>,
+    /// Where the back edges of latches that are calls go: the calls' return addresses, each
+    /// an entry (the loop goes round when the callee returns there).
+    #[serde(skip)]
+    pub returns: Vec<u64>,
     /// Where control enters it (a back edge goes from a latch to one of these).
     #[serde(skip)]
     pub entries: Vec<u64>,
@@ -934,6 +938,14 @@ impl Loops<'_> {
             for v in &scc {
                 self.item[*v] = Some(id);
             }
+            let entry_addrs: Vec<u64> = entries.iter().map(|e| self.nodes[*e].insn.addr).collect();
+            let returns = latches
+                .iter()
+                .map(|l| &self.nodes[*l].insn)
+                .filter(|i| matches!(i.flow, Flow::Call(_) | Flow::CallRegister(_)))
+                .map(|i| i.addr + i.len)
+                .filter(|r| entry_addrs.contains(r))
+                .collect();
             self.found.push(Loop {
                 header,
                 latches: latch_addrs,
@@ -941,7 +953,8 @@ impl Loops<'_> {
                 source,
                 iteration: iteration.unwrap_or(0),
                 body: site.body,
-                entries: entries.iter().map(|e| self.nodes[*e].insn.addr).collect(),
+                entries: entry_addrs,
+                returns,
             });
         }
         Ok(())

@@ -187,6 +187,24 @@ fn a_loop_without_a_bound_is_refused_naming_it() {
     assert_eq!(f.worst(0).map(|w| w.cycles), Ok(Some(22)));
 }
 
+/// A rotated loop whose latch is a call, as embassy's run queue is: the bench counts its back
+/// edge where the callee returns, at the entry after the call.
+#[test]
+fn a_latch_that_is_a_call_goes_round_where_its_callee_returns() {
+    // 0: b 6; 2: nop; 4: blx r1; 6: cmp r0, #0; 8: bne 4; 10: bx lr | 12: bx lr.
+    let mut f = Fixture::new(&[0xe001, 0xbf00, 0x4788, 0x2800, 0xd1fc, BX_LR, BX_LR])
+        .function(0, 12)
+        .function(12, 14);
+    f.indirect.insert(4, vec![12]);
+    f.annotated.insert(6, 3);
+    let w = f.worst(0).expect("annotated");
+    let [l] = &w.loops[..] else {
+        panic!("{:?}", w.loops)
+    };
+    assert_eq!((l.entries.clone(), l.latches.clone()), (vec![6], vec![4]));
+    assert_eq!(l.returns, vec![6]);
+}
+
 #[test]
 fn a_wait_for_interrupt_is_refused() {
     // wfi; bx lr
@@ -413,6 +431,7 @@ fn the_json_report_has_the_contracts_fields() {
             xip_cycles: 37_568,
             lines: 84,
             loops: Vec::new(),
+            entry: 0,
         }],
         reaction_bound_cycles: BTreeMap::from([("sonar".to_owned(), Some(9_000))]),
         reaction_error: None,
