@@ -233,7 +233,8 @@ class Bench {
    * loop (a jump into its body from the rest of its function, or a call of the function where
    * it starts in the loop) and per exception level (a handler's run of the loop is its own,
    * and the interrupted one goes on when it returns), the back edges taken (a latch to an
-   * entry, or a latch call's return to one); the most of each is in `stats`. `loopFn` marks each halfword of the code with its
+   * entry, or a latch call's return to one); the most of each, per exception level, is in
+   * `stats`. `loopFn` marks each halfword of the code with its
    * function's index (from 1), so that an instruction outside them costs a lookup.
    */
   watchLoops(loops) {
@@ -245,7 +246,7 @@ class Bench {
       returns: new Set(l.returns ?? []),
       body: new Set(l.body),
       count: new Int32Array(64),
-      max: 0,
+      max: new Int32Array(64),
     }));
     this.loopFn = null;
     if (this.loops.length === 0) return;
@@ -313,7 +314,7 @@ class Bench {
       // return to the entry after it (the call itself only leaves the loop's function).
       if ((l.latches.has(pc) && l.entries.has(npc)) || (a !== b && l.returns.has(npc))) {
         const c = ++l.count[ctx];
-        if (c > l.max) l.max = c;
+        if (c > l.max[ctx]) l.max[ctx] = c;
       } else if (!l.body.has(pc) && l.body.has(npc) && (a === b || npc === l.start)) {
         l.count[ctx] = 0;
       }
@@ -625,7 +626,7 @@ class Bench {
       ns: this.now,
       ...this.accounts,
       instructions_per_ns: this.core.cycles / this.now,
-      loops: this.loops.map((l) => l.max),
+      loops: this.loops.map((l) => Array.from(l.max)),
       calls: this.calls,
     });
   }

@@ -85,9 +85,10 @@ pub struct Stats {
     /// boot vectors' copy of the image into SRAM.
     #[serde(default)]
     pub boot: u64,
-    /// Of each of [`Boot::loops`], the most back edges taken on one entry.
+    /// Of each of [`Boot::loops`], the most back edges taken on one entry, by exception
+    /// level (0 thread mode, 16 + n interrupt n).
     #[serde(default)]
-    pub loops: Vec<u64>,
+    pub loops: Vec<Vec<u64>>,
     /// Every call of a [`Boot::timed`] function, in order: its index there and its own
     /// cycles (from its entry to its return, handlers excluded).
     #[serde(default)]

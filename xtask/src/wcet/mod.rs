@@ -418,6 +418,13 @@ pub struct BenchLoop {
     /// Return addresses of latches that are calls: a return there from the callee is a back
     /// edge (the latch itself only leaves for the callee).
     pub returns: Vec<u64>,
+    /// The bound a job at each exception level takes (0 thread mode, 16 + n interrupt n): an
+    /// annotation may hold for some jobs only, and the bench checks each where its job runs.
+    #[serde(skip)]
+    pub levels: BTreeMap<u32, u64>,
+    /// The bound a job that runs at any level takes (the critical section's), if one does.
+    #[serde(skip)]
+    pub any_level: Option<u64>,
 }
 
 impl BenchLoop {
@@ -432,7 +439,42 @@ impl BenchLoop {
             latches: l.latches.clone(),
             body: l.body.clone(),
             returns: l.returns.clone(),
+            levels: BTreeMap::new(),
+            any_level: None,
         }
+    }
+
+    /// The most back edges an entry the analysis took at exception `level`, if a job there
+    /// took any.
+    pub fn bound_at(&self, level: u32) -> Option<u64> {
+        match (self.levels.get(&level), self.any_level) {
+            (Some(a), Some(b)) => Some((*a).max(b)),
+            (a, b) => a.copied().or(b),
+        }
+    }
+
+    /// This loop as `job` bounds it, with what an earlier job took.
+    fn bounded_by(mut self, job: &str) -> Self {
+        match level_of(job) {
+            Some(level) => {
+                let b = self.levels.entry(level).or_insert(0);
+                *b = (*b).max(self.bound);
+            }
+            None => self.any_level = Some(self.any_level.unwrap_or(0).max(self.bound)),
+        }
+        self
+    }
+}
+
+/// The exception level a job runs at: its handler's, thread mode for the deciding job, `None`
+/// for the critical section (at any).
+fn level_of(job: &str) -> Option<u32> {
+    match job {
+        "sensing_poll" => Some(bound::EXC_SENSING),
+        "alarm" => Some(bound::EXC_ALARM),
+        "gpio" => Some(bound::EXC_GPIO),
+        "deciding" => Some(0),
+        _ => None,
     }
 }
 
@@ -1364,12 +1406,25 @@ pub fn bench_watch_with(annotations: &Annotations) -> Result<BenchWatch, String>
             control_poll = job.entry;
         }
         for at in job.loops.into_iter().map(|l| l.at).filter(|at| at.counted) {
+            let bound = at.bound;
             match out
                 .iter_mut()
                 .find(|o| o.function == at.function && o.entries == at.entries)
             {
-                Some(o) => o.bound = o.bound.max(at.bound),
-                None => out.push(at),
+                Some(o) => {
+                    // Each job's bound at its level; the most of all where no level is known.
+                    let most = o.bound.max(bound);
+                    let merged = BenchLoop {
+                        bound,
+                        ..std::mem::take(o)
+                    }
+                    .bounded_by(&job.job);
+                    *o = BenchLoop {
+                        bound: most,
+                        ..merged
+                    };
+                }
+                None => out.push(at.bounded_by(&job.job)),
             }
         }
     }
