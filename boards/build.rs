@@ -15,6 +15,9 @@ fn main() {
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     if env::var("TARGET").is_ok_and(|t| t.starts_with("thumbv6m")) {
         println!("cargo:rustc-link-arg-bins=-Tlink-rp.x");
+        // The Pico's image runs from SRAM: it starts at the copy in flash (memory.x), which
+        // is where a debugger's `load` or a UF2 converter must start it, not at `Reset`.
+        println!("cargo:rustc-link-arg-bins=--entry=psmpa_boot");
     }
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }

@@ -11,7 +11,7 @@ use psmpa_board_rp as _;
 // linked in SRAM, points VTOR at the copied table and starts cortex-m-rt's reset handler from
 // it. Four words a round: the copy is the boot's only cost of running from SRAM.
 core::arch::global_asm!(
-    ".section .psmpa_boot, \"ax\"",
+    ".pushsection .psmpa_boot, \"ax\"",
     ".global psmpa_boot",
     ".type psmpa_boot, %function",
     ".thumb_func",
@@ -33,4 +33,5 @@ core::arch::global_asm!(
     "    bx r0",
     ".ltorg",
     ".size psmpa_boot, . - psmpa_boot",
+    ".popsection",
 );
