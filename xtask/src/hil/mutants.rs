@@ -492,8 +492,7 @@ fn write_unshipped(dir: &Path) -> Result<Vec<PathBuf>, String> {
 /// The clean image, its annotated loops counted on every run.
 fn clean(annotations: &crate::wcet::Annotations) -> Result<Firmware, String> {
     let fw = super::build().and_then(|elf| Firmware::read(&elf))?;
-    let loops = crate::wcet::bench_watch_with(annotations)?.loops;
-    Ok(Firmware { loops, ..fw })
+    Ok(fw.watching(crate::wcet::bench_watch_with(annotations)?))
 }
 
 /// The clean image with `m`, a mutant of the annotations, planted in them.

@@ -377,7 +377,7 @@ pub struct JobWcet {
     pub measured_worst_cycles: Option<u64>,
     /// Of which: the XIP cache's misses.
     pub xip_cycles: u64,
-    /// Lines of code it may run.
+    /// Lines of code in flash it may run (none for code in SRAM).
     pub lines: usize,
     pub loops: Vec<LoopReport>,
     /// The function it runs (0 for the critical section, found in many).
@@ -445,9 +445,12 @@ impl BenchLoop {
     }
 
     /// The most back edges an entry the analysis took at exception `level`, if a job there
-    /// took any.
+    /// took any. A handler's job is all the handler runs, so its own bound holds there
+    /// whatever the critical section took; thread mode runs more than the deciding job, so
+    /// there the larger holds.
     pub fn bound_at(&self, level: u32) -> Option<u64> {
         match (self.levels.get(&level), self.any_level) {
+            (Some(a), _) if level >= 16 => Some(*a),
             (Some(a), Some(b)) => Some((*a).max(b)),
             (a, b) => a.copied().or(b),
         }
@@ -1427,6 +1430,9 @@ pub fn bench_watch_with(annotations: &Annotations) -> Result<BenchWatch, String>
                 None => out.push(at.bounded_by(&job.job)),
             }
         }
+    }
+    if control_poll == 0 {
+        return Err("the analysis found no control task's poll (the deciding job) to time".into());
     }
     Ok(BenchWatch {
         loops: out,
