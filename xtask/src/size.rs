@@ -82,8 +82,8 @@ pub struct BoardSizes {
     pub code_in_sram: u64,
 }
 
-/// The SRAM a board image's code may take: the Pico's `memory.x` links it in the last 96 KiB.
-const BOARD_CODE_IN_SRAM: u64 = 96 * 1024;
+/// The SRAM a board image's code may take: the Pico's `memory.x` links it in the last 80 KiB.
+const BOARD_CODE_IN_SRAM: u64 = 80 * 1024;
 
 /// What `firmware/size.json` holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

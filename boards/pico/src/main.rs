@@ -9,7 +9,8 @@ use psmpa_board_rp as _;
 // Runs from flash before anything else (boot2 jumps here, memory.x's boot vectors): copies the
 // vector table, the code and the constants from their load address in flash to where they are
 // linked in SRAM, points VTOR at the copied table and starts cortex-m-rt's reset handler from
-// it. Four words a round: the copy is the boot's only cost of running from SRAM.
+// it. Four words a round, the whole code region (memory.x): the copy is the boot's only cost
+// of running from SRAM, and the same for every build.
 core::arch::global_asm!(
     ".pushsection .psmpa_boot, \"ax\"",
     ".global psmpa_boot",

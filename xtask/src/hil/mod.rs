@@ -2146,7 +2146,8 @@ where a scenario declares planning time); bumper reactions, which include its 5 
 {} cycles ({:.2} ms) against {} to {}. The sonar triggered at most {trigger:.3} ms apart and the \
 bumper's samples came at most {:.3} ms apart (the sonar's up to {:.3} ms: a sample is delivered when \
 its echo ends, a lost one not at all). Every outcome equal to psmpa-sim's, running the same robot. \
-The boot copies the image's {} B of code and constants into SRAM in {} emulated cycles; with a miss \
+The boot copies the code region, {} B (the image's code and constants, and what follows them in \
+flash), into SRAM in {} emulated cycles; with a miss \
 of the XIP cache per 8-byte line read, as on silicon, about {} cycles: {:.0} ms at the ring \
 oscillator's nominal 6.5 MHz, before the firmware sets up its clocks.\n",
         reports.len(),
