@@ -171,6 +171,7 @@ class Bench {
     // UDF and BKPT: rp2040js calls this hook (for a debugger) and runs on; a chip with no
     // debugger attached takes a HardFault, as the panic handler's `udf` expects.
     this.faulted = false;
+    this.floated = new Set(); // inputs found floating on this chip
     mcu.onBreak = () => {
       this.faulted = true;
     };
@@ -340,7 +341,20 @@ class Bench {
     else if (gpio.pullupEnabled && gpio.pulldownEnabled) level = gpio.rawInputValue; // bus keeper
     else if (gpio.pullupEnabled) level = true;
     else if (gpio.pulldownEnabled) level = false;
-    else level = this.bit(); // floating
+    else {
+      // Floating: a seeded random level, and a defect of the board whatever it reads (the
+      // pads reset with their pull-down, so only the firmware leaves an input without a pull).
+      level = this.bit();
+      if (!this.floated.has(pin)) {
+        this.floated.add(pin);
+        this.events.push({
+          ev: 'warning',
+          message: `GPIO${pin}: an input the world leaves open floats: its pad has neither a pull-up nor a pull-down`,
+          pc: this.core.PC,
+          ns: this.now,
+        });
+      }
+    }
     if (level !== gpio.rawInputValue) gpio.setInputValue(level);
   }
 
