@@ -456,16 +456,15 @@ impl BenchLoop {
         }
     }
 
-    /// This loop as `job` bounds it, with what an earlier job took.
-    fn bounded_by(mut self, job: &str) -> Self {
-        match level_of(job) {
-            Some(level) => {
-                let b = self.levels.entry(level).or_insert(0);
-                *b = (*b).max(self.bound);
-            }
-            None => self.any_level = Some(self.any_level.unwrap_or(0).max(self.bound)),
-        }
-        self
+    /// Takes `bound`, what `job` took for this loop: at the job's exception level, and in
+    /// the most of all.
+    fn bounded_by(&mut self, job: &str, bound: u64) {
+        self.bound = self.bound.max(bound);
+        let at = match level_of(job) {
+            Some(level) => self.levels.entry(level).or_insert(0),
+            None => self.any_level.get_or_insert(0),
+        };
+        *at = (*at).max(bound);
     }
 }
 
@@ -1414,20 +1413,12 @@ pub fn bench_watch_with(annotations: &Annotations) -> Result<BenchWatch, String>
                 .iter_mut()
                 .find(|o| o.function == at.function && o.entries == at.entries)
             {
-                Some(o) => {
-                    // Each job's bound at its level; the most of all where no level is known.
-                    let most = o.bound.max(bound);
-                    let merged = BenchLoop {
-                        bound,
-                        ..std::mem::take(o)
-                    }
-                    .bounded_by(&job.job);
-                    *o = BenchLoop {
-                        bound: most,
-                        ..merged
-                    };
+                Some(o) => o.bounded_by(&job.job, bound),
+                None => {
+                    let mut at = at;
+                    at.bounded_by(&job.job, bound);
+                    out.push(at);
                 }
-                None => out.push(at.bounded_by(&job.job)),
             }
         }
     }
